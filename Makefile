@@ -1,0 +1,31 @@
+# Every target sets itself up from a machine that has only python3.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed-stamp
+PYTEST_ARGS ?=
+
+.PHONY: setup demo test bench stress clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[robot,host,test]'
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(BIN)/btf-host demo --out demo-out
+
+test: $(STAMP)
+	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
+
+bench: $(STAMP)
+	$(BIN)/python -m benchmarks
+
+stress: $(STAMP)
+	BTF_STRESS=1 $(BIN)/python -m pytest -q -m slow --hypothesis-profile=stress tests
+
+clean:
+	rm -rf $(VENV) demo-out .pytest_cache .hypothesis

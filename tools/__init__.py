@@ -1,0 +1,1 @@
+"""The base-station side: receive, store, synthesize, compare, report, demo."""
