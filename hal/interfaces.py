@@ -76,3 +76,12 @@ class Camera(Protocol):
     def open(self, width: int, height: int, pixel_format: str = "BGR3") -> None: ...
     def capture(self) -> np.ndarray: ...
     def close(self) -> None: ...
+
+
+def view_from_orientation(o: Orientation) -> ViewAngles:
+    """The camera's view over the sample from the tracker mounted on it.
+
+    The tracker sits on the camera with pitch -90° when the camera looks straight down,
+    so the view elevation is -pitch; the azimuth is the heading.
+    """
+    return ViewAngles(elevation=-o.pitch, azimuth=o.heading % 360.0)
