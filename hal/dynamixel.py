@@ -1,0 +1,275 @@
+"""Dynamixel X-series servos over Protocol 2.0, through dynamixel-sdk.
+
+Degrees at the interface, ticks (4096 per turn, 2048 = 0°) inside. A value is used only
+when the SDK reports COMM_SUCCESS, no packet error and the expected payload length; a
+timeout or corrupt reply is retried a bounded number of times, then raises an error naming
+the servo and the port. A status with the alert bit (0x80) makes the driver read the
+hardware error status, reboot the servo, restore torque and goal, and redo the request.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from enum import IntEnum
+
+import dynamixel_sdk as sdk
+
+from hal.interfaces import DeviceTimeout, HalError, LimitError
+
+TICKS_PER_TURN = 4096
+CENTER_TICKS = 2048
+ALERT = 0x80
+
+
+class Reg(IntEnum):
+    """X-series control table: (address); sizes are given where used."""
+
+    TORQUE_ENABLE = 64
+    HARDWARE_ERROR_STATUS = 70
+    PROFILE_VELOCITY = 112
+    GOAL_POSITION = 116
+    MOVING = 122
+    PRESENT_POSITION = 132
+
+
+def deg_to_ticks(deg: float) -> int:
+    ticks = round(CENTER_TICKS + deg * TICKS_PER_TURN / 360.0)
+    if not 0 <= ticks < TICKS_PER_TURN:
+        raise LimitError(f"goal {deg:.2f}° is outside the servo's range [-180°, 180°)")
+    return ticks
+
+
+def ticks_to_deg(ticks: int) -> float:
+    return (ticks - CENTER_TICKS) * 360.0 / TICKS_PER_TURN
+
+
+@dataclass(frozen=True, slots=True)
+class Recovery:
+    """One alert handled: which servo, and the hardware error status it reported."""
+
+    servo_id: int
+    hardware_error: int
+
+
+class _Port(sdk.PortHandler):
+    """PortHandler with a configurable USB latency (the SDK hard-codes 16 ms)."""
+
+    def __init__(self, port_name: str, latency_ms: float) -> None:
+        super().__init__(port_name)
+        self.latency_ms = latency_ms
+
+    def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802 (SDK name)
+        self.packet_start_time = self.getCurrentTime()
+        self.packet_timeout = self.tx_time_per_byte * packet_length + self.latency_ms * 2.0 + 2.0
+
+
+class _Failed(Exception):
+    """One attempt failed on the wire (timeout, corrupt or short reply): worth a retry."""
+
+    def __init__(self, reason: str, timeout: bool = False) -> None:
+        super().__init__(reason)
+        self.timeout = timeout
+
+
+def _comm_failure(ph: sdk.PacketHandler, sid: int, result: int) -> _Failed:
+    reason = ph.getTxRxResult(result).removeprefix("[TxRxResult] ").rstrip("!")
+    return _Failed(f"servo {sid}: {reason}", timeout=result == sdk.COMM_RX_TIMEOUT)
+
+
+def _packet_error(ph: sdk.PacketHandler, sid: int, port: str, what: str, error: int) -> HalError:
+    """The servo understood and refused: retrying would not help."""
+    reason = ph.getRxPacketError(error & ~ALERT).removeprefix("[RxPacketError] ").rstrip("!")
+    return HalError(f"servo {sid} on {port}: {what} refused ({reason})")
+
+
+class _Alert(Exception):
+    def __init__(self, servo_id: int) -> None:
+        super().__init__(servo_id)
+        self.servo_id = servo_id
+
+
+class DynamixelServoBus:
+    """The `ServoBus` for a chain of X-series servos on one serial port."""
+
+    def __init__(
+        self,
+        port: str,
+        baudrate: int = 1_000_000,
+        *,
+        retries: int = 3,
+        latency_ms: float = 16.0,
+        profile_velocity: int = 0,
+        reboot_timeout_s: float = 2.0,
+        max_recoveries: int = 2,
+    ) -> None:
+        if retries < 1:
+            raise ValueError("retries must be at least 1")
+        self.port_name = port
+        self.retries = retries
+        self.profile_velocity = profile_velocity
+        self.reboot_timeout_s = reboot_timeout_s
+        self.max_recoveries = max_recoveries
+        self.recoveries: list[Recovery] = []
+        self._lock = threading.RLock()
+        self._goals: dict[int, int] = {}
+        self._torque: dict[int, bool] = {}
+        self._port = _Port(port, latency_ms)
+        self._ph = sdk.PacketHandler(2.0)
+        try:
+            opened = self._port.openPort() and self._port.setBaudRate(baudrate)
+        except Exception as exc:  # pyserial raises SerialException/OSError/ValueError
+            raise HalError(f"cannot open servo port {port}: {exc}") from exc
+        if not opened:
+            raise HalError(f"cannot open servo port {port} at {baudrate} baud")
+
+    # -- ServoBus -------------------------------------------------------------------
+    def ping(self, servo_id: int) -> bool:
+        with self._lock:
+            try:
+                self._call(servo_id, "ping", lambda: self._ph.ping(self._port, servo_id)[1:], alerts=False)
+            except HalError:
+                return False
+            return True
+
+    def set_torque(self, servo_ids: list[int], enabled: bool) -> None:
+        with self._lock:
+            for sid in servo_ids:
+                self._torque[sid] = enabled
+                if enabled and self.profile_velocity:
+                    self._write(sid, Reg.PROFILE_VELOCITY, 4, self.profile_velocity)
+                self._write(sid, Reg.TORQUE_ENABLE, 1, int(enabled))
+                if not enabled:
+                    self._goals.pop(sid, None)
+
+    def move(self, goals_deg: dict[int, float]) -> None:
+        ticks = {sid: deg_to_ticks(deg) for sid, deg in goals_deg.items()}  # all checked first
+        with self._lock:
+            self._goals.update(ticks)
+            group = sdk.GroupSyncWrite(self._port, self._ph, Reg.GOAL_POSITION, 4)
+            for sid, t in ticks.items():
+                group.addParam(sid, list(t.to_bytes(4, "little")))
+            # Broadcast: no status comes back, so only a transmit failure is visible.
+            self._call(min(ticks, default=0), "sync write goal", lambda: (group.txPacket(), 0), alerts=False)
+
+    def positions(self, servo_ids: list[int]) -> dict[int, float]:
+        raw = self._sync_read(servo_ids, Reg.PRESENT_POSITION, 4)
+        return {sid: ticks_to_deg(v) for sid, v in raw.items()}
+
+    def is_moving(self, servo_ids: list[int]) -> bool:
+        return any(self._sync_read(servo_ids, Reg.MOVING, 1).values())
+
+    def hardware_error(self, servo_id: int) -> int:
+        with self._lock:
+            return self._read(servo_id, Reg.HARDWARE_ERROR_STATUS, 1, alerts=False)
+
+    def reboot(self, servo_id: int) -> None:
+        """Reboot a servo, wait until it answers again, and restore its torque and goal."""
+        with self._lock:
+            self._call(servo_id, "reboot", lambda: self._ph.reboot(self._port, servo_id), alerts=False)
+            deadline = time.monotonic() + self.reboot_timeout_s
+            while not self.ping(servo_id):
+                if time.monotonic() > deadline:
+                    raise DeviceTimeout(f"servo {servo_id} on {self.port_name} did not come back after reboot")
+                time.sleep(0.005)
+            if self._torque.get(servo_id):
+                if self.profile_velocity:
+                    self._write(servo_id, Reg.PROFILE_VELOCITY, 4, self.profile_velocity, alerts=False)
+                self._write(servo_id, Reg.TORQUE_ENABLE, 1, 1, alerts=False)
+            if servo_id in self._goals:
+                self._write(servo_id, Reg.GOAL_POSITION, 4, self._goals[servo_id], alerts=False)
+
+    def close(self) -> None:
+        with self._lock:
+            if self._port.is_open:
+                self._port.closePort()
+
+    # -- transactions ---------------------------------------------------------------
+    def _write(self, sid: int, reg: Reg, size: int, value: int, alerts: bool = True) -> None:
+        fn = {1: self._ph.write1ByteTxRx, 4: self._ph.write4ByteTxRx}[size]
+        self._call(sid, f"write {reg.name.lower()}", lambda: fn(self._port, sid, reg, value), alerts)
+
+    def _read(self, sid: int, reg: Reg, size: int, alerts: bool = True) -> int:
+        def attempt() -> tuple[int, int]:
+            data, result, error = self._ph.readTxRx(self._port, sid, reg, size)
+            if result == sdk.COMM_SUCCESS and len(data) != size:
+                raise _Failed(f"servo {sid}: reply of {len(data)} bytes, expected {size}")
+            return (_unpack(data, size) if result == sdk.COMM_SUCCESS else 0), result, error
+
+        return self._call(sid, f"read {reg.name.lower()}", attempt, alerts)
+
+    def _sync_read(self, servo_ids: list[int], reg: Reg, size: int) -> dict[int, int]:
+        """Read one register of several servos in one SYNC_READ, retried as a whole."""
+        ids = list(dict.fromkeys(servo_ids))
+        if not ids:
+            return {}
+        with self._lock:
+            for _ in range(self.max_recoveries + 1):
+                try:
+                    return self._retry(ids[0], f"sync read {reg.name.lower()}", lambda: self._sync_once(ids, reg, size))
+                except _Alert as alert:
+                    self._recover(alert.servo_id)
+            raise HalError(f"servo alert persists after {self.max_recoveries} reboots on {self.port_name}")
+
+    def _sync_once(self, ids: list[int], reg: Reg, size: int) -> dict[int, int]:
+        result = self._ph.syncReadTx(self._port, reg, size, ids, len(ids), False)
+        if result != sdk.COMM_SUCCESS:
+            raise _comm_failure(self._ph, ids[0], result)
+        out, alerted = {}, None
+        for sid in ids:
+            data, result, error = self._ph.readRx(self._port, sid, size)
+            if result != sdk.COMM_SUCCESS:
+                raise _comm_failure(self._ph, sid, result)
+            if error & ~ALERT:
+                raise _packet_error(self._ph, sid, self.port_name, f"sync read {reg.name.lower()}", error)
+            if len(data) != size:
+                raise _Failed(f"servo {sid}: reply of {len(data)} bytes, expected {size}")
+            if error & ALERT and alerted is None:
+                alerted = sid
+            out[sid] = _unpack(data, size)
+        if alerted is not None:
+            raise _Alert(alerted)
+        return out
+
+    def _call(self, sid: int, what: str, attempt, alerts: bool = True):
+        """Run an SDK call returning (value..., result, error) with retries and alert handling."""
+
+        def checked():
+            *value, result, error = attempt()
+            if result != sdk.COMM_SUCCESS:
+                raise _comm_failure(self._ph, sid, result)
+            if error & ~ALERT:
+                raise _packet_error(self._ph, sid, self.port_name, what, error)
+            if error & ALERT and alerts:
+                raise _Alert(sid)
+            return value[0] if value else None
+
+        with self._lock:
+            for _ in range(self.max_recoveries + 1):
+                try:
+                    return self._retry(sid, what, checked)
+                except _Alert:
+                    self._recover(sid)
+            raise HalError(f"servo {sid} on {self.port_name}: alert persists after {self.max_recoveries} reboots")
+
+    def _retry(self, sid: int, what: str, attempt):
+        failure = _Failed("not attempted")
+        for _ in range(self.retries):
+            try:
+                return attempt()
+            except _Failed as exc:
+                failure = exc
+                # A late reply must not be taken for the next request's answer.
+                time.sleep(self._port.latency_ms / 1000.0)
+                self._port.clearPort()
+        error = DeviceTimeout if failure.timeout else HalError
+        raise error(f"servo {sid} on {self.port_name}: {what} failed {self.retries} times (last: {failure})")
+
+    def _recover(self, sid: int) -> None:
+        code = self.hardware_error(sid)
+        self.recoveries.append(Recovery(sid, code))
+        self.reboot(sid)
+
+
+def _unpack(data: list[int], size: int) -> int:
+    return int.from_bytes(bytes(data[:size]), "little", signed=size == 4)
