@@ -1,0 +1,266 @@
+"""The robot's TOML configuration, read once at start into frozen dataclasses.
+
+Every problem (missing file, bad TOML, unknown key, wrong type, missing key file)
+raises `ConfigError` with one line naming the key and the file; the runtime stops
+with exit status 2. Relative paths are resolved against the config file's directory.
+"""
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, fields, replace
+from pathlib import Path
+from typing import Any, Mapping
+
+
+class ConfigError(ValueError):
+    """The configuration cannot be used; the message is one line naming the problem."""
+
+
+@dataclass(frozen=True, slots=True)
+class HalConfig:
+    body: str = "fake"  # fake | emulated | real
+    scene: str = "black"
+    size: tuple[int, int] = (120, 160)  # camera frame (height, width)
+    fault_rate: float = 0.0
+    fault_seed: int = 0
+    servo_port: str = ""
+    servo_baud: int = 1_000_000
+    tracker_bus: int = 1
+    camera: str = ""  # device index or path for the real camera
+    seed: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class LinkConfig:
+    url: str = "loop://"
+    key_file: Path = Path("robot.key")
+    baud: int = 115_200
+    node_id: int = 1
+    peer_id: int = 2
+    link_id: int = 1
+    mtu: int = 100
+    heartbeat_s: float = 1.0
+    failsafe_s: float = 5.0  # silence from the base after which the arm stops and holds
+    window: int = 8  # packets in flight from the outbox
+
+
+@dataclass(frozen=True, slots=True)
+class SweepConfig:
+    start: float = 90.0
+    stop: float = 30.0
+    step: float = 10.0
+    azimuths: tuple[float, ...] = (0.0,)
+    autostart: bool = True
+    settle_timeout_s: float = 10.0
+    retries: int = 2  # extra attempts per device step before the pose is skipped
+    pose_tolerance_deg: float = 1.0  # measured pose already in this sweep: not measured again
+
+
+@dataclass(frozen=True, slots=True)
+class FeatureConfig:
+    space: str = "rgb"  # rgb | hsv | gray | pca | raw
+    bands: tuple[str, ...] = ()  # empty: every band of the space
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentConfig:
+    method: str = "isodata"  # isodata | mask | scene (the fake camera's ground truth)
+    mask: Path | None = None
+    n_labels: int = 16
+    k: int = 4
+    min_samples: int = 50
+    split_std: float = 20.0
+    merge_distance: float = 15.0
+    max_merges: int = 2
+    iterations: int = 10
+    subsample: int = 20_000
+
+
+@dataclass(frozen=True, slots=True)
+class SkipConfig:
+    min_pixels: int = 64  # labels under this count are neither fitted nor sent
+    percentile_precision: float = 0.0  # >0: subsample large regions to this probability precision
+    unchanged_tolerance: float = 0.0  # >0: UNCHANGED marker when every percentile moved less
+    skip_measured_pose: bool = True
+
+
+@dataclass(frozen=True, slots=True)
+class Config:
+    robot_id: int = 1
+    state_dir: Path = Path("state")
+    outbox_quota_bytes: int = 64 * 1024 * 1024
+    hal: HalConfig = field(default_factory=HalConfig)
+    link: LinkConfig = field(default_factory=LinkConfig)
+    sweep: SweepConfig = field(default_factory=SweepConfig)
+    features: FeatureConfig = field(default_factory=FeatureConfig)
+    segment: SegmentConfig = field(default_factory=SegmentConfig)
+    skip: SkipConfig = field(default_factory=SkipConfig)
+    source: Path | None = None
+
+
+_SECTIONS: dict[str, type] = {
+    "hal": HalConfig,
+    "link": LinkConfig,
+    "sweep": SweepConfig,
+    "features": FeatureConfig,
+    "segment": SegmentConfig,
+    "skip": SkipConfig,
+}
+_TOP = {"robot_id": int, "state_dir": Path, "outbox_quota_bytes": int}
+_TYPES: dict[type, dict[str, Any]] = {
+    HalConfig: {"body": str, "scene": str, "size": (int, 2), "fault_rate": float, "fault_seed": int,
+                "servo_port": str, "servo_baud": int, "tracker_bus": int, "camera": str, "seed": int},
+    LinkConfig: {"url": str, "key_file": Path, "baud": int, "node_id": int, "peer_id": int,
+                 "link_id": int, "mtu": int, "heartbeat_s": float, "failsafe_s": float, "window": int},
+    SweepConfig: {"start": float, "stop": float, "step": float, "azimuths": (float, None),
+                  "autostart": bool, "settle_timeout_s": float, "retries": int,
+                  "pose_tolerance_deg": float},
+    FeatureConfig: {"space": str, "bands": (str, None)},
+    SegmentConfig: {"method": str, "mask": Path, "n_labels": int, "k": int, "min_samples": int,
+                    "split_std": float, "merge_distance": float, "max_merges": int,
+                    "iterations": int, "subsample": int},
+    SkipConfig: {"min_pixels": int, "percentile_precision": float, "unchanged_tolerance": float,
+                 "skip_measured_pose": bool},
+}
+CHOICES = {
+    "hal.body": ("fake", "emulated", "real"),
+    "hal.scene": ("black", "white", "mixed", "field"),
+    "features.space": ("rgb", "hsv", "gray", "pca", "raw"),
+    "segment.method": ("isodata", "mask", "scene"),
+}
+
+
+def _convert(name: str, value: Any, kind: Any, base: Path) -> Any:
+    if isinstance(kind, tuple):
+        item, length = kind
+        if not isinstance(value, list):
+            raise ConfigError(f"{name} must be a list, got {type(value).__name__}")
+        if length is not None and len(value) != length:
+            raise ConfigError(f"{name} must have {length} items, got {len(value)}")
+        return tuple(_convert(f"{name}[{i}]", v, item, base) for i, v in enumerate(value))
+    if kind is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{name} must be true or false, got {value!r}")
+        return value
+    if kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{name} must be an integer, got {value!r}")
+        return value
+    if kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{name} must be a number, got {value!r}")
+        if not math.isfinite(value):
+            raise ConfigError(f"{name} must be finite, got {value!r}")
+        return float(value)
+    if not isinstance(value, str):
+        raise ConfigError(f"{name} must be a string, got {value!r}")
+    if kind is Path:
+        path = Path(value).expanduser()
+        return path if path.is_absolute() else base / path
+    return value
+
+
+def _section(cls: type, table: Any, prefix: str, base: Path) -> Any:
+    if not isinstance(table, dict):
+        raise ConfigError(f"[{prefix}] must be a table")
+    types = _TYPES[cls]
+    values = {}
+    for key, raw in table.items():
+        name = f"{prefix}.{key}"
+        if key not in types:
+            raise ConfigError(f"unknown key {name} (known: {', '.join(types)})")
+        value = _convert(name, raw, types[key], base)
+        if name in CHOICES and value not in CHOICES[name]:
+            raise ConfigError(f"{name} must be one of {', '.join(CHOICES[name])}, got {value!r}")
+        values[key] = value
+    obj = cls(**values)
+    # Paths left at their defaults are relative to the config file as well.
+    for f in fields(cls):
+        if types.get(f.name) is Path and f.name not in values:
+            default = getattr(obj, f.name)
+            if default is not None and not default.is_absolute():
+                obj = replace(obj, **{f.name: base / default})
+    return obj
+
+
+def from_mapping(data: Mapping[str, Any], base: Path = Path(".")) -> Config:
+    """Build and check a `Config` from parsed TOML; raises ConfigError on any problem."""
+    top: dict[str, Any] = {}
+    for key, raw in data.items():
+        if key in _SECTIONS:
+            top[key] = _section(_SECTIONS[key], raw, key, base)
+        elif key in _TOP:
+            top[key] = _convert(key, raw, _TOP[key], base)
+        else:
+            known = ", ".join([*_TOP, *(f"[{s}]" for s in _SECTIONS)])
+            raise ConfigError(f"unknown key {key} (known: {known})")
+    top.setdefault("state_dir", base / "state")
+    cfg = Config(**top)
+    check(cfg)
+    return cfg
+
+
+def check(cfg: Config) -> None:
+    s = cfg.sweep
+    if s.step <= 0:
+        raise ConfigError(f"sweep.step must be positive, got {s.step}")
+    for name, value in (("sweep.start", s.start), ("sweep.stop", s.stop)):
+        if not 0.0 <= value <= 90.0:
+            raise ConfigError(f"{name} must lie in [0, 90] degrees, got {value}")
+    if not s.azimuths:
+        raise ConfigError("sweep.azimuths must name at least one azimuth")
+    if s.retries < 0 or s.settle_timeout_s <= 0 or s.pose_tolerance_deg < 0:
+        raise ConfigError("sweep.retries, sweep.settle_timeout_s and sweep.pose_tolerance_deg must be >= 0")
+    h = cfg.hal
+    if min(h.size) < 8:
+        raise ConfigError(f"hal.size must be at least 8x8, got {h.size}")
+    if not 0.0 <= h.fault_rate <= 1.0:
+        raise ConfigError(f"hal.fault_rate must lie in [0, 1], got {h.fault_rate}")
+    ln = cfg.link
+    if ln.heartbeat_s <= 0 or ln.failsafe_s <= ln.heartbeat_s:
+        raise ConfigError("link.failsafe_s must exceed link.heartbeat_s, both positive")
+    if ln.window < 1 or ln.mtu < 32:
+        raise ConfigError("link.window must be >= 1 and link.mtu >= 32")
+    sk = cfg.skip
+    if sk.min_pixels < 1 or not 0.0 <= sk.percentile_precision < 0.5 or sk.unchanged_tolerance < 0:
+        raise ConfigError("skip.min_pixels >= 1, skip.percentile_precision in [0, 0.5), "
+                          "skip.unchanged_tolerance >= 0")
+    sg = cfg.segment
+    if not 1 <= sg.n_labels <= 256:
+        raise ConfigError(f"segment.n_labels must lie in [1, 256], got {sg.n_labels}")
+    if sg.method == "mask":
+        if sg.mask is None:
+            raise ConfigError("segment.method = 'mask' needs segment.mask (a PNG or .npy label file)")
+        if not sg.mask.is_file():
+            raise ConfigError(f"segment.mask: no such file {sg.mask}")
+    if sg.method == "scene" and cfg.hal.body != "fake":
+        raise ConfigError("segment.method = 'scene' needs hal.body = 'fake' (ground truth)")
+    if cfg.outbox_quota_bytes < 4096:
+        raise ConfigError("outbox_quota_bytes must be at least 4096")
+
+
+def check_key_file(cfg: Config) -> None:
+    """The link key must exist before anything moves: no key, no link."""
+    path = cfg.link.key_file
+    if not path.is_file():
+        raise ConfigError(f"link.key_file: no such file {path} (create one with btf-host keygen)")
+
+
+def load(path: str | Path) -> Config:
+    """Read and check the config file; every problem is one ConfigError line."""
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"config file not found: {p}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"cannot read config file {p}: {exc}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: bad TOML: {exc}") from None
+    try:
+        return replace(from_mapping(data, p.resolve().parent), source=p)
+    except ConfigError as exc:
+        raise ConfigError(f"{p}: {exc}") from None

@@ -1,0 +1,112 @@
+"""The robot's config: good files load into frozen records; every bad one is one clear line."""
+import subprocess
+import sys
+from dataclasses import FrozenInstanceError
+from pathlib import Path
+
+import pytest
+
+from onboard import config
+from onboard.config import ConfigError
+
+GOOD = """
+robot_id = 7
+[hal]
+body = "fake"
+scene = "mixed"
+size = [60, 80]
+fault_rate = 0.1
+[link]
+url = "loop://"
+key_file = "robot.key"
+[sweep]
+start = 90
+stop = 30
+step = 10
+azimuths = [0, 45.5]
+[features]
+space = "hsv"
+bands = ["V"]
+[skip]
+min_pixels = 10
+"""
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    p = tmp_path / "robot.toml"
+    p.write_text(text)
+    return p
+
+
+def test_good_file_loads_into_frozen_records_with_paths_relative_to_the_file(tmp_path):
+    cfg = config.load(write(tmp_path, GOOD))
+    assert cfg.robot_id == 7
+    assert cfg.hal.size == (60, 80) and cfg.hal.fault_rate == 0.1
+    assert cfg.sweep.azimuths == (0.0, 45.5) and cfg.sweep.start == 90.0
+    assert cfg.features.bands == ("V",)
+    assert cfg.link.key_file == tmp_path.resolve() / "robot.key"
+    assert cfg.state_dir == tmp_path.resolve() / "state"
+    with pytest.raises(FrozenInstanceError):
+        cfg.robot_id = 3  # type: ignore[misc]
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        ("robot_id = [", "bad TOML"),
+        ("colour = 3", "unknown key colour"),
+        ("[sweep]\nspeed = 3", "unknown key sweep.speed"),
+        ("[sweep]\nstep = 'ten'", "sweep.step must be a number"),
+        ("robot_id = 1.5", "robot_id must be an integer"),
+        ("[sweep]\nautostart = 1", "sweep.autostart must be true or false"),
+        ("[hal]\nsize = [10]", "hal.size must have 2 items"),
+        ("[hal]\nbody = 'magic'", "hal.body must be one of"),
+        ("[sweep]\nstep = -5", "sweep.step must be positive"),
+        ("[sweep]\nstart = 120", "sweep.start must lie in [0, 90]"),
+        ("[sweep]\nstart = nan", "must be finite"),
+        ("[segment]\nmethod = 'mask'\nmask = 'nowhere.png'", "no such file"),
+        ("hal = 3", "[hal] must be a table"),
+    ],
+)
+def test_each_bad_config_raises_one_line_naming_the_problem(tmp_path, text, words):
+    with pytest.raises(ConfigError) as info:
+        config.load(write(tmp_path, text))
+    msg = str(info.value)
+    assert words in msg and "\n" not in msg
+    assert str(tmp_path / "robot.toml") in msg
+
+
+def test_missing_file_is_a_config_error(tmp_path):
+    with pytest.raises(ConfigError, match="config file not found"):
+        config.load(tmp_path / "absent.toml")
+
+
+def test_missing_key_file_is_reported(tmp_path):
+    cfg = config.load(write(tmp_path, GOOD))
+    with pytest.raises(ConfigError, match="link.key_file: no such file"):
+        config.check_key_file(cfg)
+    (tmp_path / "robot.key").write_text("00" * 32)
+    config.check_key_file(cfg)
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        (None, "config file not found"),
+        ("robot_id = [", "bad TOML"),
+        ("colour = 3", "unknown key"),
+        ("[sweep]\nstep = 'ten'", "must be a number"),
+        ("[link]\nkey_file = 'none.key'", "link.key_file: no such file"),
+    ],
+)
+def test_btf_robot_run_stops_at_start_with_one_line_and_exit_2(tmp_path, text, words):
+    path = tmp_path / "robot.toml"
+    if text is not None:
+        path.write_text(text + "\n")
+    out = subprocess.run(
+        [sys.executable, "-m", "onboard.cli", "run", "--config", str(path), "--hal", "fake"],
+        capture_output=True, text=True, timeout=60, cwd=Path(__file__).resolve().parents[1],
+    )
+    assert out.returncode == 2, out.stderr
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and words in lines[0] and "Traceback" not in out.stderr
