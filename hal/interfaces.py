@@ -52,6 +52,14 @@ class Calibration:
         return min(self.system, self.gyro, self.accel, self.mag) >= 1
 
 
+@dataclass(frozen=True, slots=True)
+class ServoRecovery:
+    """A servo raised its alert bit; the bus read `hardware_error`, rebooted and restored it."""
+
+    servo_id: int
+    hardware_error: int
+
+
 @runtime_checkable
 class ServoBus(Protocol):
     def ping(self, servo_id: int) -> bool: ...
