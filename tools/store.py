@@ -1,0 +1,318 @@
+"""The base station's SQLite database of captures, fitted models and masks.
+
+One capture is one view of one robot: (robot, sequence) is unique, so a packet
+received twice is stored once. Every write runs in a transaction. A file that is
+not a btfscout database (or is damaged) raises `CorruptDatabase` and is never
+rewritten.
+"""
+from __future__ import annotations
+
+import json
+import sqlite3
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from onboard.johnson import Family, Johnson
+from tools.images import decode_png, encode_png
+
+SCHEMA_VERSION = 1
+# PRAGMA application_id: marks the file as ours ("BTFS").
+APPLICATION_ID = 0x42544653
+_SQLITE_MAGIC = b"SQLite format 3\x00"
+
+_SCHEMA = """
+CREATE TABLE captures (
+    id INTEGER PRIMARY KEY,
+    robot TEXT NOT NULL,
+    sequence INTEGER NOT NULL,
+    time REAL NOT NULL,
+    cmd_elevation REAL, cmd_azimuth REAL,
+    elevation REAL NOT NULL, azimuth REAL NOT NULL,
+    space TEXT NOT NULL,
+    bands TEXT NOT NULL,
+    scene TEXT NOT NULL DEFAULT '',
+    UNIQUE (robot, sequence)
+);
+CREATE TABLE models (
+    capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
+    label INTEGER NOT NULL, band INTEGER NOT NULL,
+    family TEXT NOT NULL,
+    gamma REAL NOT NULL, delta REAL NOT NULL, xi REAL NOT NULL, lam REAL NOT NULL,
+    p0 REAL, p1 REAL, p2 REAL, p3 REAL,
+    z REAL, count INTEGER NOT NULL,
+    beta1 REAL, beta2 REAL,
+    censored_low INTEGER NOT NULL DEFAULT 0, censored_high INTEGER NOT NULL DEFAULT 0,
+    PRIMARY KEY (capture, label, band)
+);
+CREATE INDEX models_by_region ON models (label, band);
+CREATE TABLE masks (
+    id INTEGER PRIMARY KEY,
+    robot TEXT NOT NULL DEFAULT '',
+    key TEXT NOT NULL,
+    height INTEGER NOT NULL, width INTEGER NOT NULL,
+    encoding TEXT NOT NULL,
+    data BLOB NOT NULL,
+    UNIQUE (robot, key)
+);
+"""
+_TABLES = {"captures", "models", "masks"}
+
+
+class CorruptDatabase(Exception):
+    """The file is damaged or is not a btfscout database; it has not been touched."""
+
+
+@dataclass(frozen=True, slots=True)
+class Capture:
+    id: int
+    robot: str
+    sequence: int
+    time: float
+    commanded: tuple[float | None, float | None]
+    measured: tuple[float, float]
+    space: str
+    band_names: tuple[str, ...]
+    scene: str
+
+    @property
+    def elevation(self) -> float:
+        return self.measured[0]
+
+
+@dataclass(frozen=True, slots=True)
+class StoredModel:
+    capture: int
+    label: int
+    band: int
+    model: Johnson
+    percentiles: tuple[float, float, float, float]
+    z: float
+    count: int
+    beta1: float
+    beta2: float
+    censored_low: int = 0
+    censored_high: int = 0
+
+
+def _angles(value: Any) -> tuple[float | None, float | None]:
+    """(elevation, azimuth) from a ViewAngles-like object, a pair, a number or None."""
+    if value is None:
+        return (None, None)
+    if hasattr(value, "elevation"):
+        return (float(value.elevation), float(getattr(value, "azimuth", 0.0)))
+    if isinstance(value, (int, float)):
+        return (float(value), 0.0)
+    elev, az = value
+    return (float(elev), float(az))
+
+
+def _family_name(family: Any) -> str:
+    return family.name if hasattr(family, "name") else str(family)
+
+
+class Store:
+    """Open with `Store.open(path)`; use as a context manager to close it."""
+
+    def __init__(self, conn: sqlite3.Connection, path: Path) -> None:
+        self._conn = conn
+        self.path = path
+
+    # -- opening ---------------------------------------------------------
+    @classmethod
+    def open(cls, path: str | Path, create: bool = True) -> "Store":
+        p = Path(path)
+        fresh = not p.exists() or p.stat().st_size == 0
+        if not fresh:
+            with open(p, "rb") as fh:
+                if fh.read(16) != _SQLITE_MAGIC:
+                    raise CorruptDatabase(f"database {p}: not an SQLite file; left untouched")
+        elif not create:
+            raise CorruptDatabase(f"database {p}: no such database")
+        if not p.parent.exists():
+            raise CorruptDatabase(f"database {p}: directory {p.parent} does not exist")
+        try:
+            conn = sqlite3.connect(str(p), isolation_level=None)
+        except sqlite3.Error as exc:
+            raise CorruptDatabase(f"database {p}: cannot open ({exc})") from None
+        try:
+            conn.execute("PRAGMA foreign_keys = ON")
+            app_id = conn.execute("PRAGMA application_id").fetchone()[0]
+            version = conn.execute("PRAGMA user_version").fetchone()[0]
+            tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+            if app_id == 0 and version == 0 and not tables:
+                conn.executescript("BEGIN;" + _SCHEMA + f"PRAGMA user_version = {SCHEMA_VERSION};"
+                                   f"PRAGMA application_id = {APPLICATION_ID}; COMMIT;")
+            elif app_id != APPLICATION_ID or not _TABLES <= tables:
+                raise CorruptDatabase(f"database {p}: not a btfscout database; left untouched")
+            elif version != SCHEMA_VERSION:
+                raise CorruptDatabase(
+                    f"database {p}: schema version {version}, this tool reads {SCHEMA_VERSION}; left untouched"
+                )
+            else:
+                check = conn.execute("PRAGMA quick_check").fetchone()[0]
+                if check != "ok":
+                    raise CorruptDatabase(f"database {p}: damaged ({check}); left untouched")
+        except sqlite3.DatabaseError as exc:
+            conn.close()
+            raise CorruptDatabase(f"database {p}: damaged ({exc}); left untouched") from None
+        except CorruptDatabase:
+            conn.close()
+            raise
+        return cls(conn, p)
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def __enter__(self) -> "Store":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- writing ---------------------------------------------------------
+    def add_capture(
+        self,
+        robot_id: str,
+        sequence: int,
+        time: float,
+        commanded: Any,
+        measured: Any,
+        space: str,
+        band_names: Iterable[str],
+        results: Mapping[tuple[int, int], Any],
+        scene: str = "",
+    ) -> bool:
+        """Stores one capture with its models; False if (robot, sequence) was already there."""
+        cmd = _angles(commanded)
+        meas = _angles(measured)
+        if meas[0] is None:
+            raise ValueError("a capture needs its measured angle")
+        rows = []
+        for (label, band), r in sorted(results.items()):
+            m = r.model
+            pct = [float(v) for v in r.percentiles]
+            rows.append((
+                int(label), int(band), _family_name(m.family),
+                float(m.gamma), float(m.delta), float(m.xi), float(m.lam),
+                *pct, float(r.z), int(r.count), float(r.beta1), float(r.beta2),
+                int(getattr(r, "censored_low", 0)), int(getattr(r, "censored_high", 0)),
+            ))
+        try:
+            self._conn.execute("BEGIN IMMEDIATE")
+            cur = self._conn.execute(
+                "INSERT OR IGNORE INTO captures (robot, sequence, time, cmd_elevation, cmd_azimuth,"
+                " elevation, azimuth, space, bands, scene) VALUES (?,?,?,?,?,?,?,?,?,?)",
+                (str(robot_id), int(sequence), float(time), cmd[0], cmd[1], meas[0], meas[1],
+                 str(space), json.dumps(list(band_names)), str(scene)),
+            )
+            if cur.rowcount == 0:
+                self._conn.execute("ROLLBACK")
+                return False
+            cid = cur.lastrowid
+            self._conn.executemany(
+                "INSERT INTO models (capture, label, band, family, gamma, delta, xi, lam,"
+                " p0, p1, p2, p3, z, count, beta1, beta2, censored_low, censored_high)"
+                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                [(cid, *row) for row in rows],
+            )
+            self._conn.execute("COMMIT")
+            return True
+        except BaseException:
+            if self._conn.in_transaction:
+                self._conn.execute("ROLLBACK")
+            raise
+
+    def next_sequence(self, robot_id: str) -> int:
+        row = self._conn.execute("SELECT MAX(sequence) FROM captures WHERE robot = ?", (robot_id,)).fetchone()
+        return 0 if row[0] is None else int(row[0]) + 1
+
+    def add_mask(self, key: str, labels: np.ndarray, robot_id: str = "") -> bool:
+        """Stores a mask under (robot, key) as PNG bytes; False if one was already there."""
+        lab = np.asarray(labels)
+        # A single statement is its own transaction in autocommit mode.
+        cur = self._conn.execute(
+            "INSERT OR IGNORE INTO masks (robot, key, height, width, encoding, data)"
+            " VALUES (?,?,?,?,?,?)",
+            (robot_id, key, int(lab.shape[0]), int(lab.shape[1]), "png", encode_png(lab)),
+        )
+        return cur.rowcount == 1
+
+    def mask(self, key: str, robot_id: str = "") -> np.ndarray | None:
+        row = self._conn.execute(
+            "SELECT height, width, data FROM masks WHERE robot = ? AND key = ?", (robot_id, key)
+        ).fetchone()
+        if row is None:
+            return None
+        arr = decode_png(row[2])
+        if arr.shape != (row[0], row[1]):
+            raise CorruptDatabase(f"database {self.path}: mask {key!r} does not match its stored size")
+        return arr
+
+    # -- reading ---------------------------------------------------------
+    def _capture_filter(self, robot: str | None, space: str | None, scene: str | None) -> tuple[str, list]:
+        where, args = [], []
+        for col, val in (("robot", robot), ("space", space), ("scene", scene)):
+            if val is not None:
+                where.append(f"{col} = ?")
+                args.append(val)
+        return (" WHERE " + " AND ".join(where)) if where else "", args
+
+    def captures(self, robot: str | None = None, space: str | None = None,
+                 scene: str | None = None) -> list[Capture]:
+        sql, args = self._capture_filter(robot, space, scene)
+        rows = self._conn.execute(
+            "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
+            " space, bands, scene FROM captures" + sql + " ORDER BY elevation, id", args
+        ).fetchall()
+        return [Capture(r[0], r[1], r[2], r[3], (r[4], r[5]), (r[6], r[7]), r[8],
+                        tuple(json.loads(r[9])), r[10]) for r in rows]
+
+    def angles(self, robot: str | None = None, space: str | None = None,
+               scene: str | None = None) -> list[float]:
+        """Distinct measured elevations, ascending."""
+        return sorted({c.elevation for c in self.captures(robot, space, scene)})
+
+    def models(self, capture: int, label: int | None = None, band: int | None = None) -> list[StoredModel]:
+        sql = ("SELECT capture, label, band, family, gamma, delta, xi, lam, p0, p1, p2, p3, z, count,"
+               " beta1, beta2, censored_low, censored_high FROM models WHERE capture = ?")
+        args: list = [capture]
+        if label is not None:
+            sql += " AND label = ?"
+            args.append(label)
+        if band is not None:
+            sql += " AND band = ?"
+            args.append(band)
+        out = []
+        for r in self._conn.execute(sql + " ORDER BY label, band", args):
+            try:
+                family = Family[r[3]]
+            except KeyError:
+                raise CorruptDatabase(f"database {self.path}: unknown family {r[3]!r}") from None
+            out.append(StoredModel(r[0], r[1], r[2], Johnson(family, r[4], r[5], r[6], r[7]),
+                                   (r[8], r[9], r[10], r[11]), r[12], r[13], r[14], r[15], r[16], r[17]))
+        return out
+
+    def models_by_angle(self, robot: str | None = None, space: str | None = None,
+                        scene: str | None = None) -> dict[float, dict[tuple[int, int], Johnson]]:
+        """For every measured elevation, the models of its latest capture."""
+        latest: dict[float, Capture] = {}
+        for c in self.captures(robot, space, scene):
+            if c.elevation not in latest or c.id > latest[c.elevation].id:
+                latest[c.elevation] = c
+        return {a: {(m.label, m.band): m.model for m in self.models(c.id)}
+                for a, c in sorted(latest.items())}
+
+    def models_at(self, angle: float, robot: str | None = None, space: str | None = None,
+                  scene: str | None = None, tolerance: float = 0.5) -> dict[tuple[int, int], Johnson]:
+        """Models of the capture measured within `tolerance` degrees of `angle` (nearest), or {}."""
+        by_angle = self.models_by_angle(robot, space, scene)
+        near = [a for a in by_angle if abs(a - angle) <= tolerance]
+        if not near:
+            return {}
+        return by_angle[min(near, key=lambda a: abs(a - angle))]
+
+    def labels(self) -> list[int]:
+        return [r[0] for r in self._conn.execute("SELECT DISTINCT label FROM models ORDER BY label")]
