@@ -10,12 +10,11 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass
 from enum import IntEnum
 
 import dynamixel_sdk as sdk
 
-from hal.interfaces import DeviceTimeout, HalError, LimitError
+from hal.interfaces import DeviceTimeout, HalError, LimitError, ServoRecovery
 
 TICKS_PER_TURN = 4096
 CENTER_TICKS = 2048
@@ -42,14 +41,6 @@ def deg_to_ticks(deg: float) -> int:
 
 def ticks_to_deg(ticks: int) -> float:
     return (ticks - CENTER_TICKS) * 360.0 / TICKS_PER_TURN
-
-
-@dataclass(frozen=True, slots=True)
-class Recovery:
-    """One alert handled: which servo, and the hardware error status it reported."""
-
-    servo_id: int
-    hardware_error: int
 
 
 class _Port(sdk.PortHandler):
@@ -110,7 +101,7 @@ class DynamixelServoBus:
         self.profile_velocity = profile_velocity
         self.reboot_timeout_s = reboot_timeout_s
         self.max_recoveries = max_recoveries
-        self.recoveries: list[Recovery] = []
+        self.recoveries: list[ServoRecovery] = []
         self._lock = threading.RLock()
         self._goals: dict[int, int] = {}
         self._torque: dict[int, bool] = {}
@@ -267,7 +258,7 @@ class DynamixelServoBus:
 
     def _recover(self, sid: int) -> None:
         code = self.hardware_error(sid)
-        self.recoveries.append(Recovery(sid, code))
+        self.recoveries.append(ServoRecovery(sid, code))
         self.reboot(sid)
 
 
