@@ -1,0 +1,224 @@
+"""The sample's surface on a periodic ground grid: grains, shading, cast shadows, heat.
+
+Everything here is independent of the view (Lambertian reflection), so one surface per
+(scene, seed, size) is built once and cached; each view only projects it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+
+from hal.scene.materials import MATERIALS, Label, Material, Shape
+
+# Sun from the south-west quarter, 45 degrees above the horizon; x east, y north.
+LIGHT_AZIMUTH_DEG = 225.0
+LIGHT_ELEVATION_DEG = 45.0
+AMBIENT = 0.12  # share of sky light that reaches every facet
+AIR_KELVIN = 293.15
+BLADE_POINTS = 8  # spheres along one grass blade
+
+
+@dataclass(frozen=True, slots=True)
+class Spheres:
+    """Grains as (possibly flattened) spheres on the torus, with per-grain spectral albedo."""
+
+    cx: np.ndarray
+    cy: np.ndarray
+    cz: np.ndarray
+    r: np.ndarray
+    flatten: np.ndarray
+    albedo: np.ndarray  # (n, 5)
+
+    def subset(self, keep: np.ndarray) -> Spheres:
+        return Spheres(*(a[keep] for a in (self.cx, self.cy, self.cz, self.r, self.flatten, self.albedo)))
+
+
+@dataclass(frozen=True, slots=True)
+class Surface:
+    """View-independent state of the plate on a T x T periodic grid."""
+
+    height: np.ndarray  # (T, T) float32, pixels
+    radiance: np.ndarray  # (T*T, 5) float32, reflected light per spectral band, 0..1
+    kelvin: np.ndarray  # (T*T,) float32, brightness temperature
+    label: np.ndarray  # (T*T,) uint8
+
+    @property
+    def size(self) -> int:
+        return self.height.shape[0]
+
+
+def smooth_noise(rng: np.random.Generator, size: int, scale: float) -> np.ndarray:
+    """Periodic Gaussian-filtered white noise, rescaled to 0..1; scale is the blob size in pixels."""
+    freq = np.fft.fftfreq(size)
+    f2 = freq[:, None] ** 2 + freq[None, :] ** 2
+    spectrum = np.fft.fft2(rng.standard_normal((size, size))) * np.exp(-2.0 * (math.pi * scale) ** 2 * f2)
+    field = np.fft.ifft2(spectrum).real
+    lo, hi = float(field.min()), float(field.max())
+    return (field - lo) / max(hi - lo, 1e-12)
+
+
+def _grain_albedo(m: Material, n: int, rng: np.random.Generator) -> np.ndarray:
+    base = np.asarray(m.albedo)
+    brightness = np.exp(m.albedo_sigma * rng.standard_normal(n))
+    tint = np.exp(m.tint_sigma * rng.standard_normal((n, base.size)))
+    albedo = base[None, :] * brightness[:, None] * tint
+    if m.bright_fraction > 0:
+        bright = rng.random(n) < m.bright_fraction
+        albedo[bright] = m.bright_albedo * tint[bright]
+    return np.clip(albedo, 0.01, 0.95)
+
+
+def _grains(m: Material, size: int, scale: float, rng: np.random.Generator) -> Spheres:
+    rm = m.radius * scale
+    n = int(m.coverage * size * size / (math.pi * rm * rm * math.exp(2 * m.radius_sigma**2)))
+    r = np.clip(rm * np.exp(m.radius_sigma * rng.standard_normal(n)), 0.35 * rm, 3.0 * rm)
+    cx, cy = rng.uniform(0, size, n), rng.uniform(0, size, n)
+    cz = rng.uniform(0.0, 0.6, n) * rm  # grains settle at different depths
+    albedo = _grain_albedo(m, n, rng)
+    if m.shape is Shape.CLODS:
+        moisture = smooth_noise(rng, size, 12.0 * rm)
+        wet = moisture[cy.astype(int) % size, cx.astype(int) % size]
+        albedo *= (1.0 - 0.5 * wet)[:, None]  # water darkens soil
+    return Spheres(cx, cy, cz, r, np.full(n, m.flatten), albedo)
+
+
+def _blades(m: Material, size: int, scale: float, rng: np.random.Generator) -> Spheres:
+    width = m.radius * scale
+    k = BLADE_POINTS
+    n = int(m.coverage * size * size / (2.0 * width * 14.0 * scale))
+    lengths = 14.0 * scale * np.exp(0.25 * rng.standard_normal(n))
+    lean = np.deg2rad(30.0) + np.deg2rad(25.0) * rng.standard_normal(n)  # mostly wind-bent one way
+    rise = rng.uniform(0.3, 0.9, n)
+    x0, y0 = rng.uniform(0, size, n), rng.uniform(0, size, n)
+    t = np.linspace(0.0, 1.0, k)[None, :]
+    cx = x0[:, None] + t * lengths[:, None] * np.cos(lean)[:, None]
+    cy = y0[:, None] + t * lengths[:, None] * np.sin(lean)[:, None]
+    cz = t * lengths[:, None] * rise[:, None]
+    r = width * (1.0 - 0.5 * t) * np.exp(m.radius_sigma * rng.standard_normal(n))[:, None]
+    albedo = np.repeat(_grain_albedo(m, n, rng), k, axis=0)
+    return Spheres(cx.ravel(), cy.ravel(), cz.ravel(), r.ravel(), np.full(n * k, m.flatten), albedo)
+
+
+def _splat(s: Spheres, size: int) -> np.ndarray:
+    """Index of the sphere whose top is highest over each cell (flat, -1 where none)."""
+    best = np.zeros(size * size, np.int64)
+    reach = np.ceil(s.r).astype(np.int64)
+    for rad in np.unique(reach):
+        sel = np.flatnonzero(reach == rad)
+        off = np.arange(-rad, rad + 1)
+        ox, oy = (a.ravel() for a in np.meshgrid(off, off))
+        px = np.floor(s.cx[sel]).astype(np.int64)[:, None] + ox
+        py = np.floor(s.cy[sel]).astype(np.int64)[:, None] + oy
+        d2 = (px + 0.5 - s.cx[sel, None]) ** 2 + (py + 0.5 - s.cy[sel, None]) ** 2
+        r2 = (s.r[sel] ** 2)[:, None]
+        inside = d2 < r2
+        z = s.cz[sel, None] + s.flatten[sel, None] * np.sqrt(np.maximum(r2 - d2, 0.0))
+        key = (np.clip(z * 256.0, 0, 2**30).astype(np.int64) << 32) | (sel[:, None] + 1)
+        cells = (py % size) * size + (px % size)
+        np.maximum.at(best, cells[inside], key[inside])
+    return (best & 0xFFFFFFFF) - 1
+
+
+def _geometry(s: Spheres, owner: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Exact height and unit normal of the owning sphere at each cell centre."""
+    height = np.zeros(size * size)
+    normal = np.zeros((size * size, 3))
+    normal[:, 2] = 1.0
+    cells = np.flatnonzero(owner >= 0)
+    o = owner[cells]
+    half = size / 2.0
+    dx = (cells % size + 0.5 - s.cx[o] + half) % size - half
+    dy = (cells // size + 0.5 - s.cy[o] + half) % size - half
+    r2 = s.r[o] ** 2
+    q = np.sqrt(np.maximum(r2 - dx * dx - dy * dy, 0.0))
+    height[cells] = s.cz[o] + s.flatten[o] * q
+    qs = np.maximum(q, 0.05 * s.r[o])  # rim of a sphere: steep but finite slope
+    n = np.stack([s.flatten[o] * dx / qs, s.flatten[o] * dy / qs, np.ones_like(qs)], axis=1)
+    normal[cells] = n / np.linalg.norm(n, axis=1, keepdims=True)
+    return height, normal
+
+
+def light_vector() -> np.ndarray:
+    az, el = math.radians(LIGHT_AZIMUTH_DEG), math.radians(LIGHT_ELEVATION_DEG)
+    return np.array([math.cos(el) * math.sin(az), math.cos(el) * math.cos(az), math.sin(el)])
+
+
+def _lit(height: np.ndarray) -> np.ndarray:
+    """False where the terrain toward the sun rises above the sun's ray (cast shadow)."""
+    az, el = math.radians(LIGHT_AZIMUTH_DEG), math.radians(LIGHT_ELEVATION_DEG)
+    rise = math.tan(el)
+    steps = int(math.ceil(float(height.max() - height.min()) / rise)) + 1
+    lit = np.ones(height.shape, bool)
+    for k in range(1, steps + 1):
+        sx, sy = round(k * math.sin(az)), round(k * math.cos(az))
+        ahead = np.roll(height, (-sy, -sx), axis=(0, 1))  # the cell k steps toward the sun
+        lit &= ahead <= height + k * rise
+    return lit
+
+
+def scene_labels(scene: str, size: int, scale: float, rng: np.random.Generator) -> np.ndarray:
+    """Which material covers each cell of the torus, (T, T) uint8."""
+    if scene == "black":
+        return np.full((size, size), Label.BLACK_SAND, np.uint8)
+    if scene == "white":
+        return np.full((size, size), Label.WHITE_SAND, np.uint8)
+    if scene == "mixed":
+        labels = np.full((size, size), Label.WHITE_SAND, np.uint8)
+        labels[:, : size // 2] = Label.BLACK_SAND  # west half; the view's left at azimuth 0
+        return labels
+    if scene == "field":
+        kinds = (Label.TAN_SAND, Label.GRASS, Label.SOIL, Label.GRAVEL)
+        fields = np.stack([smooth_noise(rng, size, 0.08 * size) for _ in kinds])
+        # a little fine noise roughens the patch borders
+        fields += 0.08 * np.stack([smooth_noise(rng, size, 3.0 * scale) for _ in kinds])
+        return np.asarray(kinds, np.uint8)[np.argmax(fields, axis=0)]
+    raise ValueError(f"unknown scene {scene!r}")
+
+
+def _near(labels: np.ndarray, s: Spheres, label: int, reach: float) -> np.ndarray:
+    """Spheres whose footprint may touch cells of `label` (centre or a point `reach` away)."""
+    size = labels.shape[0]
+    keep = np.zeros(s.cx.size, bool)
+    for ox, oy in ((0, 0), (reach, 0), (-reach, 0), (0, reach), (0, -reach)):
+        ix = np.floor(s.cx + ox).astype(np.int64) % size
+        iy = np.floor(s.cy + oy).astype(np.int64) % size
+        keep |= labels[iy, ix] == label
+    return keep
+
+
+@lru_cache(maxsize=4)
+def build_surface(scene: str, seed: int, size: int, scale: float) -> Surface:
+    """The plate for `scene` on a size x size torus; each material draws from its own stream.
+
+    A material's grains come from a generator seeded by (seed, label) only, so the black
+    half of the mixed plate is the same realisation as the black plate.
+    """
+    labels = scene_labels(scene, size, scale, np.random.default_rng([seed, 0]))
+    flat_labels = labels.ravel()
+    height = np.zeros(size * size)
+    normal = np.zeros((size * size, 3))
+    albedo = np.zeros((size * size, 5))
+    for label in np.unique(labels):
+        m = MATERIALS[Label(int(label))]
+        rng = np.random.default_rng([seed, int(label)])
+        spheres = _blades(m, size, scale, rng) if m.shape is Shape.BLADES else _grains(m, size, scale, rng)
+        if not np.all(flat_labels == label):
+            spheres = spheres.subset(_near(labels, spheres, int(label), float(spheres.r.max()) + 1.0))
+        owner = _splat(spheres, size)
+        h, n = _geometry(spheres, owner, size)
+        a = np.where((owner >= 0)[:, None], spheres.albedo[np.maximum(owner, 0)], np.asarray(m.substrate))
+        cells = flat_labels == label
+        height[cells], normal[cells], albedo[cells] = h[cells], n[cells], a[cells]
+    lit = _lit(height.reshape(size, size)).ravel()
+    direct = np.clip(normal @ light_vector(), 0.0, None) * lit
+    irradiance = AMBIENT + (1.0 - AMBIENT) * direct
+    radiance = albedo * irradiance[:, None]
+    emissivity = np.array([MATERIALS[Label(int(v))].emissivity for v in range(1, 7)])[flat_labels - 1]
+    gain = np.array([MATERIALS[Label(int(v))].heat_gain for v in range(1, 7)])[flat_labels - 1]
+    absorbed = (1.0 - albedo.mean(axis=1)) * direct
+    kelvin = (AIR_KELVIN + gain * absorbed) * emissivity**0.25
+    return Surface(height.reshape(size, size).astype(np.float32), radiance.astype(np.float32),
+                   kelvin.astype(np.float32), flat_labels.copy())
