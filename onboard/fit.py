@@ -1,0 +1,235 @@
+"""The fixed-memory fitter: histograms in, Johnson models out.
+
+Only a lookup table and the percentile method: no optimiser, no iteration, no sorting.
+Each integer level's mass is spread uniformly over [v - 1/2, v + 1/2] when reading
+percentiles, so ties in 8-bit data never make a gap zero or bias the family.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from onboard.johnson import Johnson
+from onboard.percentile import model_from_percentiles, sl_band
+
+__all__ = [
+    "Z_LADDER", "FitResult", "PercentileCodec", "fit_histogram", "fit_values",
+    "model_from_percentiles", "sl_band", "z_for_count",
+]
+
+# z values tried from the top; the packet sends the index of the one used.
+Z_LADDER: tuple[float, ...] = (0.524, 0.5, 0.45, 0.4, 0.35, 0.3, 0.25, 0.2, 0.15, 0.1)
+# The tail percentile x(3z) should rest on at least this many pixels.
+MIN_TAIL_PIXELS = 8
+
+
+def _phi(x: float) -> float:
+    return 0.5 * math.erfc(-x / math.sqrt(2.0))
+
+
+# Lower-tail probabilities Phi(-3z), Phi(-z), Phi(z), Phi(3z) for each ladder step.
+_PROBS: dict[float, tuple[float, float, float, float]] = {
+    z: (_phi(-3 * z), _phi(-z), _phi(z), _phi(3 * z)) for z in Z_LADDER
+}
+
+
+def z_for_count(count: int) -> float:
+    """The largest ladder step whose outer tail holds MIN_TAIL_PIXELS of `count` pixels."""
+    for z in Z_LADDER:
+        if count * _PROBS[z][0] >= MIN_TAIL_PIXELS:
+            return z
+    return Z_LADDER[-1]
+
+
+@dataclass(frozen=True, slots=True)
+class FitResult:
+    model: Johnson
+    count: int
+    z: float
+    percentiles: tuple[float, float, float, float]  # x(-3z), x(-z), x(z), x(3z), data units
+    beta1: float  # squared skewness of the histogram, for diagnostics
+    beta2: float  # kurtosis of the histogram
+
+
+class PercentileCodec:
+    """Fixed-point codes for percentiles across a sensor range [lo, hi]."""
+
+    def __init__(self, lo: float, hi: float, bits: int = 16) -> None:
+        if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+            raise ValueError(f"codec range must be finite with hi > lo, got [{lo}, {hi}]")
+        if bits not in (8, 16, 32):
+            raise ValueError(f"codec bits must be 8, 16 or 32, got {bits}")
+        self.lo, self.hi, self.bits = float(lo), float(hi), bits
+        self.step = (self.hi - self.lo) / (1 << bits)
+        self._top = (1 << bits) - 1
+
+    @classmethod
+    def for_levels(cls, levels: int) -> PercentileCodec:
+        """Integer sensors: the spread range [-1/2, levels - 1/2]; 16-bit codes up to 8 bits."""
+        if not 2 <= levels <= 65536:
+            raise ValueError(f"levels must be in [2, 65536], got {levels}")
+        return cls(-0.5, levels - 0.5, 16 if levels <= 256 else 32)
+
+    def encode(self, percentiles) -> tuple[int, int, int, int]:
+        codes = []
+        for x in percentiles:
+            x = float(x)
+            if not math.isfinite(x):
+                raise ValueError(f"cannot encode non-finite percentile {x}")
+            codes.append(min(max(round((x - self.lo) / self.step), 0), self._top))
+        return tuple(codes)  # type: ignore[return-value]
+
+    def decode(self, codes) -> tuple[float, float, float, float]:
+        out = []
+        for c in codes:
+            c = int(c)
+            if not 0 <= c <= self._top:
+                raise ValueError(f"percentile code {c} outside [0, {self._top}]")
+            out.append(self.lo + c * self.step)
+        return tuple(out)  # type: ignore[return-value]
+
+    def snap(self, percentiles) -> tuple[float, float, float, float]:
+        return self.decode(self.encode(percentiles))
+
+    def __repr__(self) -> str:
+        return f"PercentileCodec(lo={self.lo}, hi={self.hi}, bits={self.bits})"
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, PercentileCodec) and (self.lo, self.hi, self.bits) == (
+            other.lo, other.hi, other.bits)
+
+    def __hash__(self) -> int:
+        return hash((self.lo, self.hi, self.bits))
+
+
+def histogram_percentiles(counts: np.ndarray, probs, lo: float = 0.0, bin_width: float = 1.0) -> np.ndarray:
+    """Quantiles at `probs` of a histogram whose bin k is centred on lo + k * bin_width,
+    each bin's mass spread uniformly across its width."""
+    cum = np.cumsum(counts, dtype=np.float64)
+    total = cum[-1]
+    targets = np.asarray(probs, dtype=np.float64) * total
+    k = np.minimum(np.searchsorted(cum, targets, side="left"), len(cum) - 1)
+    here = np.asarray(counts, dtype=np.float64)[k]
+    below = cum[k] - here
+    frac = np.clip((targets - below) / np.maximum(here, 1.0), 0.0, 1.0)
+    return lo + bin_width * (k - 0.5 + frac)
+
+
+def _betas(counts: np.ndarray, lo: float, bin_width: float) -> tuple[float, float]:
+    """beta1, beta2 of the spread histogram (uniform within each bin, so never degenerate)."""
+    w = np.asarray(counts, dtype=np.float64)
+    w = w / w.sum()
+    c = lo + bin_width * np.arange(len(w))
+    mu = float(w @ c)
+    dv = c - mu
+    h2 = bin_width * bin_width / 12.0
+    m2 = float(w @ (dv * dv)) + h2
+    m3 = float(w @ (dv ** 3 + 3.0 * dv * h2))
+    m4 = float(w @ (dv ** 4 + 6.0 * dv * dv * h2)) + bin_width ** 4 / 80.0
+    return m3 * m3 / m2 ** 3, m4 / (m2 * m2)
+
+
+def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
+                  codec: PercentileCodec | None = None, z: float | None = None) -> FitResult:
+    """Fit one histogram (bin k centred on lo + k * bin_width). Percentiles are snapped
+    through `codec` (default: the range of the bins at 16 or 32 bits) before solving."""
+    counts = np.asarray(counts)
+    if counts.ndim != 1 or counts.size == 0:
+        raise ValueError(f"counts must be a non-empty 1-D array, got shape {counts.shape}")
+    if counts.dtype.kind not in "iuf":
+        raise ValueError(f"counts must be numeric, got dtype {counts.dtype}")
+    if counts.dtype.kind == "f" and not np.all(np.isfinite(counts)):
+        raise ValueError("counts must be finite")
+    if np.any(counts < 0):
+        raise ValueError("counts must be non-negative")
+    if not (math.isfinite(lo) and math.isfinite(bin_width) and bin_width > 0):
+        raise ValueError(f"need finite lo and positive bin_width, got {lo}, {bin_width}")
+    total = float(np.sum(counts, dtype=np.float64))
+    if total <= 0:
+        raise ValueError("histogram is empty: nothing to fit")
+    count = int(round(total))
+    if codec is None:
+        bits = 16 if counts.size <= 256 else 32
+        codec = PercentileCodec(lo - 0.5 * bin_width, lo + (counts.size - 0.5) * bin_width, bits)
+    z = z_for_count(count) if z is None else z
+    occupied = np.flatnonzero(counts)
+    if occupied.size == 1:
+        # One occupied bin: a constant region, sent as four equal percentiles.
+        pct = codec.snap([lo + bin_width * occupied[0]] * 4)
+    else:
+        pct = codec.snap(histogram_percentiles(counts, _probs(z), lo, bin_width))
+    model = model_from_percentiles(pct, z, count)
+    beta1, beta2 = _betas(counts, lo, bin_width)
+    return FitResult(model, count, z, pct, beta1, beta2)
+
+
+def _probs(z: float) -> tuple[float, float, float, float]:
+    if z in _PROBS:
+        return _PROBS[z]
+    return (_phi(-3 * z), _phi(-z), _phi(z), _phi(3 * z))
+
+
+def fit_values(values: np.ndarray, value_range: tuple[float, float] | None = None,
+               bins: int | None = None) -> FitResult:
+    """Fit raw values. Integer dtypes default to one bin per level over the dtype's range;
+    floats to 256 bins over `value_range` (default: the data's own range)."""
+    v = np.asarray(values).ravel()
+    if v.size == 0:
+        raise ValueError("no values to fit")
+    if v.dtype.kind not in "iuf":
+        raise ValueError(f"values must be numeric, got dtype {v.dtype}")
+    if v.dtype.kind == "f" and not np.all(np.isfinite(v)):
+        raise ValueError("values contain NaN or inf")
+    lo, hi, bins = _value_grid(v.dtype, value_range, bins, v)
+    vmin, vmax = float(v.min()), float(v.max())
+    if vmin < lo or vmax > hi:
+        raise ValueError(f"values [{vmin}, {vmax}] outside the declared range [{lo}, {hi}]")
+    counts, width, centre0 = _bin(v, lo, hi, bins)
+    return fit_histogram(counts, centre0, width)
+
+
+def _value_grid(dtype: np.dtype, value_range, bins, v: np.ndarray | None = None):
+    """(lo, hi, bins) for a dtype: integers get unit bins centred on each level."""
+    if dtype.kind in "iu" and value_range is None and bins is None:
+        info = np.iinfo(dtype)
+        if info.max - info.min + 1 > 65536:
+            raise ValueError(f"integer dtype {dtype} is deeper than 16 bits: give value_range and bins")
+        return float(info.min), float(info.max), int(info.max - info.min + 1)
+    if value_range is None:
+        if v is None:
+            raise ValueError(f"float data of dtype {dtype} needs a value_range")
+        value_range = (float(v.min()), float(v.max()))
+    lo, hi = float(value_range[0]), float(value_range[1])
+    if not (math.isfinite(lo) and math.isfinite(hi) and hi >= lo):
+        raise ValueError(f"value_range must be finite with hi >= lo, got {value_range}")
+    if bins is None:
+        bins = int(hi - lo + 1) if dtype.kind in "iu" else 256
+    if not 2 <= bins <= 65536:
+        raise ValueError(f"bins must be in [2, 65536], got {bins}")
+    return lo, hi, bins
+
+
+def _bin_geometry(lo: float, hi: float, bins: int, integer: bool) -> tuple[float, float]:
+    """(bin width, centre of bin 0). Integer data whose levels fill the bins one each
+    is centred on the levels; otherwise the bins tile [lo, hi]."""
+    if hi == lo:
+        return 1.0, lo
+    if integer and hi - lo + 1 == bins:
+        return 1.0, lo
+    width = (hi - lo) / bins if hi > lo else 1.0
+    return width, lo + 0.5 * width
+
+
+def _bin(v: np.ndarray, lo: float, hi: float, bins: int) -> tuple[np.ndarray, float, float]:
+    width, centre0 = _bin_geometry(lo, hi, bins, v.dtype.kind in "iu")
+    idx = _bin_index(v, lo, width, centre0, bins)
+    return np.bincount(idx, minlength=bins), width, centre0
+
+
+def _bin_index(v: np.ndarray, lo: float, width: float, centre0: float, bins: int) -> np.ndarray:
+    if width == 1.0 and centre0 == lo and v.dtype.kind in "iu":
+        return (v.astype(np.intp) - int(lo)) if lo != 0 else v.astype(np.intp, copy=False)
+    edge0 = centre0 - 0.5 * width
+    return np.clip(((v - edge0) * (1.0 / width)).astype(np.intp), 0, bins - 1)
