@@ -1,0 +1,127 @@
+"""BNO055 orientation tracker over I2C (smbus2), in NDOF fusion mode.
+
+Register addresses from the Bosch BNO055 datasheet (page 0). Euler angles are
+little-endian int16 in 1/16 degree; conversion to degrees happens here and nowhere else.
+"""
+from __future__ import annotations
+
+import errno
+import time
+from collections.abc import Callable
+from enum import IntEnum
+from typing import Any, Protocol
+
+from hal.interfaces import Calibration, HalError, Orientation
+
+CHIP_ID = 0xA0
+DEFAULT_ADDRESS = 0x28
+
+
+class Reg(IntEnum):
+    CHIP_ID = 0x00
+    PAGE_ID = 0x07
+    EULER_H_LSB = 0x1A  # heading, roll, pitch: 6 bytes
+    CALIB_STAT = 0x35
+    SYS_STATUS = 0x39
+    OPR_MODE = 0x3D
+    PWR_MODE = 0x3E
+    SYS_TRIGGER = 0x3F
+
+
+class Mode(IntEnum):
+    CONFIG = 0x00
+    IMU = 0x08
+    NDOF = 0x0C
+
+
+# Datasheet table 3-6: 19 ms from any mode into CONFIG, 7 ms from CONFIG into a fusion mode.
+TO_CONFIG_S = 0.019
+FROM_CONFIG_S = 0.007
+RETRYABLE = frozenset({errno.EREMOTEIO, errno.EIO, errno.EBUSY})  # 121 NACK, 5, 16
+
+
+class SMBusLike(Protocol):
+    def read_byte_data(self, i2c_addr: int, register: int) -> int: ...
+    def write_byte_data(self, i2c_addr: int, register: int, value: int) -> None: ...
+    def read_i2c_block_data(self, i2c_addr: int, register: int, length: int) -> list[int]: ...
+
+
+def _int16(lo: int, hi: int) -> int:
+    v = lo | (hi << 8)
+    return v - 0x10000 if v & 0x8000 else v
+
+
+class BNO055Tracker:
+    """OrientationTracker on a BNO055. The bus is passed in; `open` makes an smbus2.SMBus."""
+
+    def __init__(self, bus: SMBusLike, address: int = DEFAULT_ADDRESS, bus_number: int = 1,
+                 retries: int = 3, sleep: Callable[[float], None] = time.sleep) -> None:
+        if retries < 0:
+            raise ValueError(f"retries must be >= 0, got {retries}")
+        self._bus = bus
+        self.address = address
+        self.bus_number = bus_number
+        self.retries = retries
+        self._sleep = sleep
+        self.retried = 0  # transient bus errors absorbed so far
+        chip = self._io(bus.read_byte_data, address, Reg.CHIP_ID)
+        if chip != CHIP_ID:
+            raise HalError(f"{self._where()}: chip id 0x{chip:02X}, expected 0x{CHIP_ID:02X} (BNO055); "
+                           "wrong device or address")
+        self._set_mode(Mode.CONFIG)
+        self._io(bus.write_byte_data, address, Reg.PAGE_ID, 0)
+        self._set_mode(Mode.NDOF)
+
+    @classmethod
+    def open(cls, bus_number: int = 1, address: int = DEFAULT_ADDRESS, **kwargs: Any) -> BNO055Tracker:
+        import smbus2  # only the real robot needs the bus module
+
+        try:
+            bus = smbus2.SMBus(bus_number)
+        except OSError as exc:
+            raise HalError(f"BNO055 on I2C bus {bus_number}: cannot open bus: {exc}") from exc
+        try:
+            return cls(bus, address=address, bus_number=bus_number, **kwargs)
+        except Exception:
+            bus.close()
+            raise
+
+    def _where(self) -> str:
+        return f"BNO055 on I2C bus {self.bus_number} address 0x{self.address:02X}"
+
+    def _io(self, op: Callable[..., Any], *args: Any) -> Any:
+        for attempt in range(self.retries + 1):
+            try:
+                return op(*args)
+            except OSError as exc:
+                if exc.errno not in RETRYABLE:
+                    raise HalError(f"{self._where()}: {exc}") from exc
+                if attempt == self.retries:
+                    raise HalError(f"{self._where()}: no answer after {self.retries + 1} tries "
+                                   f"({errno.errorcode.get(exc.errno, exc.errno)})") from exc
+                self.retried += 1
+                self._sleep(0.001 * (attempt + 1))
+        raise AssertionError("unreachable")
+
+    def _set_mode(self, mode: Mode) -> None:
+        self._io(self._bus.write_byte_data, self.address, Reg.OPR_MODE, int(mode))
+        self._sleep(TO_CONFIG_S if mode is Mode.CONFIG else FROM_CONFIG_S)
+        got = self._io(self._bus.read_byte_data, self.address, Reg.OPR_MODE) & 0x0F
+        if got != mode:
+            raise HalError(f"{self._where()}: asked for mode {mode.name}, chip reports 0x{got:02X}")
+
+    def orientation(self) -> Orientation:
+        raw = self._io(self._bus.read_i2c_block_data, self.address, Reg.EULER_H_LSB, 6)
+        if len(raw) != 6:
+            raise HalError(f"{self._where()}: short Euler read ({len(raw)} of 6 bytes)")
+        heading, roll, pitch = (_int16(raw[i], raw[i + 1]) / 16.0 for i in (0, 2, 4))
+        return Orientation(heading=heading, roll=roll, pitch=pitch)
+
+    def calibration(self) -> Calibration:
+        v = self._io(self._bus.read_byte_data, self.address, Reg.CALIB_STAT)
+        return Calibration(system=(v >> 6) & 3, gyro=(v >> 4) & 3, accel=(v >> 2) & 3, mag=v & 3)
+
+    def close(self) -> None:
+        close = getattr(self._bus, "close", None)
+        if close is not None:
+            close()
