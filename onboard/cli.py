@@ -11,7 +11,7 @@ import importlib
 import sys
 
 PROG = "btf-robot"
-COMMANDS: tuple[str, ...] = ()
+COMMANDS: tuple[str, ...] = ("selftest",)
 
 
 class CliError(Exception):

@@ -1,0 +1,203 @@
+"""The one place that picks a body for every device: real, emulated or fake.
+
+The body comes from the config mapping's `body` (the keys of `onboard.config.HalConfig`)
+or else from `BTF_HAL`; with neither, `build_hal` refuses: a robot must never run on
+fakes by accident. Device modules are imported only when their body is chosen, so a
+machine without a camera stack can still build the fakes.
+"""
+from __future__ import annotations
+
+import dataclasses
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass, field
+from enum import Enum
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from hal.arm import Arm, ArmCalibration, JointCalibration
+from hal.fakes import Faults
+from hal.interfaces import Camera, HalError, Orientation, OrientationTracker, ServoBus, ViewAngles
+
+ENV_VAR = "BTF_HAL"
+# Views the emulated camera's image sequence is rendered at (it replays them in order).
+SEQUENCE_VIEWS = (ViewAngles(90.0), ViewAngles(60.0), ViewAngles(30.0))
+
+
+class Body(str, Enum):
+    REAL = "real"
+    EMULATED = "emulated"
+    FAKE = "fake"
+
+
+class HalConfigError(HalError):
+    """The HAL cannot be built from this configuration; the message says which key."""
+
+
+@dataclass(frozen=True)
+class Hal:
+    """Every device of the robot, built for one body; `close()` releases them all."""
+
+    body: Body
+    servo_bus: ServoBus
+    arm: Arm
+    tracker: OrientationTracker
+    camera: Camera
+    size: tuple[int, int]
+    _cleanup: tuple[Callable[[], None], ...] = field(default=(), repr=False)
+
+    def close(self) -> None:
+        for closer in (self.camera.close, self.tracker.close, self.servo_bus.close, *self._cleanup):
+            try:
+                closer()
+            except Exception:  # noqa: BLE001 - closing must release everything it can
+                pass
+
+
+def _options(config: Mapping[str, Any] | Any | None) -> dict[str, Any]:
+    if config is None:
+        return {}
+    if dataclasses.is_dataclass(config) and not isinstance(config, type):
+        return {f.name: getattr(config, f.name) for f in dataclasses.fields(config)}
+    if isinstance(config, Mapping):
+        return dict(config)
+    raise HalConfigError(f"HAL configuration must be a mapping, got {type(config).__name__}")
+
+
+def choose_body(config: Mapping[str, Any] | None, env: Mapping[str, str]) -> Body:
+    value = (config or {}).get("body") or env.get(ENV_VAR, "")
+    if not value:
+        raise HalConfigError(f"no HAL body chosen: set hal.body in the config or {ENV_VAR}=real|emulated|fake")
+    try:
+        return Body(str(value).strip().lower())
+    except ValueError:
+        raise HalConfigError(f"unknown HAL body {value!r}; choose real, emulated or fake") from None
+
+
+def arm_calibration(options: Mapping[str, Any]) -> ArmCalibration:
+    """`arm = {yaw = {servo_id, min_deg, max_deg, offset_deg, sign, corrections}, tilt = {...}}`."""
+    raw = options.get("arm")
+    if not raw:
+        return ArmCalibration()
+    try:
+        joints = {}
+        for name in ("yaw", "tilt"):
+            j = dict(raw[name])
+            j["corrections"] = tuple((float(a), float(b)) for a, b in j.get("corrections", ()))
+            joints[name] = JointCalibration(**j)
+        extra = {k: float(raw[k]) for k in ("tolerance_deg", "poll_s") if k in raw}
+        return ArmCalibration(joints["yaw"], joints["tilt"], **extra)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise HalConfigError(f"bad arm calibration in the HAL config: {exc}") from None
+
+
+def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, str] | None = None) -> Hal:
+    """Build every device for the chosen body. Keys (all optional except the body):
+    body, scene, size, fault_rate, fault_seed, servo_port, servo_baud, tracker_bus,
+    camera, seed, arm, servo_latency_ms."""
+    options = _options(config)
+    body = choose_body(options, os.environ if env is None else env)
+    size = tuple(int(v) for v in options.get("size", (120, 160)))
+    if len(size) != 2 or min(size) < 8:
+        raise HalConfigError(f"hal size must be (height, width), each at least 8, got {size}")
+    calibration = arm_calibration(options)
+    builder = {Body.FAKE: _fake, Body.EMULATED: _emulated, Body.REAL: _real}[body]
+    return builder(options, calibration, size)
+
+
+def _faults(options: Mapping[str, Any], kinds: frozenset[str] = frozenset()) -> Faults:
+    try:
+        return Faults(rate=float(options.get("fault_rate", 0.0)), seed=int(options.get("fault_seed", 0)), kinds=kinds)
+    except ValueError as exc:
+        raise HalConfigError(f"hal fault_rate: {exc}") from None
+
+
+def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]) -> Hal:
+    from hal.fakes.camera import FakeCamera
+    from hal.fakes.servo import FakeServoBus
+    from hal.fakes.tracker import FakeTracker
+
+    seed = int(options.get("seed", 0))
+    start = cal.tilt.servo_deg(0.0)  # parked looking straight down
+    bus = FakeServoBus(tuple(cal.servo_ids), faults=_faults(options), start_deg={cal.tilt.servo_id: start,
+                                                                                 cal.yaw.servo_id: cal.yaw.servo_deg(0.0)})
+    arm = Arm(bus, cal)
+
+    def true_view() -> ViewAngles:
+        return arm.view_for(bus.true_positions())
+
+    tracker = FakeTracker(true_view, faults=_faults(options), seed=seed)
+    camera = FakeCamera(str(options.get("scene", "black")), true_view, seed=seed, size=size,
+                        faults=_faults(options))
+    return Hal(Body.FAKE, bus, arm, tracker, camera, size)
+
+
+def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]) -> Hal:
+    from hal.bno055 import BNO055Tracker
+    from hal.dynamixel import DynamixelServoBus
+    from hal.emulators.bno055 import EmulatedSMBus
+    from hal.emulators.camera import SequenceCamera
+    from hal.emulators.dxl import DxlEmulator
+
+    emulator = DxlEmulator(tuple(cal.servo_ids), faults=_faults(options, frozenset({"drop", "corrupt"})))
+    for sid in cal.servo_ids:  # park as the fake does: straight down
+        joint = cal.tilt if sid == cal.tilt.servo_id else cal.yaw
+        emulator.servos[sid].position = 2048.0 + joint.servo_deg(0.0) * 4096.0 / 360.0
+    cleanup: list[Callable[[], None]] = [emulator.close]
+    try:
+        bus = DynamixelServoBus(emulator.port, latency_ms=float(options.get("servo_latency_ms", 4.0)))
+        arm = Arm(bus, cal)
+
+        def orientation() -> Orientation:
+            view = arm.view_for({sid: emulator.position_deg(sid) for sid in cal.servo_ids})
+            return Orientation(heading=view.azimuth, roll=0.0, pitch=-view.elevation)
+
+        tracker = BNO055Tracker(EmulatedSMBus(orientation_source=orientation, seed=int(options.get("seed", 0))))
+        frames = Path(tempfile.mkdtemp(prefix="btf-frames-"))
+        cleanup.append(lambda: shutil.rmtree(frames, ignore_errors=True))
+        _write_sequence(frames, str(options.get("scene", "black")), size, int(options.get("seed", 0)))
+        camera = SequenceCamera(str(frames))
+    except BaseException:
+        for closer in reversed(cleanup):
+            closer()
+        raise
+    return Hal(Body.EMULATED, bus, arm, tracker, camera, size, tuple(cleanup))
+
+
+def _write_sequence(directory: Path, scene: str, size: tuple[int, int], seed: int) -> None:
+    """Frames the scene renderer draws, saved as an image sequence for OpenCV to replay."""
+    import cv2
+
+    from hal.scene import render
+
+    for i, view in enumerate(SEQUENCE_VIEWS):
+        image = render(scene, view, size=size, seed=seed).image
+        if not cv2.imwrite(str(directory / f"frame_{i:04d}.png"), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
+            raise HalError(f"cannot write the emulated camera's frames to {directory}")
+
+
+def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]) -> Hal:
+    from hal.bno055 import BNO055Tracker
+    from hal.dynamixel import DynamixelServoBus
+
+    port = str(options.get("servo_port", ""))
+    if not port:
+        raise HalConfigError("hal servo_port is required for the real body (e.g. /dev/ttyUSB0)")
+    bus = DynamixelServoBus(port, int(options.get("servo_baud", 1_000_000)),
+                            latency_ms=float(options.get("servo_latency_ms", 16.0)))
+    try:
+        tracker = BNO055Tracker.open(int(options.get("tracker_bus", 1)), 0x28)
+        camera = _real_camera(str(options.get("camera", "")))
+    except BaseException:
+        bus.close()
+        raise
+    return Hal(Body.REAL, bus, Arm(bus, cal), tracker, camera, size)
+
+
+def _real_camera(device: str) -> Camera:
+    from hal.camera import OpenCVCamera, PiCamera2Camera
+
+    if device == "picamera2":
+        return PiCamera2Camera()
+    return OpenCVCamera(int(device) if device.isdigit() else (device or 0))

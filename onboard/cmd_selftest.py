@@ -1,0 +1,147 @@
+"""`btf-robot selftest`: exercise every device once and print one JSON line per device.
+
+Exit status 0 when every device passes, 1 when any fails, 2 for bad usage.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from hal.interfaces import ViewAngles
+from onboard.cli import CliError
+
+POSES = (ViewAngles(60.0, 0.0), ViewAngles(90.0, 0.0))
+POSE_TOLERANCE_DEG = 2.0
+SERVO_NUDGE_DEG = 5.0
+SETTLE_TIMEOUT_S = 10.0
+
+
+@dataclass(frozen=True, slots=True)
+class DeviceResult:
+    device: str
+    ok: bool
+    detail: str
+
+    def json(self) -> str:
+        return json.dumps({"device": self.device, "ok": self.ok, "detail": self.detail})
+
+
+def add_parser(sub: Any) -> argparse.ArgumentParser:
+    p = sub.add_parser("selftest", help="exercise every device and report one JSON line each")
+    p.add_argument("--hal", choices=("fake", "emulated", "real"), help="device body (default: config or BTF_HAL)")
+    p.add_argument("--config", metavar="FILE", help="robot TOML config; its [hal] section is used")
+    return p
+
+
+def _hal_options(args: argparse.Namespace) -> dict[str, Any] | None:
+    options: dict[str, Any] | None = None
+    if args.config:
+        from onboard.config import ConfigError, load
+
+        try:
+            cfg = load(args.config)
+        except ConfigError as exc:
+            raise CliError(str(exc)) from None
+        options = {k: getattr(cfg.hal, k) for k in cfg.hal.__slots__}
+    if args.hal:
+        options = {**(options or {}), "body": args.hal}
+    return options
+
+
+def run(args: argparse.Namespace) -> int:
+    from hal.factory import HalConfigError, build_hal
+
+    try:
+        hal = build_hal(_hal_options(args))
+    except HalConfigError as exc:
+        raise CliError(str(exc)) from None
+    except Exception as exc:  # noqa: BLE001 - a device that cannot even be built fails the test
+        print(DeviceResult("hal", False, f"{type(exc).__name__}: {exc}").json(), flush=True)
+        return 1
+    try:
+        results = [_check(name, fn, hal) for name, fn in CHECKS]
+    finally:
+        hal.close()
+    for r in results:
+        print(r.json(), flush=True)
+    return 0 if all(r.ok for r in results) else 1
+
+
+def _check(name: str, fn: Callable[[Any], str], hal: Any) -> DeviceResult:
+    try:
+        return DeviceResult(name, True, fn(hal))
+    except Exception as exc:  # noqa: BLE001 - every failure is reported, none escapes
+        return DeviceResult(name, False, f"{type(exc).__name__}: {exc}")
+
+
+def _servo_bus(hal: Any) -> str:
+    bus, ids = hal.servo_bus, hal.arm.joints.servo_ids
+    missing = [i for i in ids if not bus.ping(i)]
+    if missing:
+        raise RuntimeError(f"servos {missing} do not answer a ping")
+    bus.set_torque(ids, True)
+    start = bus.positions(ids)
+    # Nudge toward the centre so the move stays inside the servo's travel.
+    goals = {i: start[i] - math.copysign(SERVO_NUDGE_DEG, start[i]) if start[i] else SERVO_NUDGE_DEG for i in ids}
+    bus.move(goals)
+    hal.arm.wait_until_stopped(SETTLE_TIMEOUT_S)
+    reached = bus.positions(ids)
+    off = {i: round(reached[i] - goals[i], 2) for i in ids if abs(reached[i] - goals[i]) > POSE_TOLERANCE_DEG}
+    if off:
+        raise RuntimeError(f"servos missed their goals by {off} degrees")
+    if bus.is_moving(ids):
+        raise RuntimeError("servos report moving after they settled")
+    errors = {i: bus.hardware_error(i) for i in ids}
+    if any(errors.values()):
+        raise RuntimeError(f"hardware error status {errors}")
+    recovered = len(getattr(bus, "recoveries", ()))
+    return f"servos {ids} ping, torque, move {SERVO_NUDGE_DEG}°, settle, no hardware error; {recovered} recoveries"
+
+
+def _arm(hal: Any) -> str:
+    arm = hal.arm
+    arm.enable()
+    seen = []
+    for pose in POSES:
+        reached = arm.view_for(arm.move_to(pose, SETTLE_TIMEOUT_S))
+        if abs(reached.elevation - pose.elevation) > POSE_TOLERANCE_DEG:
+            raise RuntimeError(f"asked for {pose}, reached {reached}")
+        seen.append(f"{reached.elevation:.1f}°")
+    return "reached elevations " + ", ".join(seen)
+
+
+def _tracker(hal: Any) -> str:
+    o = hal.tracker.orientation()
+    values = (o.heading, o.roll, o.pitch)
+    if not all(math.isfinite(v) for v in values):
+        raise RuntimeError(f"non-finite orientation {o}")
+    cal = hal.tracker.calibration()
+    return f"heading {o.heading:.1f}° roll {o.roll:.1f}° pitch {o.pitch:.1f}°; calibration {cal}"
+
+
+def _camera(hal: Any) -> str:
+    cam = hal.camera
+    h, w = hal.size
+    cam.open(w, h)
+    try:
+        frame = cam.capture()
+    finally:
+        cam.close()
+    if not isinstance(frame, np.ndarray) or frame.ndim != 3 or frame.shape[:2] != (h, w):
+        raise RuntimeError(f"frame shape {getattr(frame, 'shape', None)}, expected ({h}, {w}, C)")
+    if frame.dtype not in (np.uint8, np.uint16):
+        raise RuntimeError(f"frame dtype {frame.dtype}, expected uint8 or uint16")
+    return f"frame {frame.shape} {frame.dtype}"
+
+
+CHECKS: tuple[tuple[str, Callable[[Any], str]], ...] = (
+    ("servo_bus", _servo_bus),
+    ("arm", _arm),
+    ("tracker", _tracker),
+    ("camera", _camera),
+)
