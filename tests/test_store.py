@@ -1,0 +1,98 @@
+"""The SQLite store: idempotent captures, queries, masks, and refusal of foreign files."""
+import sqlite3
+
+import numpy as np
+import pytest
+
+from onboard.fit import fit_histogram
+from onboard.johnson import Family
+from tools.store import CorruptDatabase, Store
+
+
+def results(shift=0):
+    rng = np.random.default_rng(shift)
+    out = {}
+    for label in (0, 1):
+        for band in (0, 1, 2):
+            v = np.clip(rng.normal(60 + 40 * label + shift, 8 + band, 5000), 0, 255).astype(np.int64)
+            out[(label, band)] = fit_histogram(np.bincount(v, minlength=256))
+    return out
+
+
+def add(store, seq, angle, shift=0):
+    return store.add_capture("bot", seq, 1000.0 + seq, (angle, 0.0), (angle + 0.2, 1.0),
+                             "rgb", ("R", "G", "B"), results(shift))
+
+
+def test_capture_round_trip_and_idempotent_insert(tmp_path):
+    with Store.open(tmp_path / "s.db") as s:
+        assert add(s, 1, 30.0) is True
+        assert add(s, 1, 30.0) is False  # the same packet received twice
+        (cap,) = s.captures()
+        assert (cap.robot, cap.sequence, cap.measured, cap.commanded) == ("bot", 1, (30.2, 1.0), (30.0, 0.0))
+        assert cap.band_names == ("R", "G", "B")
+        stored = s.models(cap.id)
+        assert len(stored) == 6
+        want = results()[(1, 2)]
+        got = s.models(cap.id, label=1, band=2)[0]
+        assert got.model == want.model and got.count == want.count
+        assert got.percentiles == pytest.approx(want.percentiles)
+        assert isinstance(got.model.family, Family)
+    with Store.open(tmp_path / "s.db") as s:  # reopening keeps everything
+        assert len(s.captures()) == 1 and s.next_sequence("bot") == 2
+
+
+def test_angles_and_models_at(tmp_path):
+    with Store.open(tmp_path / "s.db") as s:
+        add(s, 1, 0.0)
+        add(s, 2, 60.0, shift=20)
+        assert s.angles() == [pytest.approx(0.2), pytest.approx(60.2)]
+        at = s.models_at(60.0)
+        assert at[(0, 0)] == results(20)[(0, 0)].model
+        assert s.models_at(30.0) == {}
+        assert list(s.models_by_angle()) == s.angles()
+        assert s.labels() == [0, 1]
+
+
+def test_masks_round_trip(tmp_path):
+    mask = (np.arange(12).reshape(3, 4) % 3).astype(np.uint8)
+    with Store.open(tmp_path / "s.db") as s:
+        assert s.add_mask("mixed", mask) is True
+        assert s.add_mask("mixed", mask) is False
+        assert np.array_equal(s.mask("mixed"), mask)
+        assert s.mask("other") is None
+
+
+@pytest.mark.parametrize("content", [b"this is not a database at all", b"SQLite format 3\x00" + b"\x07" * 600])
+def test_garbage_file_is_refused_and_untouched(tmp_path, content):
+    p = tmp_path / "x.db"
+    p.write_bytes(content)
+    with pytest.raises(CorruptDatabase, match="x.db"):
+        Store.open(p)
+    assert p.read_bytes() == content
+
+
+def test_foreign_sqlite_database_is_refused_and_untouched(tmp_path):
+    p = tmp_path / "other.db"
+    con = sqlite3.connect(p)
+    con.execute("CREATE TABLE people (name TEXT)")
+    con.commit()
+    con.close()
+    before = p.read_bytes()
+    with pytest.raises(CorruptDatabase, match="not a btfscout database"):
+        Store.open(p)
+    assert p.read_bytes() == before
+
+
+def test_failed_insert_leaves_nothing_half_written(tmp_path):
+    good = results()[(0, 0)]
+
+    class Bad:  # five percentiles: the models insert fails after the capture row went in
+        model, count, z, beta1, beta2 = good.model, good.count, good.z, good.beta1, good.beta2
+        percentiles = (1.0, 2.0, 3.0, 4.0, 5.0)
+
+    with Store.open(tmp_path / "s.db") as s:
+        with pytest.raises(sqlite3.Error):
+            s.add_capture("bot", 5, 0.0, None, 10.0, "rgb", ("R",), {(0, 0): good, (1, 0): Bad()})
+        assert s.captures() == []
+        assert add(s, 5, 10.0) is True  # the sequence number is still free

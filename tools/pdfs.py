@@ -1,0 +1,102 @@
+"""The paper's Table 2: how well Johnson and its peers fit each region's histogram.
+
+For every (label, band) the error of a model is the normalized-histogram L1
+difference  sum_k |h_k - p_k|  (0 .. 2) between the data's normalized histogram h and
+the model's probability p_k of each integer level k, i.e. its mass over
+[k - 1/2, k + 1/2] with both tails folded into the end levels (exactly what
+rounding and clipping a continuous draw to the sensor's levels gives). Using the
+binned probabilities rather than samples keeps the table free of sampling noise.
+
+Johnson is our robot's percentile fit from the region's histogram. The peers are
+scipy.stats maximum-likelihood fits to the dequantized values (each integer spread
+uniformly over its level, seeded): normal; uniform; Weibull and lognormal with their
+location fixed just below the lowest level's lower edge, so their support covers the data.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from scipy import stats
+
+from onboard.johnson import Johnson
+from tools.metrics import histogram
+
+PEERS = ("johnson", "gaussian", "uniform", "weibull", "lognormal")
+# MLE fits see at most this many values; enough for a stable fit, bounded time.
+FIT_SAMPLE = 20000
+
+
+@dataclass(frozen=True, slots=True)
+class PdfRow:
+    label: int
+    band: str
+    count: int
+    errors: dict[str, float]
+    failed: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class PdfTable:
+    rows: tuple[PdfRow, ...]
+    total: dict[str, float]
+
+    def to_json(self) -> dict:
+        return {
+            "peers": list(PEERS),
+            "rows": [{"label": r.label, "band": r.band, "count": r.count, "errors": dict(r.errors),
+                      "failed": list(r.failed)} for r in self.rows],
+            "total": dict(self.total),
+        }
+
+
+def binned(dist, levels: int) -> np.ndarray:
+    c = dist.cdf(np.arange(levels - 1, dtype=np.float64) + 0.5)
+    return np.diff(np.concatenate(([0.0], c, [1.0])))
+
+
+def _peer_probabilities(values: np.ndarray, levels: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    v = values if len(values) <= FIT_SAMPLE else rng.choice(values, FIT_SAMPLE, replace=False)
+    x = v.astype(np.float64) + rng.uniform(-0.5, 0.5, len(v))
+    floor = float(v.min()) - 0.5 - 1e-3
+    out: dict[str, np.ndarray] = {}
+    with np.errstate(all="ignore"):
+        mu, sd = stats.norm.fit(x)
+        out["gaussian"] = binned(stats.norm(mu, sd), levels)
+        lo, width = stats.uniform.fit(x)
+        out["uniform"] = binned(stats.uniform(lo, width), levels)
+        c, _, scale = stats.weibull_min.fit(x, floc=floor)
+        out["weibull"] = binned(stats.weibull_min(c, floor, scale), levels)
+        s, _, scale = stats.lognorm.fit(x, floc=floor)
+        out["lognormal"] = binned(stats.lognorm(s, floor, scale), levels)
+    return out
+
+
+def table(bands: np.ndarray, mask: np.ndarray, band_names: tuple[str, ...],
+          fit: Callable[[np.ndarray, int], Johnson], levels: int = 256, seed: int = 0) -> PdfTable:
+    """Table 2 for an H x W x B band stack under a label mask; `fit(values, levels)` gives Johnson."""
+    if bands.shape[:2] != mask.shape:
+        raise ValueError(f"mask size {mask.shape} differs from the image's {bands.shape[:2]}")
+    rng = np.random.default_rng(seed)
+    rows = []
+    for label in np.unique(mask):
+        sel = mask == label
+        for k, name in enumerate(band_names):
+            values = bands[:, :, k][sel].astype(np.int64)
+            h = histogram(values, levels)
+            if values.min() == values.max():
+                # A constant region: every model degenerates to the one level, exactly.
+                probs = {p: h for p in PEERS}
+            else:
+                probs = {"johnson": fit(values, levels).level_probabilities(levels)}
+                probs.update(_peer_probabilities(values, levels, rng))
+            errors, failed = {}, []
+            for p in PEERS:
+                e = float(np.abs(h - probs[p]).sum())
+                if not np.isfinite(e):
+                    e, failed = 2.0, failed + [p]  # a failed fit scores the worst possible error
+                errors[p] = e
+            rows.append(PdfRow(int(label), name, int(sel.sum()), errors, tuple(failed)))
+    total = {p: float(sum(r.errors[p] for r in rows)) for p in PEERS}
+    return PdfTable(tuple(rows), total)
