@@ -233,3 +233,126 @@ def _bin_index(v: np.ndarray, lo: float, width: float, centre0: float, bins: int
         return (v.astype(np.intp) - int(lo)) if lo != 0 else v.astype(np.intp, copy=False)
     edge0 = centre0 - 0.5 * width
     return np.clip(((v - edge0) * (1.0 / width)).astype(np.intp), 0, bins - 1)
+
+
+class FrameFitter:
+    """Per-(label, band) histograms in preallocated memory, filled in bounded row chunks.
+
+    Without `value_range` the bins are the integer levels 0 .. bins-1 (256 for 8-bit,
+    65536 for 16-bit sensors). With it, integer-like ranges (hi - lo + 1 == bins) keep one
+    bin per level; otherwise the bins tile [lo, hi]. A chunk holds at most
+    chunk_rows * 1024 pixels (fewer rows for wide frames), so the extra memory of add()
+    does not grow with frame size.
+    """
+
+    def __init__(self, n_labels: int, n_bands: int, bins: int = 256,
+                 value_range: tuple[float, float] | None = None, chunk_rows: int = 64,
+                 subsample: int = 1) -> None:
+        if n_labels < 1 or n_bands < 1:
+            raise ValueError(f"need at least one label and one band, got {n_labels}, {n_bands}")
+        if not 2 <= bins <= 65536:
+            raise ValueError(f"bins must be in [2, 65536], got {bins}")
+        if chunk_rows < 1 or subsample < 1:
+            raise ValueError(f"chunk_rows and subsample must be >= 1, got {chunk_rows}, {subsample}")
+        if n_labels * n_bands * bins >= 2**31:
+            raise ValueError("labels x bands x bins is too large for one histogram array")
+        lo, hi = (0.0, float(bins - 1)) if value_range is None else map(float, value_range)
+        if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
+            raise ValueError(f"value_range must be finite with hi > lo, got {value_range}")
+        self.n_labels, self.n_bands, self.bins = n_labels, n_bands, bins
+        self.lo, self.hi = lo, hi
+        self.chunk_pixels = chunk_rows * 1024
+        self.chunk_rows, self.subsample = chunk_rows, subsample
+        self.bin_width, self.centre0 = _bin_geometry(lo, hi, bins, hi - lo + 1 == bins)
+        self._unit_levels = self.bin_width == 1.0 and self.centre0 == lo and lo == 0.0
+        edge0 = self.centre0 - 0.5 * self.bin_width
+        if self._unit_levels:
+            self.codec = PercentileCodec.for_levels(bins)
+        else:
+            self.codec = PercentileCodec(edge0, edge0 + bins * self.bin_width, 16 if bins <= 256 else 32)
+        self.counts = np.zeros((n_labels, n_bands, bins), dtype=np.int64)
+        self._bases = (np.arange(n_labels, dtype=np.intp)[:, None] * n_bands
+                       + np.arange(n_bands, dtype=np.intp)[None, :]) * bins
+        self.empty_labels: tuple[int, ...] = ()
+
+    def reset(self) -> None:
+        self.counts[...] = 0
+        self.empty_labels = ()
+
+    def add(self, frame: np.ndarray, labels: np.ndarray) -> None:
+        """Accumulate one frame (HxWxB, or HxW for one band) under its label image (HxW)."""
+        frame, labels = self._checked(frame, labels)
+        frame, labels = frame[::self.subsample, ::self.subsample], labels[::self.subsample, ::self.subsample]
+        height, width = labels.shape
+        if height == 0 or width == 0:
+            return
+        step = max(1, min(self.chunk_rows, self.chunk_pixels // width))
+        size = self.counts.size
+        flat = self.counts.reshape(-1)
+        for r0 in range(0, height, step):
+            lab, vals = labels[r0:r0 + step], frame[r0:r0 + step]
+            lmin, lmax = int(lab.min()), int(lab.max())
+            if lmin < 0 or lmax >= self.n_labels:
+                bad = lmin if lmin < 0 else lmax
+                raise ValueError(f"label {bad} outside [0, {self.n_labels - 1}]")
+            # One gather of each pixel's (label, band) base offset, then add the bin index.
+            idx = np.take(self._bases, lab, axis=0)
+            if self._unit_levels and vals.dtype.kind in "ui":
+                self._check_range(vals)
+                np.add(idx, vals, out=idx, casting="unsafe")
+            else:
+                idx += self._value_index(vals)
+            flat += np.bincount(idx.reshape(-1), minlength=size)
+
+    def fit(self, min_count: int = 1) -> dict[tuple[int, int], FitResult]:
+        """Fit every (label, band) with at least `min_count` pixels; others go to empty_labels."""
+        totals = self.counts[:, 0, :].sum(axis=1)
+        results: dict[tuple[int, int], FitResult] = {}
+        empty = []
+        for label in range(self.n_labels):
+            count = int(totals[label])
+            if count < max(min_count, 1):
+                empty.append(label)
+                continue
+            z = z_for_count(count)
+            for band in range(self.n_bands):
+                results[(label, band)] = fit_histogram(
+                    self.counts[label, band], self.centre0, self.bin_width, self.codec, z)
+        self.empty_labels = tuple(empty)
+        return results
+
+    def _checked(self, frame: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        frame, labels = np.asarray(frame), np.asarray(labels)
+        if frame.dtype.kind not in "uif" or frame.dtype.itemsize > 8:
+            raise ValueError(f"frame dtype must be unsigned, integer or float, got {frame.dtype}")
+        if labels.dtype.kind not in "ui":
+            raise ValueError(f"labels must be integers, got dtype {labels.dtype}")
+        if frame.ndim == 2:
+            frame = frame[..., None]
+        if frame.ndim != 3 or frame.shape[2] != self.n_bands:
+            raise ValueError(f"frame shape {frame.shape} is not HxWx{self.n_bands}")
+        if labels.shape != frame.shape[:2]:
+            raise ValueError(f"labels shape {labels.shape} does not match frame {frame.shape[:2]}")
+        return frame, labels
+
+    def _check_range(self, vals: np.ndarray) -> None:
+        if vals.dtype.kind in "ui":
+            info = np.iinfo(vals.dtype)
+            if info.min >= self.lo and info.max <= self.hi:
+                return  # the dtype cannot leave the range
+        vmin, vmax = vals.min(), vals.max()
+        if vmin < self.lo or vmax > self.hi:
+            raise ValueError(f"frame values [{vmin}, {vmax}] outside the declared range [{self.lo}, {self.hi}]")
+
+    def _value_index(self, vals: np.ndarray) -> np.ndarray:
+        """Bin index of every value (new intp array), after range checks."""
+        if vals.dtype.kind == "f" and not np.all(np.isfinite(vals)):
+            raise ValueError("frame contains NaN or inf")
+        self._check_range(vals)
+        if self.bin_width == 1.0 and self.centre0 == self.lo:
+            # one bin per level: round to the nearest level
+            return np.rint(vals - self.lo).astype(np.intp)
+        edge0 = self.centre0 - 0.5 * self.bin_width
+        idx = ((vals - edge0) * (1.0 / self.bin_width)).astype(np.intp)
+        np.clip(idx, 0, self.bins - 1, out=idx)
+        return idx
