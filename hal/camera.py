@@ -1,0 +1,178 @@
+"""Camera drivers: OpenCV VideoCapture (V4L2) and a picamera2-shaped adapter.
+
+Both hand out RGB: H x W x 3 uint8, or H x W x 1 uint16 for the 16-bit "Y16 " format.
+"""
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import cv2
+import numpy as np
+
+from hal.interfaces import HalError
+
+SIXTEEN_BIT = frozenset({"Y16 "})
+V4L2_DEFAULT_BUFFERS = 4  # what V4L2 queues when a driver will not say
+
+
+def fourcc_text(code: float) -> str:
+    c = int(code)
+    return "".join(chr((c >> (8 * i)) & 0xFF) for i in range(4)) if c > 0 else "?"
+
+
+def _check_format(pixel_format: str) -> str:
+    if len(pixel_format) != 4 or not pixel_format.isascii():
+        raise HalError(f"pixel format must be a four-character code such as 'BGR3', 'MJPG' or 'Y16 ', "
+                       f"got {pixel_format!r}")
+    return pixel_format
+
+
+class OpenCVCamera:
+    """A V4L2 device through cv2.VideoCapture that never hands out a stale frame.
+
+    V4L2 fills a queue of buffers while nobody reads; `capture` grabs past every buffer
+    the driver may have queued (it asks for one) so the frame it retrieves is fresh.
+    """
+
+    def __init__(self, device: int | str, api: int = cv2.CAP_V4L2, retries: int = 3,
+                 capture_factory: Callable[[Any, int], Any] = cv2.VideoCapture) -> None:
+        self.device = device
+        self.api = api
+        self.retries = retries
+        self._factory = capture_factory
+        self._cap: Any = None
+        self.size: tuple[int, int] = (0, 0)  # granted (height, width)
+        self.pixel_format = ""
+        self.stale_buffers = 0
+        self.dropped = 0
+
+    def _where(self) -> str:
+        return f"camera {self.device!r}"
+
+    def open(self, width: int, height: int, pixel_format: str = "BGR3") -> None:
+        fmt = _check_format(pixel_format)
+        if width <= 0 or height <= 0:
+            raise HalError(f"{self._where()}: frame size must be positive, got {width}x{height}")
+        self.close()
+        cap = self._factory(self.device, self.api)
+        if not cap.isOpened():
+            raise HalError(f"{self._where()}: cannot open the device")
+        self._cap = cap
+        try:
+            self._configure(cap, width, height, fmt)
+        except BaseException:
+            self.close()
+            raise
+
+    def _configure(self, cap: Any, width: int, height: int, fmt: str) -> None:
+        # FOURCC first: many drivers reset the frame size when the format changes.
+        cap.set(cv2.CAP_PROP_FOURCC, cv2.VideoWriter_fourcc(*fmt))
+        if fmt in SIXTEEN_BIT:
+            cap.set(cv2.CAP_PROP_CONVERT_RGB, 0)
+        cap.set(cv2.CAP_PROP_FRAME_WIDTH, width)
+        cap.set(cv2.CAP_PROP_FRAME_HEIGHT, height)
+        cap.set(cv2.CAP_PROP_BUFFERSIZE, 1)
+        got_w, got_h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+        got_fmt = fourcc_text(cap.get(cv2.CAP_PROP_FOURCC))
+        if (got_w, got_h) != (width, height) or (fmt in SIXTEEN_BIT and got_fmt != fmt):
+            raise HalError(f"{self._where()}: asked for {width}x{height} {fmt!r}, "
+                           f"driver granted {got_w}x{got_h} {got_fmt!r}")
+        buffers = int(cap.get(cv2.CAP_PROP_BUFFERSIZE))
+        self.stale_buffers = buffers if buffers > 0 else V4L2_DEFAULT_BUFFERS
+        self.size, self.pixel_format = (height, width), fmt
+        for _ in range(self.stale_buffers):  # drop what queued up while we configured
+            cap.grab()
+
+    def _read(self) -> np.ndarray | None:
+        """One fresh frame, or None when the device dropped it."""
+        for _ in range(self.stale_buffers):
+            if not self._cap.grab():
+                return None
+        if not self._cap.grab():
+            return None
+        ok, frame = self._cap.retrieve()
+        return frame if ok and frame is not None else None
+
+    def capture(self) -> np.ndarray:
+        if self._cap is None:
+            raise HalError(f"{self._where()}: capture before open")
+        for _ in range(self.retries + 1):
+            frame = self._read()
+            if frame is not None:
+                return self._to_output(frame)
+            self.dropped += 1
+        raise HalError(f"{self._where()}: no frame after {self.retries + 1} tries (frames dropped)")
+
+    def _to_output(self, frame: np.ndarray) -> np.ndarray:
+        h, w = self.size
+        if self.pixel_format in SIXTEEN_BIT:
+            frame = frame.reshape(frame.shape[0], frame.shape[1], -1)[..., :1]
+            want = np.uint16
+        else:
+            frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2RGB if frame.ndim == 2 else cv2.COLOR_BGR2RGB)
+            want = np.uint8
+        if frame.shape[:2] != (h, w) or frame.dtype != want:
+            raise HalError(f"{self._where()}: frame is {frame.shape} {frame.dtype}, expected {h}x{w} {want.__name__}")
+        return np.ascontiguousarray(frame)
+
+    def close(self) -> None:
+        if self._cap is not None:
+            self._cap.release()
+            self._cap = None
+
+
+PICAMERA2_FORMATS = {"BGR3": "RGB888", "RGB3": "BGR888"}  # picamera2 names the memory order reversed
+
+
+class PiCamera2Camera:
+    """The Raspberry Pi camera stack through a picamera2-shaped object."""
+
+    def __init__(self, factory: Callable[[], Any] | None = None) -> None:
+        if factory is None:
+            try:
+                from picamera2 import Picamera2  # only on a Raspberry Pi
+            except ImportError as exc:
+                raise HalError("picamera2 is not installed; use an OpenCV camera device instead") from exc
+            factory = Picamera2
+        self._factory = factory
+        self._cam: Any = None
+        self.size: tuple[int, int] = (0, 0)
+        self.pixel_format = ""
+
+    def open(self, width: int, height: int, pixel_format: str = "BGR3") -> None:
+        if pixel_format not in PICAMERA2_FORMATS:
+            raise HalError(f"picamera2: pixel format {pixel_format!r} unsupported; use one of "
+                           f"{', '.join(PICAMERA2_FORMATS)}")
+        self.close()
+        cam = self._factory()
+        try:
+            config = cam.create_still_configuration(main={"size": (width, height),
+                                                          "format": PICAMERA2_FORMATS[pixel_format]})
+            cam.configure(config)
+            granted = tuple(config["main"]["size"])
+            if granted != (width, height):
+                raise HalError(f"picamera2: asked for {width}x{height}, granted {granted[0]}x{granted[1]}")
+            cam.start()
+        except BaseException:
+            cam.close()
+            raise
+        self._cam, self.size, self.pixel_format = cam, (height, width), pixel_format
+
+    def capture(self) -> np.ndarray:
+        if self._cam is None:
+            raise HalError("picamera2: capture before open")
+        frame = np.asarray(self._cam.capture_array())  # waits for the next completed request
+        h, w = self.size
+        if frame.ndim != 3 or frame.shape[:2] != (h, w) or frame.shape[2] < 3 or frame.dtype != np.uint8:
+            raise HalError(f"picamera2: frame is {frame.shape} {frame.dtype}, expected {h}x{w}x3 uint8")
+        rgb = frame[..., 2::-1] if self.pixel_format == "BGR3" else frame[..., :3]
+        return np.ascontiguousarray(rgb)
+
+    def close(self) -> None:
+        if self._cam is not None:
+            try:
+                self._cam.stop()
+            finally:
+                self._cam.close()
+                self._cam = None
