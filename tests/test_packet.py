@@ -1,0 +1,260 @@
+"""Packet bodies: exact model round trip, sizes, every kind, and strict rejection of bad fields."""
+from __future__ import annotations
+
+import math
+
+import msgpack
+import numpy as np
+import pytest
+
+from onboard.fit import Z_LADDER, PercentileCodec, fit_histogram, fit_values
+from radio import FrameError
+from radio.packet import (
+    MAX_BODY, SCHEMA_VERSION, AckPacket, CommandName, CommandPacket, Kind, LabelModels,
+    LogLevel, LogPacket, MaskPacket, ModelsPacket, NackPacket, Reason, RobotState, StatusPacket,
+    UnchangedPacket, decode, downsample_labels, encode, encode_mask, encode_models, models_packet,
+)
+
+HEADER = dict(robot_id=3, seq=41, time=1_700_000_000.25, commanded=(45.0, 30.0),
+              measured=(44.93, 29.87), feature_space="rgb")
+
+
+def _fits(n_labels: int, n_bands: int, seed: int = 0, levels: int = 256) -> dict:
+    """Fitter results over varied shapes: skewed, heavy-tailed, clipped, bounded, constant."""
+    rng = np.random.default_rng(seed)
+    fits = {}
+    for lab in range(n_labels):
+        n = int(rng.integers(300, 20000))
+        for band in range(n_bands):
+            shape = (lab + band) % 5
+            if shape == 0:
+                v = rng.normal(rng.uniform(30, 220), rng.uniform(2, 30), n)
+            elif shape == 1:
+                v = rng.gamma(rng.uniform(1, 4), rng.uniform(5, 20), n)
+            elif shape == 2:
+                v = 128 + rng.standard_t(3, n) * 10
+            elif shape == 3:
+                v = 255 * rng.beta(2, 5, n)
+            else:
+                v = np.full(n, float(rng.integers(0, levels)))
+            v = np.clip(np.round(v * (levels / 256)), 0, levels - 1).astype(np.int64)
+            fits[(lab * 3 + 1, band)] = fit_histogram(np.bincount(v, minlength=levels))
+    return fits
+
+
+def _bands(n: int) -> tuple[str, ...]:
+    return tuple("RGBHSVXYZABCDEFQ"[:n])
+
+
+def test_host_recomputes_the_robots_models_bit_for_bit():
+    for seed in range(5):
+        fits = _fits(6, 3, seed)
+        packet = decode(encode_models(fits, bands=_bands(3), **HEADER))
+        assert set(packet.models) == set(fits)
+        for key, fit in fits.items():
+            assert packet.models[key] == fit.model  # exact float equality of every parameter
+
+
+def test_deeper_sensors_use_32_bit_codes_and_stay_exact():
+    fits = _fits(3, 2, seed=7, levels=4096)
+    body = encode_models(fits, bands=_bands(2), levels=4096, **HEADER)
+    packet = decode(body)
+    assert all(packet.models[k] == f.model for k, f in fits.items())
+    assert packet.levels == 4096
+    body8 = encode_models(_fits(3, 2, seed=7), bands=_bands(2), **HEADER)
+    assert len(body) - len(body8) == 3 * 2 * 4 * 2  # 2 extra bytes per code
+
+
+def test_decoded_fields_match_what_was_sent():
+    fits = _fits(4, 3)
+    packet = decode(encode_models(fits, bands=("R", "G", "B"), censored={4: (0.25, 0.5)},
+                                  extras={"exposure_us": 1200, "gain": 1.5}, **HEADER))
+    assert isinstance(packet, ModelsPacket)
+    assert (packet.robot_id, packet.seq, packet.time) == (3, 41, 1_700_000_000.25)
+    assert packet.commanded == (45.0, 30.0) and packet.measured == (44.93, 29.87)
+    assert packet.feature_space == "rgb" and packet.bands == ("R", "G", "B") and packet.levels == 256
+    assert [r.label for r in packet.labels] == [1, 4, 7, 10]
+    codec = PercentileCodec.for_levels(256)
+    for rec in packet.labels:
+        fit = fits[(rec.label, 0)]
+        assert rec.count == fit.count and Z_LADDER[rec.z_index] == fit.z
+        assert rec.codes[1] == codec.encode(fits[(rec.label, 1)].percentiles)
+    by_label = {r.label: r for r in packet.labels}
+    assert abs(by_label[4].censored_low - 0.25) <= 0.5 / 65535
+    assert abs(by_label[4].censored_high - 0.5) <= 0.5 / 65535
+    assert by_label[1].censored_low == 0.0 and by_label[1].censored_high == 0.0
+    assert packet.extras == {"exposure_us": 1200, "gain": 1.5}
+
+
+def test_a_capture_of_8_labels_by_3_bands_fits_in_300_bytes_even_with_maximal_header():
+    fits = _fits(8, 3)
+    header = dict(HEADER, robot_id=65535, seq=2**32 - 1, commanded=(-89.99, 359.99),
+                  measured=(89.99, 359.99))
+    body = encode_models(fits, bands=("R", "G", "B"), **header)
+    assert len(body) <= 300, len(body)
+
+
+def test_each_model_costs_eight_bytes_of_codes():
+    fits3, fits4 = _fits(4, 3), _fits(4, 4)
+    small = encode_models(fits3, bands=("R", "G", "B"), **HEADER)
+    large = encode_models(fits4, bands=("R", "G", "B", "H"), **HEADER)
+    # one more band: 4 models of 8 bytes, plus the band's name "H" (2 bytes)
+    assert len(large) - len(small) == 4 * 8 + 2
+    assert len(msgpack.unpackb(small)[13]) == 4 * 3 * 8
+
+
+def test_fixed_point_error_is_at_most_half_a_step_under_a_hundredth_of_a_gray_level():
+    codec = PercentileCodec.for_levels(256)
+    assert codec.step == 2.0**-8
+    x = np.random.default_rng(1).uniform(-0.5, 255.5, 20000)
+    err = max(abs(codec.decode(codec.encode([v] * 4))[0] - v) for v in x)
+    assert err <= 2.0**-9 < 0.01
+
+
+def test_encoding_refuses_incomplete_or_inconsistent_fits():
+    fits = _fits(2, 3)
+    del fits[(1, 2)]
+    with pytest.raises(ValueError, match="lacks a model"):
+        encode_models(fits, bands=("R", "G", "B"), **HEADER)
+    with pytest.raises(ValueError, match="outside the band list"):
+        encode_models(_fits(2, 3), bands=("R", "G"), **HEADER)
+    with pytest.raises(ValueError, match="elevation"):
+        encode_models(_fits(2, 3), bands=("R", "G", "B"), **dict(HEADER, measured=(95.0, 0.0)))
+    with pytest.raises(ValueError, match="censored"):
+        encode_models(_fits(1, 3), bands=("R", "G", "B"), censored={1: (1.5, 0.0)}, **HEADER)
+
+
+def test_angles_travel_at_a_hundredth_of_a_degree_and_azimuth_wraps():
+    packet = decode(encode(UnchangedPacket(1, 9, 5.0, (30.004, -10.0), (29.996, 370.0), 4)))
+    assert packet.commanded == (30.0, 350.0) and packet.measured == (30.0, 10.0)
+
+
+# -- the other kinds -----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("packet", [
+    UnchangedPacket(1, 9, 5.0, (30.0, 0.0), (29.5, 359.5), 4),
+    StatusPacket(2, 10.5, RobotState.SWEEPING, (45.0, 90.0), 12, 4096, 17, "sweep 3/20"),
+    StatusPacket(2, 0.0, RobotState.PAUSED, None, 0, 0, None, "outbox full", {"disk_free": 10}),
+    CommandPacket(7, CommandName.PING),
+    CommandPacket(8, CommandName.GOTO, {"elevation": 45.0, "azimuth": -30.0}),
+    CommandPacket(9, CommandName.SWEEP, {"elevations": (30.0, 60.0), "azimuths": (0.0, 90.0, 180.0)}),
+    CommandPacket(10, CommandName.SET, {"key": "skip.min_pixels", "value": 500}),
+    CommandPacket(11, CommandName.REBOOT_SERVO, {"servo_id": 2}),
+    CommandPacket(12, CommandName.SEND_MASK, {"seq": 41}),
+    AckPacket(8, "at pose"),
+    NackPacket(9, Reason.OUT_OF_LIMITS, "elevation 95 beyond the arm's reach"),
+    LogPacket(2, 3.5, LogLevel.WARNING, "tracker calibration low"),
+], ids=lambda p: type(p).__name__)
+def test_every_kind_round_trips(packet):
+    assert decode(encode(packet)) == packet
+
+
+def test_mask_mode_pools_to_64_and_round_trips():
+    labels = np.zeros((480, 640), np.uint8)
+    labels[100:300, 200:500] = 3
+    labels[350:, :] = 7
+    packet = decode(encode_mask(labels, robot_id=1, seq=5))
+    assert isinstance(packet, MaskPacket)
+    assert packet.frame_shape == (480, 640) and packet.shape == (48, 64)
+    assert (packet.full_size() == labels).mean() > 0.99
+    assert sum(packet.runs) == 48 * 64
+
+
+def test_mode_pooling_keeps_the_majority_and_breaks_ties_low():
+    labels = np.array([[1, 1, 2, 2], [1, 5, 2, 3], [4, 4, 6, 6], [4, 9, 7, 8]], np.uint8)
+    assert downsample_labels(labels, 2).tolist() == [[1, 2], [4, 6]]
+    tie = np.array([[5, 2], [2, 5]], np.uint8)
+    assert downsample_labels(tie, 1).tolist() == [[2]]
+
+
+def test_small_masks_travel_exactly():
+    labels = np.random.default_rng(2).integers(0, 4, (20, 30)).astype(np.uint8)
+    packet = decode(encode_mask(labels, robot_id=1, seq=5))
+    assert np.array_equal(packet.label_map(), labels)
+    assert np.array_equal(packet.full_size(), labels)
+
+
+def test_mask_refuses_labels_beyond_a_byte():
+    with pytest.raises(ValueError, match="0..255"):
+        encode_mask(np.full((4, 4), 300), robot_id=1, seq=1)
+
+
+def test_command_arguments_are_checked_when_encoding():
+    with pytest.raises(ValueError, match="takes arguments"):
+        encode(CommandPacket(1, CommandName.GOTO, {"elevation": 10.0}))
+    with pytest.raises(ValueError, match="servo id"):
+        encode(CommandPacket(1, CommandName.REBOOT_SERVO, {"servo_id": 300}))
+
+
+# -- strict decoding of hand-made bodies ---------------------------------------------------
+
+
+def _raw(*items) -> bytes:
+    return msgpack.packb(list(items), use_bin_type=True)
+
+
+def _models_fields() -> list:
+    body = encode_models(_fits(2, 3), bands=("R", "G", "B"), **HEADER)
+    return msgpack.unpackb(body)
+
+
+def _with(index: int, value) -> bytes:
+    items = _models_fields()
+    items[index] = value
+    return _raw(*items)
+
+
+def _codes(items: list, edit) -> bytes:
+    codes = bytearray(items[13])
+    edit(codes)
+    items[13] = bytes(codes)
+    return _raw(*items)
+
+
+BAD = {
+    "must be an array": msgpack.packb({"v": 1}),
+    "schema version": _raw(99, 1),
+    "kind": _raw(SCHEMA_VERSION, 42),
+    "fields": _raw(SCHEMA_VERSION, int(Kind.ACK)),
+    "integer": _raw(SCHEMA_VERSION, int(Kind.ACK), True, ""),  # a bool is not an id
+    "finite": _with(4, float("nan")),
+    "elevation": _with(5, 9001),
+    "azimuth": _with(6, 36000),
+    "band names repeat": _with(10, ["R", "R", "B"]),
+    "levels": _with(11, 1),
+    "whole number": _with(12, b"\x01\x00\x00"),
+    "codes blob": _with(13, b"\x00" * 7),
+    "decrease": _codes(_models_fields(), lambda c: c.__setitem__(slice(0, 2), b"\xff\xff")),
+    "z ladder": _with(12, bytes([1, 200, 0, 0, 1, 0, 4, 0, 0, 0, 1, 0])),
+    "strictly increasing": _with(12, bytes([4, 0, 0, 0, 1, 0, 4, 0, 0, 0, 1, 0])),
+    "censored": _with(14, b"\x00"),
+    "extras": _raw(*_models_fields(), [1, 2]),
+    "unknown command": _raw(SCHEMA_VERSION, int(Kind.COMMAND), 1, 99, {}),
+    "takes arguments": _raw(SCHEMA_VERSION, int(Kind.COMMAND), 1, int(CommandName.PING), {"x": 1}),
+    "empty run": _raw(SCHEMA_VERSION, int(Kind.MASK), 1, 1, 8, 8, 2, 2, b"\x01\x02", b"\x00\x04\x00\x00"),
+    "cover": _raw(SCHEMA_VERSION, int(Kind.MASK), 1, 1, 8, 8, 2, 2, b"\x01\x02", b"\x00\x01\x00\x01"),
+    "same label": _raw(SCHEMA_VERSION, int(Kind.MASK), 1, 1, 8, 8, 2, 2, b"\x01\x01", b"\x00\x02\x00\x02"),
+    "mask height": _raw(SCHEMA_VERSION, int(Kind.MASK), 1, 1, 800, 800, 65, 1, b"\x01", b"\x00\x41"),
+    "not before": _raw(SCHEMA_VERSION, int(Kind.UNCHANGED), 1, 5, 1.0, 0, 0, 0, 0, 5),
+    "unprintable": _raw(SCHEMA_VERSION, int(Kind.LOG), 1, 1.0, 20, "bell\x07"),
+    "msgpack": _raw(SCHEMA_VERSION, int(Kind.ACK), 1, "x") + b"\x00",
+    "exceeds": b"\x00" * (MAX_BODY + 1),
+}
+
+
+@pytest.mark.parametrize("reason", sorted(BAD))
+def test_malformed_bodies_raise_frame_error_naming_the_problem(reason):
+    with pytest.raises(FrameError, match=reason):
+        decode(BAD[reason])
+
+
+def test_decoded_models_are_never_non_finite():
+    # Extreme but legal codes: all at the bottom, all at the top, one giant gap.
+    codec = PercentileCodec.for_levels(256)
+    top = (1 << codec.bits) - 1
+    for codes in [(0, 0, 0, 1), (0, 1, 1, top), (top - 1, top, top, top), (0, 0, top, top)]:
+        rec = LabelModels(1, 10**9, len(Z_LADDER) - 1, (codes,))
+        packet = decode(encode(ModelsPacket(1, 1, 1.0, (0.0, 0.0), (0.0, 0.0), "gray", ("Y",), 256, (rec,))))
+        m = packet.models[(1, 0)]
+        assert all(math.isfinite(v) for v in (m.gamma, m.delta, m.xi, m.lam))
