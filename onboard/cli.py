@@ -11,7 +11,7 @@ import importlib
 import sys
 
 PROG = "btf-robot"
-COMMANDS: tuple[str, ...] = ("selftest",)
+COMMANDS: tuple[str, ...] = ("selftest", "run")
 
 
 class CliError(Exception):
