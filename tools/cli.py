@@ -13,6 +13,12 @@ import sys
 PROG = "btf-host"
 # Subcommand modules, in the order --help lists them.
 COMMANDS: tuple[str, ...] = (
+    "fit",
+    "mask",
+    "synth",
+    "compare",
+    "pdfs",
+    "resolve",
     "demo",
 )
 
