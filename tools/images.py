@@ -106,3 +106,32 @@ def decode_png(data: bytes) -> np.ndarray:
     if arr is None:
         raise ImageError("mask: stored PNG bytes are damaged")
     return arr
+
+
+SPACES = ("rgb", "hsv", "gray", "pca")
+
+
+def feature_bands(image: np.ndarray, space: str, pca=None):
+    """The robot's own feature bands of an RGB image (onboard.features); pca fits a basis if none is given."""
+    from onboard.features import FeatureSpace, FeatureSpec, PcaBasis, compute
+
+    if space not in SPACES:
+        raise ImageError(f"feature space {space!r}: expected one of {', '.join(SPACES)}")
+    if space == "pca" and pca is None:
+        pca = PcaBasis.fit(image)
+    return compute(image, FeatureSpec(FeatureSpace(space)), pca=pca), pca
+
+
+def to_rgb(bands: np.ndarray, space: str, pca=None) -> np.ndarray:
+    """Synthesized feature bands back to a viewable RGB (or single-band) uint8 image."""
+    if space == "rgb" or space == "gray":
+        return bands if space == "rgb" else bands[:, :, 0]
+    if space == "hsv":
+        hsv = bands.copy()
+        hsv[:, :, 0] = np.minimum(hsv[:, :, 0], 179)
+        return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+    if space == "pca":
+        if pca is None:
+            raise ImageError("pca bands need their basis to become an image")
+        return np.rint(pca.invert(bands)).astype(np.uint8)
+    raise ImageError(f"feature space {space!r}: cannot turn it back into an image")

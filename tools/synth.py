@@ -113,3 +113,38 @@ def synthesize_at(source: _ModelSource | Mapping[float, Models], mask: np.ndarra
     if lo == hi:
         return synthesize(mask, by_angle[lo], rng, levels)
     return interpolate(by_angle[lo], by_angle[hi], w, mask, rng, levels)
+
+
+# --- the MODELS.json document that `btf-host fit --json` prints ----------------------------
+def models_document(space: str, band_names: tuple[str, ...], levels: int, angle: float | None,
+                    results: Mapping[tuple[int, int], object], pca: dict | None = None,
+                    image: str | None = None) -> dict:
+    rows = []
+    for (label, band), r in sorted(results.items()):
+        m = r.model
+        rows.append({
+            "label": int(label), "band": int(band), "band_name": band_names[band],
+            "family": str(m.family.value), "gamma": m.gamma, "delta": m.delta, "xi": m.xi, "lam": m.lam,
+            "percentiles": [float(p) for p in r.percentiles], "z": float(r.z), "count": int(r.count),
+            "beta1": float(r.beta1), "beta2": float(r.beta2),
+        })
+    return {"image": image, "space": space, "bands": list(band_names), "levels": int(levels),
+            "angle": angle, "pca": pca, "models": rows}
+
+
+def models_from_document(doc: object) -> tuple[float | None, dict[tuple[int, int], Johnson], dict]:
+    """(angle, models, the document) from one parsed MODELS.json document; ValueError says what is wrong."""
+    from onboard.johnson import Family
+
+    if not isinstance(doc, dict) or not isinstance(doc.get("models"), list):
+        raise ValueError("not a models document (expected an object with a 'models' list)")
+    out: dict[tuple[int, int], Johnson] = {}
+    for k, row in enumerate(doc["models"]):
+        try:
+            out[(int(row["label"]), int(row["band"]))] = Johnson(
+                Family(row["family"]), float(row["gamma"]), float(row["delta"]),
+                float(row["xi"]), float(row["lam"]))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"model {k}: {exc}") from None
+    angle = doc.get("angle")
+    return (None if angle is None else float(angle)), out, doc

@@ -1,0 +1,65 @@
+"""`btf-host fit`: Johnson models from an image on disk, with the robot's own fitter."""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import numpy as np
+
+from onboard.fit import FrameFitter
+from tools.cli import CliError
+from tools.images import SPACES, ImageError, feature_bands, read_image, read_mask
+from tools.store import CorruptDatabase, Store
+from tools.synth import models_document
+
+ROBOT_ID = "host"
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("fit", help="fit Johnson models per (label, band) of an image",
+                       description="Fit Johnson models per (label, band); without --mask the whole image is label 0.")
+    p.add_argument("image")
+    p.add_argument("--mask", help="label mask PNG, same size as the image")
+    p.add_argument("--space", choices=SPACES, default="rgb")
+    p.add_argument("--angle", type=float, help="view elevation in degrees (needed with --db)")
+    p.add_argument("--db", help="store the models as a capture of robot 'host' in this database")
+    p.add_argument("--json", action="store_true", help="print the models document (MODELS.json)")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    if args.db and args.angle is None:
+        raise CliError("--db needs --angle: every stored capture has a view angle")
+    try:
+        image = read_image(args.image)
+        mask = read_mask(args.mask, image.shape[:2]) if args.mask else np.zeros(image.shape[:2], np.uint8)
+        feats, pca = feature_bands(image, args.space)
+    except (ImageError, ValueError) as exc:
+        raise CliError(str(exc)) from None
+    fitter = FrameFitter(int(mask.max()) + 1, feats.data.shape[2], bins=feats.levels)
+    fitter.add(feats.data, mask)
+    results = fitter.fit()
+    doc = models_document(args.space, feats.band_names, feats.levels, args.angle, results,
+                          pca=None if pca is None else pca.to_record(), image=str(args.image))
+    if args.db:
+        try:
+            with Store.open(args.db) as store:
+                seq = store.next_sequence(ROBOT_ID)
+                store.add_capture(ROBOT_ID, seq, time.time(), None, (args.angle, 0.0), args.space,
+                                  feats.band_names, results)
+                if args.mask:
+                    store.add_mask(f"{ROBOT_ID}/{seq}", mask, ROBOT_ID)
+        except CorruptDatabase as exc:
+            raise CliError(str(exc)) from None
+        doc["stored"] = {"db": str(args.db), "robot": ROBOT_ID, "sequence": seq}
+    if args.json:
+        print(json.dumps(doc, indent=1))
+    else:
+        for row in doc["models"]:
+            print(f"label {row['label']:3d} band {row['band_name']:>3}  {row['family']:<5} "
+                  f"gamma {row['gamma']:9.4f} delta {row['delta']:8.4f} xi {row['xi']:9.3f} "
+                  f"lam {row['lam']:9.3f}  n {row['count']}")
+        if args.db:
+            print(f"stored as capture {ROBOT_ID}/{seq} in {args.db}")
+    return 0

@@ -1,0 +1,47 @@
+"""`btf-host pdfs`: the paper's Table 2, Johnson against its peers per (label, band)."""
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from onboard.fit import fit_histogram
+from onboard.johnson import Johnson
+from tools.cli import CliError
+from tools.images import SPACES, ImageError, feature_bands, read_image, read_mask
+from tools.pdfs import PEERS, table
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("pdfs", help="histogram error of Johnson vs Gaussian, uniform, Weibull, lognormal")
+    p.add_argument("image")
+    p.add_argument("--mask", required=True)
+    p.add_argument("--space", choices=SPACES, default="rgb")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--json", action="store_true")
+    return p
+
+
+def _johnson(values: np.ndarray, levels: int) -> Johnson:
+    return fit_histogram(np.bincount(values, minlength=levels)).model
+
+
+def run(args: argparse.Namespace) -> int:
+    try:
+        image = read_image(args.image)
+        mask = read_mask(args.mask, image.shape[:2])
+        feats, _ = feature_bands(image, args.space)
+    except (ImageError, ValueError) as exc:
+        raise CliError(str(exc)) from None
+    t = table(feats.data, mask, feats.band_names, _johnson, feats.levels, args.seed)
+    if args.json:
+        doc = t.to_json()
+        doc["space"] = args.space
+        print(json.dumps(doc, indent=1))
+        return 0
+    print(f"{'label':>5} {'band':>4} {'count':>8} " + " ".join(f"{p:>10}" for p in PEERS))
+    for r in t.rows:
+        print(f"{r.label:5d} {r.band:>4} {r.count:8d} " + " ".join(f"{r.errors[p]:10.4f}" for p in PEERS))
+    print(f"{'total':>19} " + " ".join(f"{t.total[p]:10.4f}" for p in PEERS))
+    return 0

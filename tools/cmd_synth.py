@@ -1,0 +1,105 @@
+"""`btf-host synth`: a synthetic image inside a mask, at a measured or interpolated angle."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from onboard.features import PcaBasis
+from tools.cli import CliError
+from tools.images import SPACES, ImageError, read_mask, to_rgb, write_image
+from tools.store import CorruptDatabase, Store
+from tools.synth import ExtrapolationWarning, MissingModels, models_from_document, synthesize_at
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("synth", help="synthesize an image from models inside a mask")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--db", help="database of captures")
+    src.add_argument("--model", help="MODELS.json: one document of `fit --json`, or a list of them")
+    p.add_argument("--mask", required=True)
+    p.add_argument("--angle", type=float, required=True)
+    p.add_argument("--out", required=True)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--space", choices=SPACES, help="which stored feature space (--db)")
+    return p
+
+
+def _from_json(path: str) -> tuple[dict, str, int, dict | None]:
+    try:
+        raw = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise CliError(f"models {path}: no such file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CliError(f"models {path}: not readable JSON ({exc})") from None
+    docs = raw if isinstance(raw, list) else [raw]
+    by_angle: dict = {}
+    try:
+        parsed = [models_from_document(d) for d in docs]
+    except ValueError as exc:
+        raise CliError(f"models {path}: {exc}") from None
+    if not parsed:
+        raise CliError(f"models {path}: no documents")
+    spaces = {d.get("space") for _, _, d in parsed}
+    if len(spaces) != 1:
+        raise CliError(f"models {path}: documents mix feature spaces {sorted(map(str, spaces))}")
+    for angle, models, _ in parsed:
+        if angle is None and len(parsed) > 1:
+            raise CliError(f"models {path}: with several documents each needs its angle")
+        by_angle[0.0 if angle is None else angle] = models
+    first = parsed[0][2]
+    if parsed[0][0] is None:  # one document without an angle serves every angle
+        by_angle = {float("-inf"): parsed[0][1]}
+    return by_angle, str(first.get("space") or "rgb"), int(first.get("levels") or 256), first.get("pca")
+
+
+def _from_db(path: str, space: str | None) -> tuple[dict, str]:
+    try:
+        with Store.open(path, create=False) as store:
+            spaces = sorted({c.space for c in store.captures()})
+            if space is None:
+                if len(spaces) > 1:
+                    raise CliError(f"database {path}: several feature spaces {spaces}; choose one with --space")
+                space = spaces[0] if spaces else "rgb"
+            by_angle = store.models_by_angle(space=space)
+    except CorruptDatabase as exc:
+        raise CliError(str(exc)) from None
+    if not by_angle:
+        raise CliError(f"database {path}: no captures in feature space {space}")
+    return by_angle, space
+
+
+def run(args: argparse.Namespace) -> int:
+    pca = None
+    if args.db:
+        if args.space == "pca":
+            raise CliError("synth --db: pca bases are not stored yet; use --model from `fit --json`")
+        by_angle, space = _from_db(args.db, args.space)
+        levels = 256
+    else:
+        by_angle, space, levels, pca_rec = _from_json(args.model)
+        pca = PcaBasis.from_record(pca_rec) if pca_rec else None
+    try:
+        mask = read_mask(args.mask)
+    except ImageError as exc:
+        raise CliError(str(exc)) from None
+    angle = args.angle
+    if float("-inf") in by_angle:
+        by_angle, angle = {angle: by_angle[float("-inf")]}, angle
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ExtrapolationWarning)
+        try:
+            bands = synthesize_at(by_angle, mask, angle, np.random.default_rng(args.seed), levels)
+        except MissingModels as exc:
+            raise CliError(str(exc)) from None
+    for w in caught:
+        print(f"btf-host: warning: {w.message}", file=sys.stderr)
+    try:
+        write_image(args.out, to_rgb(bands.astype(np.uint8), space, pca))
+    except ImageError as exc:
+        raise CliError(str(exc)) from None
+    return 0
