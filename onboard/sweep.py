@@ -23,6 +23,7 @@ class SweepPlan:
     stop: float
     step: float
     azimuths: tuple[float, ...] = (0.0,)
+    elevations: tuple[float, ...] = ()  # an explicit list (from a SWEEP command) overrides start..stop
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.start) and math.isfinite(self.stop) and math.isfinite(self.step)):
@@ -34,6 +35,8 @@ class SweepPlan:
 
     def poses(self) -> list[ViewAngles]:
         """Elevations from start toward stop (inclusive, either direction), per azimuth."""
+        if self.elevations:
+            return [ViewAngles(float(e), float(a)) for a in self.azimuths for e in self.elevations]
         direction = -1.0 if self.stop < self.start else 1.0
         n = int(math.floor(abs(self.stop - self.start) / self.step + 1e-9)) + 1
         elevations = [self.start + direction * i * self.step for i in range(n)]
@@ -90,7 +93,8 @@ class SweepProgress:
     def to_record(self) -> dict:
         return {
             "sweep_id": self.sweep_id,
-            "plan": {**asdict(self.plan), "azimuths": list(self.plan.azimuths)},
+            "plan": {**asdict(self.plan), "azimuths": list(self.plan.azimuths),
+                     "elevations": list(self.plan.elevations)},
             "next_index": self.next_index,
             "measured": [[i, v.elevation, v.azimuth] for i, v in self.measured],
             "skipped": [[s.index, s.commanded.elevation, s.commanded.azimuth, s.reason]
@@ -104,7 +108,8 @@ class SweepProgress:
         return cls(
             sweep_id=int(rec["sweep_id"]),
             plan=SweepPlan(float(plan["start"]), float(plan["stop"]), float(plan["step"]),
-                           tuple(float(a) for a in plan["azimuths"])),
+                           tuple(float(a) for a in plan["azimuths"]),
+                           tuple(float(e) for e in plan.get("elevations", ()))),
             next_index=int(rec["next_index"]),
             measured=[(int(i), ViewAngles(float(e), float(a))) for i, e, a in rec["measured"]],
             skipped=[SkippedPose(int(i), ViewAngles(float(e), float(a)), str(r))

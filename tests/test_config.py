@@ -104,7 +104,8 @@ def test_btf_robot_run_stops_at_start_with_one_line_and_exit_2(tmp_path, text, w
     if text is not None:
         path.write_text(text + "\n")
     out = subprocess.run(
-        [sys.executable, "-m", "onboard.cli", "run", "--config", str(path), "--hal", "fake"],
+        [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())",
+         "run", "--config", str(path), "--hal", "fake"],
         capture_output=True, text=True, timeout=60, cwd=Path(__file__).resolve().parents[1],
     )
     assert out.returncode == 2, out.stderr

@@ -1,0 +1,230 @@
+"""One pose, end to end: move, settle, read the tracker, capture, features, segment, fit.
+
+The measured view (from the tracker) is what a capture is filed under. Each device
+step gets bounded retries; when they run out the pose is skipped with a reason
+(`PoseSkipped`) and the caller records it. The fitter is preallocated once and reset
+per capture, so memory does not grow with the mission.
+"""
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from dataclasses import dataclass, field
+from typing import Any, Callable, TypeVar
+
+import numpy as np
+
+from hal.interfaces import HalError, ViewAngles, view_from_orientation
+from onboard import skip
+from onboard.config import Config
+from onboard.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
+from onboard.fit import FitResult, FrameFitter
+from radio import packet as pk
+
+T = TypeVar("T")
+
+
+class PoseSkipped(Exception):
+    """A pose could not be measured after its retries; `reason` says which step failed."""
+
+    def __init__(self, reason: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+
+
+@dataclass(frozen=True, slots=True)
+class Capture:
+    """The fitted models of one view, ready to encode."""
+
+    commanded: ViewAngles
+    measured: ViewAngles
+    band_names: tuple[str, ...]
+    levels: int
+    results: dict[tuple[int, int], FitResult]
+    skipped_labels: tuple[int, ...]
+    labels: np.ndarray = field(repr=False)
+    mask_changed: bool = False
+    unchanged: bool = False
+    stride: int = 1
+
+
+def feature_spec(cfg: Config) -> FeatureSpec:
+    """Only the bands the config asks for are ever computed."""
+    return FeatureSpec(FeatureSpace(cfg.features.space), cfg.features.bands or None)
+
+
+class Pipeline:
+    """Per-pose capture on a HAL record (`arm`, `tracker`, `camera`) with retries."""
+
+    def __init__(
+        self,
+        cfg: Config,
+        hal: Any,
+        segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple[np.ndarray, bool]],
+        pump: Callable[[], None] = lambda: None,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
+        self.cfg = cfg
+        self.hal = hal
+        self.segmenter = segmenter
+        self.pump = pump  # keeps the link serviced while the arm moves
+        self.sleep = sleep
+        self.spec = feature_spec(cfg)
+        self.pca: PcaBasis | None = None
+        self._fitter: FrameFitter | None = None
+        self._previous: dict[tuple[int, int], dict[tuple[int, int], FitResult]] = {}
+        self.faults: list[str] = []  # every retried fault, for STATUS
+
+    # -- device steps ------------------------------------------------------------------
+
+    def _retry(self, step: str, fn: Callable[[], T]) -> T:
+        attempts = self.cfg.sweep.retries + 1
+        last = ""
+        for attempt in range(attempts):
+            try:
+                return fn()
+            except (HalError, OSError, TimeoutError, ValueError) as exc:
+                last = f"{type(exc).__name__}: {exc}"
+                self.faults.append(f"{step}: {last}")
+                del self.faults[:-32]
+                self.pump()
+        raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}")
+
+    def move(self, view: ViewAngles) -> None:
+        timeout = self.cfg.sweep.settle_timeout_s
+        arm = self.hal.arm
+
+        self._retry("move", lambda: arm.move_to(view, timeout))  # waits until settled
+
+    def measure_view(self) -> ViewAngles:
+        return self._retry("tracker", lambda: view_from_orientation(self.hal.tracker.orientation()))
+
+    def frame(self) -> np.ndarray:
+        def grab() -> np.ndarray:
+            frame = self.hal.camera.capture()
+            if not isinstance(frame, np.ndarray) or frame.ndim not in (2, 3) or frame.size == 0:
+                raise ValueError(f"camera returned an unusable frame {getattr(frame, 'shape', None)}")
+            return frame
+
+        return self._retry("camera", grab)
+
+    # -- the capture -------------------------------------------------------------------
+
+    def fitter(self, n_bands: int) -> FrameFitter:
+        if self._fitter is None or self._fitter.counts.shape[1] != n_bands:
+            self._fitter = FrameFitter(self.cfg.segment.n_labels, n_bands, bins=256)
+        return self._fitter
+
+    def process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles) -> Capture:
+        """Features, segmentation, skip rules and the fit for one frame."""
+        if self.spec.space is FeatureSpace.PCA and self.pca is None:
+            self.pca = PcaBasis.fit(frame)  # once per scene; sent with the scene
+        feats = compute(frame, self.spec, self.pca)
+        labels, changed = self.segmenter(feats, frame, measured)
+        n_labels = self.cfg.segment.n_labels
+        counts = skip.label_counts(labels, n_labels)
+        keep = skip.kept_labels(counts, self.cfg.skip.min_pixels)
+        stride = skip.subsample_stride(counts, keep, self.cfg.skip.percentile_precision)
+        data = feats.data
+        if feats.levels > 256:
+            raise PoseSkipped("16-bit bands need a deeper fitter than this runtime configures")
+        fitter = self.fitter(data.shape[2])
+        fitter.reset()
+        if stride > 1:
+            # A deterministic pixel lattice: every stride-th pixel of each row block.
+            flat_d = data.reshape(-1, data.shape[2])[::stride]
+            flat_l = labels.reshape(-1)[::stride]
+            fitter.add(flat_d[:, None, :], flat_l[:, None])
+        else:
+            fitter.add(data, labels)
+        results = fitter.fit(min_count=max(1, self.cfg.skip.min_pixels // stride))
+        results = {k: r for k, r in results.items() if k[0] in keep}
+        dropped = tuple(int(i) for i in np.flatnonzero((counts > 0) & (counts < self.cfg.skip.min_pixels)))
+        key = skip.pose_key(commanded)
+        same = skip.unchanged(self._previous.get(key), results, self.cfg.skip.unchanged_tolerance)
+        if not same:  # compare with the last models sent, so slow drift is still caught
+            self._previous[key] = results
+        return Capture(commanded, measured, feats.band_names, feats.levels, results, dropped,
+                       labels, changed, same, stride)
+
+    def capture(self, commanded: ViewAngles, move: bool = True) -> Capture:
+        if move:
+            self.move(commanded)
+        measured = self.measure_view()
+        frame = self.frame()
+        return self.process(frame, commanded, measured)
+
+
+# -- packets: every body the robot sends, as (outbox kind, body) ------------------------
+
+
+class SeqCounter:
+    """Capture sequence numbers that never repeat across restarts (persisted atomically)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        try:
+            self._next = int(self.path.read_text().strip()) if self.path.exists() else 1
+        except (OSError, ValueError):
+            self._next = int(time.time())  # unreadable: jump ahead rather than reuse
+        self.last: int | None = None
+
+    def next(self) -> int:
+        seq = self._next
+        self._next += 1
+        tmp = self.path.with_suffix(".tmp")
+        tmp.write_text(str(self._next))
+        os.replace(tmp, self.path)
+        self.last = seq
+        return seq
+
+
+def _pose(v: ViewAngles) -> tuple[float, float]:
+    return (float(v.elevation), float(v.azimuth))
+
+
+def models_body(robot_id: int, seq: int, now: float, space: str, cap: Capture) -> tuple[int, bytes]:
+    body = pk.encode_models(cap.results, robot_id=robot_id, seq=seq, time=now,
+                            commanded=_pose(cap.commanded), measured=_pose(cap.measured),
+                            feature_space=space, bands=cap.band_names, levels=cap.levels)
+    return int(pk.Kind.MODELS), body
+
+
+def unchanged_body(robot_id: int, seq: int, ref_seq: int, now: float, cap: Capture) -> tuple[int, bytes]:
+    packet = pk.UnchangedPacket(robot_id, seq, now, _pose(cap.commanded), _pose(cap.measured), ref_seq)
+    return int(pk.Kind.UNCHANGED), pk.encode(packet)
+
+
+def mask_body(robot_id: int, seq: int, labels: np.ndarray) -> tuple[int, bytes]:
+    return int(pk.Kind.MASK), pk.encode_mask(labels, robot_id=robot_id, seq=seq)
+
+
+def status_body(robot_id: int, now: float, state: pk.RobotState, pose: ViewAngles | None,
+                pending: int, used: int, last_seq: int | None, text: str,
+                extras: dict | None = None) -> tuple[int, bytes]:
+    packet = pk.StatusPacket(robot_id, now, state, None if pose is None else _pose(pose),
+                             pending, used, last_seq, text[:500], _extras(extras or {}))
+    return int(pk.Kind.STATUS), pk.encode(packet)
+
+
+def reply_body(command_id: int, ok: bool, text: str, extras: dict | None = None,
+               reason: pk.Reason = pk.Reason.INTERNAL) -> tuple[int, bytes]:
+    if ok:
+        packet: Any = pk.AckPacket(command_id, text[:500], _extras(extras or {}))
+        return int(pk.Kind.ACK), pk.encode(packet)
+    return int(pk.Kind.NACK), pk.encode(pk.NackPacket(command_id, reason, text[:500]))
+
+
+def _extras(d: dict) -> dict:
+    """Fit a result map into the packet's extension fields (16 keys, scalars or short lists)."""
+    out: dict[str, Any] = {}
+    for k, v in list(d.items())[:16]:
+        if isinstance(v, (list, tuple)):
+            v = [x if isinstance(x, (int, float, str, bool)) or x is None else str(x) for x in v][:64]
+        elif not (isinstance(v, (int, float, str, bool)) or v is None):
+            v = str(v)
+        if isinstance(v, str):
+            v = v[:500]
+        out[str(k)[:32]] = v
+    return out

@@ -1,0 +1,101 @@
+"""`btf-robot run`: the robot's runtime, autonomous sweeps and remote control over the link."""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import signal
+import time
+
+from onboard import config as config_mod
+from onboard.cli import CliError
+from onboard.config import ConfigError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("run", help="run the robot: sweeps, commands, outbox, failsafe")
+    p.add_argument("--config", required=True, help="robot TOML config (see examples/robot.toml)")
+    p.add_argument("--hal", choices=("fake", "emulated", "real"), help="override hal.body")
+    p.add_argument("--port", help="override link.url (a device, pty path, loop://, socket://)")
+    p.add_argument("--exit-when-idle", action="store_true",
+                   help="exit 0 once no sweep is running and every packet is acknowledged")
+    p.add_argument("--max-seconds", type=float, default=0.0, help="stop after this long (0: never)")
+    return p
+
+
+def _setup(args: argparse.Namespace):
+    try:
+        cfg = config_mod.load(args.config)
+        if args.hal:
+            cfg = dataclasses.replace(cfg, hal=dataclasses.replace(cfg.hal, body=args.hal))
+        if args.port:
+            cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, url=args.port))
+        config_mod.check(cfg)
+        config_mod.check_key_file(cfg)
+        from radio.keys import KeyFileError, load_key
+
+        try:
+            key = load_key(cfg.link.key_file)
+        except KeyFileError as exc:
+            raise ConfigError(f"link.key_file: {exc}") from None
+    except ConfigError as exc:
+        raise CliError(str(exc)) from None
+    return cfg, key
+
+
+def _open_port(url: str, baud: int):
+    try:
+        from radio.serial_port import open_port  # type: ignore[attr-defined]
+
+        return open_port(url, baud)
+    except ImportError:
+        import serial  # pyserial, the robot extra
+
+        return serial.serial_for_url(url, baudrate=baud, timeout=0)
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg, key = _setup(args)
+    from hal.factory import build_hal
+    from hal.interfaces import HalError
+    from radio.auth import FileCounterStore
+    from radio.link import Link
+    from onboard.runtime import LinkTransport, Runtime, Segmentation
+    from onboard.watchdog import Notifier
+
+    cfg.state_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        hal = build_hal(cfg.hal)
+    except HalError as exc:
+        raise CliError(f"hal: {exc}") from None
+    try:
+        port = _open_port(cfg.link.url, cfg.link.baud)
+    except Exception as exc:
+        hal.close()
+        raise CliError(f"link.url {cfg.link.url}: cannot open: {exc}") from None
+    try:
+        segment = Segmentation(cfg, hal)
+        link = Link(cfg.link.node_id, cfg.link.peer_id, cfg.link.link_id, key,
+                    FileCounterStore(cfg.state_dir / "counters.json"), mtu=cfg.link.mtu,
+                    heartbeat=cfg.link.heartbeat_s, link_timeout=cfg.link.failsafe_s)
+        if hasattr(hal.camera, "open"):
+            h, w = cfg.hal.size
+            hal.camera.open(w, h)
+        rt = Runtime(cfg, hal, LinkTransport(link, port), segment, notifier=Notifier())
+    except (ConfigError, ValueError, HalError) as exc:
+        hal.close()
+        raise CliError(str(exc)) from None
+    stopping = []
+    signal.signal(signal.SIGTERM, lambda *_: stopping.append(1))
+    t0 = time.monotonic()
+
+    def stop(r: Runtime) -> bool:
+        if stopping or (args.max_seconds and time.monotonic() - t0 > args.max_seconds):
+            return True
+        return bool(args.exit_when_idle and r.idle())
+
+    try:
+        return rt.run(stop)
+    finally:
+        rt.outbox.close()
+        hal.close()
+        port.close()

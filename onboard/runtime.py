@@ -1,0 +1,540 @@
+"""The robot's main loop: sweeps, remote-control commands, the outbox and the failsafe.
+
+One thread turns `step()`: service the link, answer commands, check the failsafe,
+measure the next pose of an active sweep, and hand outbox rows to the link. Every
+packet goes through the outbox first and leaves it only when the base acknowledged it.
+Faults become retries, then a skipped pose with its reason; no exception ends the loop.
+
+Failsafe: once the link has been up, a LinkDown (no heartbeat from the base for
+`link.failsafe_s`) stops the arm where it is and pauses the sweep; when the link
+returns the robot sends a STATUS reporting the failsafe and resumes what it was doing.
+Before the base was ever heard, an autonomous sweep runs and its packets wait in the outbox.
+"""
+from __future__ import annotations
+
+import enum
+import time
+from collections import deque
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Protocol
+
+from hal.interfaces import ViewAngles
+from onboard import config as config_mod
+from onboard import capture as wire
+from onboard.capture import Capture, Pipeline, PoseSkipped
+from radio import FrameError
+from radio import packet as pk
+from onboard.config import Config, ConfigError
+from onboard.outbox import Outbox, OutboxFull
+from onboard.sweep import SweepPlan, SweepProgress, SweepStore
+from onboard.watchdog import Notifier
+
+
+# -- the link seam ---------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Received:
+    body: bytes
+
+
+@dataclass(frozen=True, slots=True)
+class Acked:
+    msg_id: int
+
+
+@dataclass(frozen=True, slots=True)
+class LinkState:
+    up: bool
+
+
+class Transport(Protocol):
+    """What the runtime needs from a link: reliable send under a persistent id, and events."""
+
+    def send(self, body: bytes, msg_id: int, now: float) -> None: ...
+    def poll(self, now: float) -> list[Received | Acked | LinkState]: ...
+
+
+class MemoryTransport:
+    """An in-memory link for tests: `sent` holds (msg_id, body); push events with `deliver`."""
+
+    def __init__(self, auto_ack: bool = True) -> None:
+        self.sent: list[tuple[int, bytes]] = []
+        self.auto_ack = auto_ack
+        self._events: deque = deque()
+
+    def send(self, body: bytes, msg_id: int, now: float) -> None:
+        self.sent.append((msg_id, body))
+        if self.auto_ack:
+            self._events.append(Acked(msg_id))
+
+    def deliver(self, event: Received | Acked | LinkState) -> None:
+        self._events.append(event)
+
+    def poll(self, now: float) -> list[Received | Acked | LinkState]:
+        out = list(self._events)
+        self._events.clear()
+        return out
+
+
+# -- the runtime -----------------------------------------------------------------------
+
+
+class Mode(enum.StrEnum):
+    IDLE = "idle"
+    SWEEPING = "sweeping"
+    FAILSAFE = "failsafe"
+
+
+SETTABLE = {
+    "sweep": ("start", "stop", "step", "azimuths", "settle_timeout_s", "retries", "pose_tolerance_deg"),
+    "skip": ("min_pixels", "percentile_precision", "unchanged_tolerance", "skip_measured_pose"),
+}
+
+
+class Runtime:
+    def __init__(
+        self,
+        cfg: Config,
+        hal: Any,
+        transport: Transport,
+        segmenter: Callable,
+        outbox: Outbox | None = None,
+        clock: Callable[[], float] = time.monotonic,
+        wall: Callable[[], float] = time.time,
+        sleep: Callable[[float], None] = time.sleep,
+        notifier: Notifier | None = None,
+    ) -> None:
+        self.cfg = cfg
+        self.hal = hal
+        self.transport = transport
+        self.clock, self.wall, self.sleep = clock, wall, sleep
+        cfg.state_dir.mkdir(parents=True, exist_ok=True)
+        self.outbox = outbox or Outbox(cfg.state_dir / "outbox.sqlite", cfg.outbox_quota_bytes)
+        self.sweeps = SweepStore(cfg.state_dir)
+        self.pipeline = Pipeline(cfg, hal, segmenter, pump=self.service, sleep=sleep)
+        self.notifier = notifier or Notifier(address="")
+        self.mode = Mode.IDLE
+        self.progress: SweepProgress | None = None
+        self.link_up = False
+        self.ever_up = False
+        self.failsafe_events: list[dict] = []
+        self._resume_mode = Mode.IDLE
+        self._in_flight: set[int] = set()
+        self._last_sent = 0
+        self._seq = wire.SeqCounter(cfg.state_dir / "seq")
+        self._last_labels = None
+        self._last_models: dict[tuple[int, int], int] = {}  # pose -> seq of its last MODELS
+        self.pose: ViewAngles | None = None
+        self.errors: deque[str] = deque(maxlen=16)
+        self.paused_reason = ""
+
+    # -- plumbing --------------------------------------------------------------------
+
+    def queue(self, kind: int, body: bytes) -> int | None:
+        """Store a packet in the outbox (before any send); None when the outbox is full."""
+        try:
+            msg_id = self.outbox.put(kind, body)
+            self.paused_reason = ""
+            return msg_id
+        except OutboxFull as exc:
+            self.paused_reason = str(exc)
+            return None
+
+    def service(self) -> None:
+        """Read link events, answer commands, feed the link from the outbox."""
+        now = self.clock()
+        for event in self.transport.poll(now):
+            if isinstance(event, Acked):
+                self._in_flight.discard(event.msg_id)
+                self.outbox.ack(event.msg_id)
+            elif isinstance(event, LinkState):
+                self._link_changed(event.up)
+            elif isinstance(event, Received):
+                self._on_body(event.body)
+        self._flush(now)
+        self.notifier.kick()
+
+    def _flush(self, now: float) -> None:
+        room = self.cfg.link.window - len(self._in_flight)
+        if room <= 0:
+            return
+        for msg_id, body in self.outbox.pending(limit=room, after=self._last_sent):
+            self.transport.send(body, msg_id, now)
+            self._in_flight.add(msg_id)
+            self._last_sent = msg_id
+
+    def _link_changed(self, up: bool) -> None:
+        if up == self.link_up:
+            return
+        self.link_up = up
+        if up:
+            self.ever_up = True
+            # Re-offer everything unacknowledged; the receiver drops duplicates by id.
+            self._in_flight.clear()
+            self._last_sent = 0
+            if self.mode is Mode.FAILSAFE:
+                event = self.failsafe_events[-1]
+                event["until"] = self.wall()
+                self.mode = self._resume_mode
+                self.send_status("failsafe: link lost, arm held", {"failsafe_since": event["since"], "failsafe_until": event["until"]})
+        elif self.ever_up and self.mode is not Mode.FAILSAFE:
+            self._failsafe()
+
+    def _failsafe(self) -> None:
+        self._resume_mode = self.mode
+        self.mode = Mode.FAILSAFE
+        self.failsafe_events.append({"since": self.wall(), "until": None})
+        del self.failsafe_events[:-8]
+        try:
+            self.hal.arm.stop_and_hold()
+        except Exception as exc:  # the arm must not end the loop; say why in STATUS
+            self.errors.append(f"failsafe hold: {type(exc).__name__}: {exc}")
+
+    # -- status ----------------------------------------------------------------------
+
+    def status(self) -> dict:
+        p = self.progress
+        return {
+            "mode": self.mode.value,
+            "sweep": None if p is None else {
+                "id": p.sweep_id, "next": p.next_index, "poses": len(p.poses), "active": p.active,
+                "skipped": [[s.index, s.commanded.elevation, s.commanded.azimuth, s.reason]
+                            for s in p.skipped[-16:]],
+            },
+            "outbox": len(self.outbox),
+            "paused": self.paused_reason,
+            "failsafe": self.failsafe_events[-4:],
+            "faults": self.pipeline.faults[-8:],
+            "errors": list(self.errors)[-8:],
+        }
+
+    def state(self) -> pk.RobotState:
+        if self.mode is Mode.FAILSAFE or self.paused_reason:
+            return pk.RobotState.PAUSED
+        return pk.RobotState.SWEEPING if self.mode is Mode.SWEEPING else pk.RobotState.IDLE
+
+    def send_status(self, text: str, extras: dict | None = None) -> None:
+        self.queue(*wire.status_body(self.cfg.robot_id, self.wall(), self.state(), self.pose,
+                                     len(self.outbox), self.outbox.bytes_used, self._seq.last,
+                                     text, extras))
+
+    # -- sweeps ----------------------------------------------------------------------
+
+    def plan(self) -> SweepPlan:
+        s = self.cfg.sweep
+        return SweepPlan(s.start, s.stop, s.step, s.azimuths)
+
+    def start_sweep(self, resume: bool, plan: SweepPlan | None = None) -> SweepProgress:
+        plan = self.plan() if plan is None else plan
+        self.progress = self.sweeps.resume_or_start(plan) if resume else self.sweeps.start(plan)
+        self.mode = Mode.SWEEPING
+        return self.progress
+
+    def stop_sweep(self) -> None:
+        if self.progress is not None:
+            self.progress.active = False
+            self.sweeps.save(self.progress)
+        if self.mode is Mode.SWEEPING:
+            self.mode = Mode.IDLE
+
+    def sweep_step(self) -> str:
+        """Measure the next pose of the sweep; returns what happened."""
+        p = self.progress
+        if p is None or p.done:
+            return "done"
+        if self.outbox.full:
+            self.paused_reason = "outbox full: acquisition paused until the host acknowledges"
+            return "paused"
+        commanded = p.current()
+        try:
+            self.pipeline.move(commanded)
+            measured = self.pipeline.measure_view()
+            if self.cfg.skip.skip_measured_pose and p.already_measured(measured, self.cfg.sweep.pose_tolerance_deg):
+                raise PoseSkipped(f"already measured in this sweep (measured {measured.elevation:.1f}°, "
+                                  f"{measured.azimuth:.1f}°)")
+            frame = self.pipeline.frame()
+            cap = self.pipeline.process(frame, commanded, measured)
+        except PoseSkipped as exc:
+            skipped = p.record_skipped(exc.reason)
+            self.sweeps.save(p)
+            self.send_status(f"skipped pose: {skipped.reason}", {
+                "sweep": p.sweep_id, "skipped_index": skipped.index,
+                "skipped_elevation": skipped.commanded.elevation,
+                "skipped_azimuth": skipped.commanded.azimuth})
+            result = "skipped"
+        else:
+            self.send_capture(cap)
+            p.record_measured(measured)
+            self.sweeps.save(p)
+            result = "measured"
+        if p.done:
+            p.active = False
+            self.sweeps.save(p)
+            self.mode = Mode.IDLE
+            self.send_status("sweep done", {"sweep": p.sweep_id, "measured": len(p.measured),
+                                            "skipped": len(p.skipped)})
+        return result
+
+    def send_capture(self, cap: Capture) -> int:
+        seq = self._seq.next()
+        self.pose = cap.measured
+        self._last_labels = cap.labels
+        if cap.mask_changed:
+            self.queue(*wire.mask_body(self.cfg.robot_id, seq, cap.labels))
+        key = wire.skip.pose_key(cap.commanded)
+        ref = self._last_models.get(key)
+        if cap.unchanged and ref is not None:
+            self.queue(*wire.unchanged_body(self.cfg.robot_id, seq, ref, self.wall(), cap))
+        else:
+            self.queue(*wire.models_body(self.cfg.robot_id, seq, self.wall(), self.cfg.features.space, cap))
+            self._last_models[key] = seq
+        return seq
+
+    # -- commands --------------------------------------------------------------------
+
+    def _on_body(self, body: bytes) -> None:
+        try:
+            cmd = pk.decode(body)
+        except FrameError as exc:
+            self.errors.append(f"bad packet from base: {exc}")
+            return
+        if not isinstance(cmd, pk.CommandPacket):
+            return  # not a command (e.g. the base's own status): nothing to answer
+        reason = pk.Reason.INTERNAL
+        try:
+            ok, result = self.handle(cmd.name.name, dict(cmd.args))
+        except PoseSkipped as exc:
+            ok, result, reason = False, exc.reason, pk.Reason.HARDWARE
+        except (ConfigError, KeyError, ValueError) as exc:
+            ok, result, reason = False, f"{type(exc).__name__}: {exc}", pk.Reason.BAD_ARGUMENT
+        except Exception as exc:  # a command that fails is answered, never fatal
+            ok, result = False, f"{type(exc).__name__}: {exc}"
+        if ok:
+            extras = result if isinstance(result, dict) else {}
+            self.queue(*wire.reply_body(cmd.command_id, True, cmd.name.name, extras))
+        else:
+            if isinstance(result, str) and result.startswith("unknown command"):
+                reason = pk.Reason.UNKNOWN_COMMAND
+            elif isinstance(result, str) and result.startswith("failsafe"):
+                reason = pk.Reason.BUSY
+            self.queue(*wire.reply_body(cmd.command_id, False, str(result), reason=reason))
+
+    def handle(self, name: str, args: dict) -> tuple[bool, Any]:
+        """Run one command; (True, result) or (False, reason)."""
+        arm = self.hal.arm
+        if name == "PING":
+            return True, {"time": self.wall()}
+        if name == "STATUS":
+            return True, _flat_status(self.status())
+        if self.mode is Mode.FAILSAFE:
+            return False, "failsafe active: the link was lost; it clears when the link is back up"
+        if name == "GOTO":
+            view = ViewAngles(float(args["elevation"]), float(args.get("azimuth", 0.0)))
+            self.pipeline.move(view)
+            m = self.pipeline.measure_view()
+            return True, {"elevation": m.elevation, "azimuth": m.azimuth}
+        if name == "CAPTURE":
+            measured = self.pipeline.measure_view()
+            commanded = measured
+            cap = self.pipeline.process(self.pipeline.frame(), commanded, measured)
+            return True, {"seq": self.send_capture(cap), "models": len(cap.results)}
+        if name == "SWEEP":
+            els = tuple(float(e) for e in args["elevations"])
+            azs = tuple(float(a) for a in args["azimuths"])
+            plan = SweepPlan(els[0], els[-1], 1.0, azs, els)
+            p = self.start_sweep(resume=False, plan=plan)
+            return True, {"sweep": p.sweep_id, "poses": len(p.poses)}
+        if name == "ABORT":
+            self.stop_sweep()
+            arm.stop_and_hold()
+            return True, {"aborted": True}
+        if name == "SET":
+            self.set_keys({args["key"]: args["value"]})
+            return True, {"set": args["key"]}
+        if name == "TORQUE_OFF":
+            self.stop_sweep()
+            arm.torque_off()
+            return True, {"torque": False}
+        if name == "REBOOT_SERVO":
+            sid = int(args["servo_id"])
+            self.hal.servo_bus.reboot(sid)
+            return True, {"rebooted": sid}
+        if name == "SEND_MASK":
+            if self._last_labels is None:
+                return False, "no label map yet: capture first"
+            self.queue(*wire.mask_body(self.cfg.robot_id, int(args.get("seq", self._seq.last or 0)),
+                                       self._last_labels))
+            return True, {"queued": True}
+        return False, f"unknown command {name!r}"
+
+    def set_keys(self, args: dict) -> None:
+        """SET section.key = value for the keys that may change at run time."""
+        cfg = self.cfg
+        for dotted, value in args.items():
+            section, _, key = str(dotted).partition(".")
+            if key not in SETTABLE.get(section, ()):
+                allowed = ", ".join(f"{s}.{k}" for s, ks in SETTABLE.items() for k in ks)
+                raise ConfigError(f"{dotted} cannot be set at run time (settable: {allowed})")
+            part = getattr(cfg, section)
+            kind = config_mod._TYPES[type(part)][key]
+            new = config_mod._convert(dotted, value, kind, cfg.state_dir)
+            cfg = replace(cfg, **{section: replace(part, **{key: new})})
+        config_mod.check(cfg)
+        self.cfg = cfg
+        self.pipeline.cfg = cfg
+
+    # -- the loop --------------------------------------------------------------------
+
+    def boot(self) -> None:
+        try:
+            self.pipeline._retry("torque on", self.hal.arm.enable)
+        except PoseSkipped as exc:
+            self.errors.append(exc.reason)
+        if self.cfg.sweep.autostart:
+            self.start_sweep(resume=True)
+        self.send_status("boot", {"mode": self.mode.value})
+        self.notifier.ready("btf-robot running")
+
+    def step(self) -> None:
+        """One turn of the loop; never raises."""
+        try:
+            self.service()
+            if self.mode is Mode.SWEEPING:
+                self.sweep_step()
+                self.service()
+        except Exception as exc:
+            self.errors.append(f"{type(exc).__name__}: {exc}")
+
+    def idle(self) -> bool:
+        """Nothing to do: no active sweep and every packet acknowledged."""
+        return self.mode is not Mode.SWEEPING and len(self.outbox) == 0
+
+    def run(self, stop: Callable[["Runtime"], bool] = lambda rt: False, tick_s: float = 0.01) -> int:
+        self.boot()
+        while not stop(self):
+            self.step()
+            if self.mode is not Mode.SWEEPING:
+                self.sleep(tick_s)
+        return 0
+
+
+def _flat_status(st: dict) -> dict:
+    """STATUS as packet extras: scalars and short lists only."""
+    sweep = st.get("sweep") or {}
+    out = {"mode": st["mode"], "outbox": st["outbox"], "paused": st["paused"]}
+    if sweep:
+        out.update(sweep_id=sweep["id"], next=sweep["next"], poses=sweep["poses"])
+        out["skipped"] = [f"{i}@{e:.1f}/{a:.1f}: {r}" for i, e, a, r in sweep["skipped"]]
+    out["failsafe"] = [f"{e['since']:.1f}-{e['until'] or 0:.1f}" for e in st["failsafe"]]
+    out["faults"] = list(st["faults"])
+    out["errors"] = list(st["errors"])
+    return out
+
+
+# -- segmentation for the configured method ---------------------------------------------
+
+
+class Segmentation:
+    """Labels per frame for `segment.method`; `changed` says the host needs a new MASK."""
+
+    def __init__(self, cfg: Config, hal: Any = None) -> None:
+        self.cfg = cfg
+        self.hal = hal
+        self._mask = None
+        self._last = None
+        self._palette = None
+        sg = cfg.segment
+        if sg.method == "mask":
+            self._mask = _load_mask(sg.mask, sg.n_labels)
+        elif sg.method == "isodata":
+            from onboard.isodata import IsodataParams
+
+            self._params = IsodataParams(k=sg.k, min_samples=sg.min_samples, split_std=sg.split_std,
+                                         merge_distance=sg.merge_distance, max_merges=sg.max_merges,
+                                         iterations=sg.iterations, subsample=sg.subsample,
+                                         seed=cfg.hal.seed)
+
+    def __call__(self, feats: Any, frame: Any, measured: ViewAngles) -> tuple[Any, bool]:
+        import numpy as np
+
+        method = self.cfg.segment.method
+        shape = frame.shape[:2]
+        if method == "mask":
+            if self._mask.shape != shape:
+                raise PoseSkipped(f"mask shape {self._mask.shape} does not match the frame {shape}")
+            labels = self._mask
+        elif method == "scene":
+            from hal.scene import render
+
+            view = ViewAngles(min(90.0, max(5.0, measured.elevation)), measured.azimuth)
+            labels = render(self.cfg.hal.scene, view, size=shape, seed=self.cfg.hal.seed).mask
+        else:
+            from onboard.isodata import isodata
+
+            labels = self._match_palette(isodata(feats.data, self._params))
+        changed = self._last is None or self._last.shape != labels.shape or \
+            float(np.mean(self._last != labels)) > 0.05
+        if changed:
+            self._last = labels.copy()
+        return labels, changed
+
+    def _match_palette(self, result: Any) -> Any:
+        try:
+            from onboard.segment import Palette  # keeps labels consistent across views
+        except ImportError:
+            return result.labels
+        if self._palette is None:
+            self._palette = Palette()
+        return self._palette.relabel(result.centres, result.labels)
+
+
+def _load_mask(path: Any, n_labels: int) -> Any:
+    try:
+        from onboard.segment import load_mask
+
+        return load_mask(path, n_labels=n_labels)
+    except ImportError:
+        import numpy as np
+
+        labels = np.load(path)
+        if labels.max(initial=0) >= n_labels:
+            raise ConfigError(f"segment.mask {path}: labels above n_labels = {n_labels}")
+        return labels.astype(np.uint8)
+    except ValueError as exc:
+        raise ConfigError(f"segment.mask {path}: {exc}") from None
+
+
+# -- binding to radio.link over a byte port ----------------------------------------------
+
+
+class LinkTransport:
+    """The sans-I/O `radio.link.Link` bound to a pyserial-like port (read/write/in_waiting)."""
+
+    def __init__(self, link: Any, port: Any) -> None:
+        self.link = link
+        self.port = port
+
+    def send(self, body: bytes, msg_id: int, now: float) -> None:
+        self.link.send(body, now, reliable=True, msg_id=msg_id)
+
+    def poll(self, now: float) -> list[Received | Acked | LinkState]:
+        from radio import link as lk
+
+        data = self.port.read(max(1, getattr(self.port, "in_waiting", 0) or 0))
+        events = self.link.receive(data, now) if data else []
+        out = self.link.poll(now)
+        if out:
+            self.port.write(out)
+        events = [*events, *self.link.pop_events()]
+        mine: list[Received | Acked | LinkState] = []
+        for ev in events:
+            if isinstance(ev, lk.Delivered):
+                mine.append(Received(ev.payload))
+            elif isinstance(ev, lk.Acked):
+                mine.append(Acked(ev.msg_id))
+            elif isinstance(ev, lk.LinkUp):
+                mine.append(LinkState(True))
+            elif isinstance(ev, lk.LinkDown):
+                mine.append(LinkState(False))
+        return mine
