@@ -146,15 +146,15 @@ def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
         raise ValueError("counts must be non-negative")
     if not (math.isfinite(lo) and math.isfinite(bin_width) and bin_width > 0):
         raise ValueError(f"need finite lo and positive bin_width, got {lo}, {bin_width}")
-    total = float(np.sum(counts, dtype=np.float64))
-    if total <= 0:
+    occupied = np.flatnonzero(counts)
+    if occupied.size == 0:
         raise ValueError("histogram is empty: nothing to fit")
-    count = int(round(total))
+    # exact even for counts near 2**53 (a float sum would round)
+    count = sum(int(c) for c in counts[occupied]) if counts.dtype.kind in "iu" else int(round(float(counts.sum())))
     if codec is None:
         bits = 16 if counts.size <= 256 else 32
         codec = PercentileCodec(lo - 0.5 * bin_width, lo + (counts.size - 0.5) * bin_width, bits)
     z = z_for_count(count) if z is None else z
-    occupied = np.flatnonzero(counts)
     if occupied.size == 1:
         # One occupied bin: a constant region, sent as four equal percentiles.
         pct = codec.snap([lo + bin_width * occupied[0]] * 4)
