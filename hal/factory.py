@@ -103,7 +103,10 @@ def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, s
         raise HalConfigError(f"hal size must be (height, width), each at least 8, got {size}")
     calibration = arm_calibration(options)
     builder = {Body.FAKE: _fake, Body.EMULATED: _emulated, Body.REAL: _real}[body]
-    return builder(options, calibration, size)
+    try:
+        return builder(options, calibration, size)
+    except (TypeError, ValueError) as exc:  # a device constructor refused an option
+        raise HalConfigError(f"{body.value} HAL: {exc}") from None
 
 
 def _faults(options: Mapping[str, Any], kinds: frozenset[str] = frozenset()) -> Faults:
@@ -167,14 +170,10 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
 
 def _write_sequence(directory: Path, scene: str, size: tuple[int, int], seed: int) -> None:
     """Frames the scene renderer draws, saved as an image sequence for OpenCV to replay."""
-    import cv2
-
+    from hal.emulators.camera import write_sequence
     from hal.scene import render
 
-    for i, view in enumerate(SEQUENCE_VIEWS):
-        image = render(scene, view, size=size, seed=seed).image
-        if not cv2.imwrite(str(directory / f"frame_{i:04d}.png"), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
-            raise HalError(f"cannot write the emulated camera's frames to {directory}")
+    write_sequence(directory, (render(scene, view, size=size, seed=seed).image for view in SEQUENCE_VIEWS))
 
 
 def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]) -> Hal:

@@ -12,12 +12,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hal.interfaces import ViewAngles
+from hal.interfaces import ViewAngles, view_from_orientation
 from onboard.cli import CliError
 
 POSES = (ViewAngles(60.0, 0.0), ViewAngles(90.0, 0.0))
 POSE_TOLERANCE_DEG = 2.0
 SERVO_NUDGE_DEG = 5.0
+TRACKER_TOLERANCE_DEG = 3.0
 SETTLE_TIMEOUT_S = 10.0
 
 
@@ -100,7 +101,7 @@ def _servo_bus(hal: Any) -> str:
     if any(errors.values()):
         raise RuntimeError(f"hardware error status {errors}")
     recovered = len(getattr(bus, "recoveries", ()))
-    return f"servos {ids} ping, torque, move {SERVO_NUDGE_DEG}°, settle, no hardware error; {recovered} recoveries"
+    return f"servos {ids} ping, torque, move {SERVO_NUDGE_DEG} deg, settle, no hardware error; {recovered} recoveries"
 
 
 def _arm(hal: Any) -> str:
@@ -111,7 +112,7 @@ def _arm(hal: Any) -> str:
         reached = arm.view_for(arm.move_to(pose, SETTLE_TIMEOUT_S))
         if abs(reached.elevation - pose.elevation) > POSE_TOLERANCE_DEG:
             raise RuntimeError(f"asked for {pose}, reached {reached}")
-        seen.append(f"{reached.elevation:.1f}°")
+        seen.append(f"{reached.elevation:.1f} deg")
     return "reached elevations " + ", ".join(seen)
 
 
@@ -120,8 +121,11 @@ def _tracker(hal: Any) -> str:
     values = (o.heading, o.roll, o.pitch)
     if not all(math.isfinite(v) for v in values):
         raise RuntimeError(f"non-finite orientation {o}")
+    seen = view_from_orientation(o)  # the arm check left the camera at the last pose
+    if abs(seen.elevation - POSES[-1].elevation) > TRACKER_TOLERANCE_DEG:
+        raise RuntimeError(f"tracker sees elevation {seen.elevation:.1f} deg, the arm is at {POSES[-1].elevation}")
     cal = hal.tracker.calibration()
-    return f"heading {o.heading:.1f}° roll {o.roll:.1f}° pitch {o.pitch:.1f}°; calibration {cal}"
+    return f"heading {o.heading:.1f} deg roll {o.roll:.1f} deg pitch {o.pitch:.1f} deg; calibration {cal}"
 
 
 def _camera(hal: Any) -> str:
