@@ -240,9 +240,9 @@ class FrameFitter:
 
     Without `value_range` the bins are the integer levels 0 .. bins-1 (256 for 8-bit,
     65536 for 16-bit sensors). With it, integer-like ranges (hi - lo + 1 == bins) keep one
-    bin per level; otherwise the bins tile [lo, hi]. A chunk holds at most
-    chunk_rows * 1024 pixels (fewer rows for wide frames), so the extra memory of add()
-    does not grow with frame size.
+    bin per level; otherwise the bins tile [lo, hi]. A chunk holds chunk_rows * 1024 pixels
+    (chunk_rows rows of a 1024-wide frame; more rows of narrower, fewer of wider frames), so
+    the extra memory of add() does not grow with frame size.
     """
 
     def __init__(self, n_labels: int, n_bands: int, bins: int = 256,
@@ -286,7 +286,7 @@ class FrameFitter:
         height, width = labels.shape
         if height == 0 or width == 0:
             return
-        step = max(1, min(self.chunk_rows, self.chunk_pixels // width))
+        step = max(1, self.chunk_pixels // width)
         size = self.counts.size
         flat = self.counts.reshape(-1)
         for r0 in range(0, height, step):
