@@ -102,6 +102,11 @@ def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, s
     if len(size) != 2 or min(size) < 8:
         raise HalConfigError(f"hal size must be (height, width), each at least 8, got {size}")
     calibration = arm_calibration(options)
+    if body is not Body.REAL:
+        from hal.scene import SCENES
+
+        if options.get("scene", "black") not in SCENES:
+            raise HalConfigError(f"unknown scene {options['scene']!r}; choose from {', '.join(SCENES)}")
     builder = {Body.FAKE: _fake, Body.EMULATED: _emulated, Body.REAL: _real}[body]
     try:
         return builder(options, calibration, size)

@@ -57,8 +57,9 @@ def _hal_options(args: argparse.Namespace) -> dict[str, Any] | None:
 def run(args: argparse.Namespace) -> int:
     from hal.factory import HalConfigError, build_hal
 
+    options = _hal_options(args)
     try:
-        hal = build_hal(_hal_options(args))
+        hal = build_hal(options)
     except HalConfigError as exc:
         raise CliError(str(exc)) from None
     except Exception as exc:  # noqa: BLE001 - a device that cannot even be built fails the test

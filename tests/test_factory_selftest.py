@@ -1,0 +1,123 @@
+"""The HAL factory picks one body for every device, never a silent fake; selftest reports per device."""
+from __future__ import annotations
+
+import json
+import threading
+
+import numpy as np
+import pytest
+
+from hal.arm import ArmCalibration
+from hal.factory import Body, HalConfigError, arm_calibration, build_hal
+from hal.interfaces import ViewAngles, view_from_orientation
+from onboard.cli import main
+
+
+def run_cli(argv, capsys, monkeypatch, env_body=None):
+    if env_body is None:
+        monkeypatch.delenv("BTF_HAL", raising=False)
+    else:
+        monkeypatch.setenv("BTF_HAL", env_body)
+    code = main(argv)
+    out, err = capsys.readouterr()
+    return code, [json.loads(line) for line in out.splitlines()], err
+
+
+def test_no_config_and_no_env_is_refused():
+    with pytest.raises(HalConfigError, match="BTF_HAL"):
+        build_hal(None, env={})
+
+
+@pytest.mark.parametrize("options, match", [
+    ({"body": "simulated"}, "unknown HAL body"),
+    ({"body": "real"}, "servo_port"),
+    ({"body": "fake", "size": (4, 4)}, "at least 8"),
+    ({"body": "fake", "scene": "moon"}, "moon"),
+    ({"body": "fake", "arm": {"yaw": {"servo_id": 1}}}, "arm calibration"),
+])
+def test_bad_options_are_one_clear_error(options, match):
+    with pytest.raises(HalConfigError, match=match):
+        build_hal(options, env={})
+
+
+def test_env_chooses_the_body_when_the_config_does_not():
+    hal = build_hal({"size": (16, 16)}, env={"BTF_HAL": "fake"})
+    try:
+        assert hal.body is Body.FAKE
+    finally:
+        hal.close()
+
+
+def test_arm_calibration_comes_from_the_config():
+    cal = arm_calibration({"arm": {"yaw": {"servo_id": 3, "min_deg": -90, "max_deg": 90},
+                                   "tilt": {"servo_id": 4, "min_deg": 0, "max_deg": 70, "sign": -1.0,
+                                            "corrections": [[0, 0.5], [70, -0.5]]},
+                                   "tolerance_deg": 0.5}})
+    assert cal.servo_ids == [3, 4] and cal.tilt.corrections == ((0.0, 0.5), (70.0, -0.5))
+    assert arm_calibration({}) == ArmCalibration()
+
+
+def test_fake_devices_share_one_world():
+    hal = build_hal({"body": "fake", "size": (48, 64), "seed": 3}, env={})
+    try:
+        hal.arm.enable()
+        hal.camera.open(64, 48)
+        frames = {}
+        for elevation in (90.0, 30.0):
+            hal.arm.move_to(ViewAngles(elevation, 0.0), timeout_s=5.0)
+            seen = view_from_orientation(hal.tracker.orientation())
+            assert seen.elevation == pytest.approx(elevation, abs=3.0)
+            frames[elevation] = hal.camera.capture()
+        assert frames[90.0].shape == (48, 64, 3)
+        assert not np.array_equal(frames[90.0], frames[30.0])
+    finally:
+        hal.close()
+
+
+def test_emulated_hal_runs_the_real_drivers_and_closes_cleanly():
+    before = threading.active_count()
+    hal = build_hal({"body": "emulated", "size": (32, 32)}, env={})
+    try:
+        assert type(hal.servo_bus).__name__ == "DynamixelServoBus"
+        hal.arm.enable()
+        hal.arm.move_to(ViewAngles(70.0, 20.0), timeout_s=5.0)
+        seen = view_from_orientation(hal.tracker.orientation())
+        assert seen.elevation == pytest.approx(70.0, abs=3.0)
+    finally:
+        hal.close()
+    assert threading.active_count() <= before
+
+
+@pytest.mark.parametrize("body", ["fake", "emulated"])
+def test_selftest_passes_on_every_device(body, capsys, monkeypatch):
+    code, lines, _ = run_cli(["selftest", "--hal", body], capsys, monkeypatch)
+    assert code == 0
+    assert [line["device"] for line in lines] == ["servo_bus", "arm", "tracker", "camera"]
+    assert all(line["ok"] for line in lines)
+
+
+def test_selftest_takes_the_body_from_the_environment(capsys, monkeypatch):
+    code, lines, _ = run_cli(["selftest"], capsys, monkeypatch, env_body="fake")
+    assert code == 0 and len(lines) == 4
+
+
+def test_selftest_without_a_body_is_a_usage_error(capsys, monkeypatch):
+    code, lines, err = run_cli(["selftest"], capsys, monkeypatch)
+    assert code == 2 and lines == []
+    assert err.count("\n") == 1 and "BTF_HAL" in err
+
+
+def test_selftest_reports_failing_devices_and_exits_1(tmp_path, capsys, monkeypatch):
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text('[hal]\nbody = "fake"\nsize = [16, 16]\nfault_rate = 1.0\n')
+    code, lines, _ = run_cli(["selftest", "--config", str(cfg)], capsys, monkeypatch)
+    assert code == 1
+    assert len(lines) == 4 and not any(line["ok"] for line in lines)
+    assert all("Timeout" in line["detail"] or "Error" in line["detail"] for line in lines)
+
+
+def test_selftest_bad_config_file_is_a_usage_error(tmp_path, capsys, monkeypatch):
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text("[hal]\nbody = 3\n")
+    code, lines, err = run_cli(["selftest", "--config", str(cfg)], capsys, monkeypatch)
+    assert code == 2 and lines == [] and "robot.toml" in err
