@@ -1,0 +1,205 @@
+"""Mask files, MASK-map down/upsampling, the persistent palette and the Segmenter."""
+import cv2
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
+from PIL import Image
+
+from onboard.features import FeatureSpace, FeatureSpec, compute
+from onboard.isodata import IsodataParams
+from onboard.segment import (
+    Palette,
+    SegmentConfig,
+    SegmentMethod,
+    Segmenter,
+    block_size,
+    downsample_labels,
+    load_mask,
+    upsample_labels,
+)
+
+COLOURS = np.array([[40, 40, 40], [200, 60, 60], [60, 200, 60], [60, 60, 200]], np.uint8)
+
+
+def _labels(h=48, w=64):
+    yy, xx = np.mgrid[0:h, 0:w]
+    return ((xx // 16 + yy // 12) % 4).astype(np.uint8)
+
+
+def test_gray_png_mask_and_npy_give_the_same_labels(tmp_path):
+    lab = _labels()
+    cv2.imwrite(str(tmp_path / "m.png"), lab)
+    np.save(tmp_path / "m.npy", lab.astype(np.int64))
+    np.testing.assert_array_equal(load_mask(tmp_path / "m.png", n_labels=4, shape=lab.shape), lab)
+    np.testing.assert_array_equal(load_mask(tmp_path / "m.npy"), lab)
+
+
+def test_colour_mask_maps_through_the_colour_table(tmp_path):
+    lab = _labels()
+    cv2.imwrite(str(tmp_path / "c.png"), COLOURS[lab][..., ::-1])
+    table = tuple(tuple(int(v) for v in c) for c in COLOURS)
+    np.testing.assert_array_equal(load_mask(tmp_path / "c.png", colours=table), lab)
+    # without a table: distinct colours in ascending (R, G, B) order
+    order = np.lexsort(COLOURS.T[::-1])
+    rank = np.empty(4, int)
+    rank[order] = np.arange(4)
+    np.testing.assert_array_equal(load_mask(tmp_path / "c.png"), rank[lab])
+    with pytest.raises(ValueError, match=r"colour \(200, 60, 60\) not in the colour table"):
+        load_mask(tmp_path / "c.png", colours=table[:1] + table[2:])
+
+
+def test_indexed_png_holds_labels_directly(tmp_path):
+    lab = _labels()
+    im = Image.fromarray(lab, "P")
+    im.putpalette(COLOURS.ravel().tolist())
+    im.save(tmp_path / "p.png")
+    np.testing.assert_array_equal(load_mask(tmp_path / "p.png"), lab)
+
+
+def test_mask_errors_name_the_problem(tmp_path):
+    lab = _labels()
+    cv2.imwrite(str(tmp_path / "m.png"), lab)
+    with pytest.raises(ValueError, match="no such file"):
+        load_mask(tmp_path / "none.png")
+    with pytest.raises(ValueError, match="the frame is 100x48"):
+        load_mask(tmp_path / "m.png", shape=(48, 100))
+    with pytest.raises(ValueError, match="label 3, above the 3 labels"):
+        load_mask(tmp_path / "m.png", n_labels=3)
+    cv2.imwrite(str(tmp_path / "big.png"), np.full((4, 4), 1000, np.uint16))
+    with pytest.raises(ValueError, match="outside 0..255"):
+        load_mask(tmp_path / "big.png")
+    (tmp_path / "m.bmp").write_bytes(b"BM")
+    with pytest.raises(ValueError, match="neither .png nor .npy"):
+        load_mask(tmp_path / "m.bmp")
+    np.save(tmp_path / "f.npy", np.zeros((3, 3), np.float32))
+    with pytest.raises(ValueError, match="2-D integer"):
+        load_mask(tmp_path / "f.npy")
+
+
+def test_downsample_takes_the_block_mode():
+    lab = np.zeros((6, 6), np.uint8)
+    lab[:3, :3] = [[1, 1, 2], [1, 2, 2], [1, 1, 0]]  # mode 1 (5 of 9)
+    lab[3:, 3:] = 7
+    lab[3, 3] = 0
+    small = downsample_labels(lab, max_side=2)
+    np.testing.assert_array_equal(small, [[1, 0], [0, 7]])
+
+
+def test_downsample_bounds_the_size_and_keeps_blocky_maps_exactly():
+    yy, xx = np.mgrid[0:480, 0:640]
+    lab = ((xx // 40 + yy // 30 * 3) % 5).astype(np.uint8)  # region edges on the 10-pixel grid
+    small = downsample_labels(lab, 64)
+    assert max(small.shape) <= 64 and block_size(lab.shape, 64) == 10
+    np.testing.assert_array_equal(upsample_labels(small, lab.shape, 64), lab)
+
+
+@settings(max_examples=60, deadline=None)
+@given(arrays(np.uint8, st.tuples(st.integers(1, 40), st.integers(1, 40)), elements=st.integers(0, 5)),
+       st.integers(1, 16))
+def test_downsample_upsample_shapes_and_values(lab, side):
+    small = downsample_labels(lab, side)
+    assert max(small.shape) <= side
+    assert set(np.unique(small)) <= set(np.unique(lab))
+    big = upsample_labels(small, lab.shape, side)
+    assert big.shape == lab.shape and big.dtype == np.uint8
+    b = block_size(lab.shape, side)
+    np.testing.assert_array_equal(big[::b, ::b], small)
+
+
+def test_upsample_with_a_foreign_size_scales_proportionally():
+    small = np.array([[0, 1], [2, 3]], np.uint8)
+    big = upsample_labels(small, (4, 6), max_side=64)  # 64 would give a 4x6 map, not 2x2
+    np.testing.assert_array_equal(big[:, :3], [[0] * 3, [0] * 3, [2] * 3, [2] * 3])
+
+
+def test_palette_keeps_labels_across_views_and_adds_new_types():
+    pal = Palette(threshold=20)
+    first = pal.match(np.array([[40.0, 40, 40], [200, 60, 60]]))
+    np.testing.assert_array_equal(first, [0, 1])
+    # next view: same clutter, slightly shifted, in another order, plus a new type
+    second = pal.match(np.array([[60.0, 200, 60], [205, 58, 62], [43, 41, 38]]))
+    np.testing.assert_array_equal(second, [2, 1, 0])
+    assert len(pal.entries) == 3
+
+
+def test_palette_gives_each_entry_to_one_centre_per_view():
+    pal = Palette(threshold=50)
+    pal.match(np.array([[100.0, 100, 100]]))
+    out = pal.match(np.array([[110.0, 100, 100], [104.0, 100, 100]]))
+    assert out[1] == 0 and out[0] == 1
+
+
+def test_full_palette_maps_to_the_nearest_entry():
+    pal = Palette(threshold=5, max_entries=2)
+    pal.match(np.array([[0.0], [100.0]]))
+    np.testing.assert_array_equal(pal.match(np.array([[70.0], [20.0]])), [1, 0])
+    assert len(pal.entries) == 2
+
+
+def test_palette_record_survives_msgpack_and_restart():
+    pal = Palette(threshold=25, max_entries=8)
+    pal.match(COLOURS.astype(float))
+    again = Palette.from_record(msgpack.unpackb(msgpack.packb(pal.to_record())))
+    assert again.entries == pal.entries and again.threshold == 25
+    np.testing.assert_array_equal(again.match(COLOURS[::-1].astype(float) + 1), [3, 2, 1, 0])
+    with pytest.raises(ValueError, match="palette record"):
+        Palette.from_record({"entries": [[1.0], [1.0, 2.0]], "threshold": 5, "max_entries": 4})
+
+
+def _scene(which, seed):
+    rng = np.random.default_rng(seed)
+    return np.clip(rng.normal(COLOURS[which].astype(float), 6), 0, 255).astype(np.uint8)
+
+
+def test_isodata_segmenter_keeps_labels_consistent_across_views():
+    cfg = SegmentConfig(SegmentMethod.ISODATA, isodata=IsodataParams(k=4), palette_threshold=30)
+    seg = Segmenter(cfg)
+    truth = _labels()
+    spec = FeatureSpec(FeatureSpace.RGB)
+    first = seg.labels_for(compute(_scene(truth, 1), spec))
+    assert seg.changed
+    code = {int(t): int(first[truth == t][0]) for t in range(4)}
+    assert all(np.all(first[truth == t] == code[t]) for t in range(4))
+    # a second view of the same clutter, laid out differently: same palette labels
+    truth2 = np.rot90(truth, 2).copy()
+    second = seg.labels_for(compute(_scene(truth2, 2), spec))
+    assert all(np.all(second[truth2 == t] == code[t]) for t in range(4))
+    assert seg.changed  # the layout moved
+
+
+def test_changed_only_when_the_map_differs_enough(tmp_path):
+    lab = _labels(64, 64)
+    np.save(tmp_path / "m.npy", lab)
+    seg = Segmenter.from_config(SegmentConfig("mask", mask_path=str(tmp_path / "m.npy"), mask_side=16))
+    ff = compute(np.zeros((64, 64, 3), np.uint8), FeatureSpec(FeatureSpace.GRAY))
+    np.testing.assert_array_equal(seg.labels_for(ff), lab)
+    assert seg.changed and seg.small.shape == (16, 16)
+    seg.labels_for(ff)
+    assert not seg.changed
+    seg.force_send()
+    seg.labels_for(ff)
+    assert seg.changed
+
+
+def test_small_label_jitter_does_not_trigger_a_new_mask():
+    cfg = SegmentConfig(SegmentMethod.ISODATA, isodata=IsodataParams(k=2), mask_side=32, change_fraction=0.05)
+    seg = Segmenter(cfg)
+    truth = (np.arange(128)[None, :] >= 64).repeat(96, 0).astype(np.uint8)
+    spec = FeatureSpec(FeatureSpace.RGB)
+    seg.labels_for(compute(_scene(truth, 3), spec))
+    seg.labels_for(compute(_scene(truth, 4), spec))  # new noise, same layout
+    assert not seg.changed
+
+
+def test_segmenter_config_errors_are_clear(tmp_path):
+    with pytest.raises(ValueError, match="needs mask_path"):
+        SegmentConfig(SegmentMethod.MASK)
+    with pytest.raises(ValueError, match="no such file"):
+        Segmenter(SegmentConfig("mask", mask_path=str(tmp_path / "none.png")))
+    np.save(tmp_path / "m.npy", _labels())
+    seg = Segmenter(SegmentConfig("mask", mask_path=str(tmp_path / "m.npy")))
+    with pytest.raises(ValueError, match="the frame is 10x10"):
+        seg.labels_for(compute(np.zeros((10, 10, 3), np.uint8), FeatureSpec(FeatureSpace.RGB)))
