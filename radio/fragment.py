@@ -1,13 +1,13 @@
 """Cutting messages to frame payloads and putting them back together, in bounded memory.
 
-Reliable data travels in sequence, so its fragments need only FIRST/LAST flags and
-the message id on the first one. Datagrams may arrive in any order (or not at all):
+Reliable data travels in sequence, so its segments need only FIRST/LAST flags and
+the message id on the first one; small messages share a frame. Datagrams may arrive in any order (or not at all):
 they carry index and count, and their reassembly has a timeout and hard limits on
 concurrent messages and on buffered bytes.
 """
 from __future__ import annotations
 
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 
 from radio.frame import Reason, read_varint, reject, varint
@@ -28,41 +28,88 @@ def public_id(flags: int, number: int) -> int:
     return AUTO_BASE + number if flags & AUTO else number
 
 
-def split_stream(msg_id: int, payload: bytes, room: int) -> list[bytes]:
-    """Reliable fragments of at most `room` bytes each, header included."""
-    flag, number = id_fields(msg_id)
-    first_head = bytes([FIRST | flag]) + varint(number)
-    out: list[bytes] = []
-    pos = 0
-    head = first_head
-    while True:
-        take = room - len(head) - 0
-        if take <= 0:
-            raise ValueError(f"frame room {room} too small for fragment headers")
-        chunk = payload[pos:pos + take]
-        pos += len(chunk)
-        last = pos >= len(payload)
-        out.append(bytes([head[0] | (LAST if last else 0)]) + head[1:] + chunk)
-        if last:
-            return out
-        head = bytes([flag])
+MORE = 0x08  # a length follows and another segment after this one
 
 
-def parse_stream(data: bytes) -> tuple[int, int | None, bytes]:
-    """(flags, public id or None, chunk) of a reliable fragment."""
+class StreamPacker:
+    """Fills reliable frame payloads from a queue of messages, several per frame if they fit.
+
+    A segment is: flags, message id (first segment of a message only), a length (only
+    when another segment follows in the same frame), bytes.
+    """
+
+    def __init__(self) -> None:
+        self._cur: tuple[int, bytes] | None = None
+        self._off = 0
+
+    def reset(self) -> None:
+        self._cur, self._off = None, 0
+
+    def next_payload(self, queue: "deque[tuple[int, bytes]]", room: int) -> tuple[bytes, list[int]] | None:
+        """(payload of at most `room` bytes, ids of messages it completes), or None when idle.
+
+        Pops whole messages from the left of `queue` as it starts them."""
+        out = bytearray()
+        ends: list[int] = []
+        while True:
+            if self._cur is None:
+                if not queue:
+                    break
+                self._cur, self._off = queue.popleft(), 0
+            mid, payload = self._cur
+            flag, number = id_fields(mid)
+            head = bytes([flag | (FIRST if self._off == 0 else 0)])
+            if self._off == 0:
+                head += varint(number)
+            rest = len(payload) - self._off
+            if len(out) + len(head) + rest <= room:
+                seg = bytes([head[0] | LAST | MORE]) + head[1:] + varint(rest) + payload[self._off:]
+                if queue and len(out) + len(seg) + 4 < room:
+                    out += seg
+                    ends.append(mid)
+                    self._cur = None
+                    continue
+                out += bytes([head[0] | LAST]) + head[1:] + payload[self._off:]
+                ends.append(mid)
+                self._cur = None
+                break
+            take = room - len(out) - len(head)
+            if take < 1:
+                break
+            out += head + payload[self._off:self._off + take]
+            self._off += take
+            break
+        return (bytes(out), ends) if out else None
+
+
+def parse_segments(data: bytes) -> list[tuple[int, int | None, bytes]]:
+    """[(flags, public id or None, chunk)] of a reliable frame payload."""
     if not data:
-        raise reject(Reason.PAYLOAD, "empty data fragment")
-    flags = data[0]
-    if flags & ~(FIRST | LAST | AUTO):
-        raise reject(Reason.PAYLOAD, f"unknown fragment flags {flags:#x}")
-    if flags & FIRST:
-        number, pos = read_varint(data, 1)
-        return flags, public_id(flags, number), data[pos:]
-    return flags, None, data[1:]
+        raise reject(Reason.PAYLOAD, "empty data payload")
+    segs = []
+    pos = 0
+    while pos < len(data):
+        flags = data[pos]
+        pos += 1
+        if flags & ~(FIRST | LAST | AUTO | MORE):
+            raise reject(Reason.PAYLOAD, f"unknown segment flags {flags:#x}")
+        msg_id = None
+        if flags & FIRST:
+            number, pos = read_varint(data, pos)
+            msg_id = public_id(flags, number)
+        if flags & MORE:
+            n, pos = read_varint(data, pos, 3)
+            if pos + n >= len(data):
+                raise reject(Reason.PAYLOAD, "segment length runs past the frame")
+            chunk, pos = data[pos:pos + n], pos + n
+        else:
+            chunk, pos = data[pos:], len(data)
+        segs.append((flags, msg_id, chunk))
+    return segs
 
 
 class StreamAssembler:
-    """Joins in-order reliable fragments; one partial message of at most `max_message` bytes."""
+    """Joins in-order reliable segments; one partial message of at most `max_message` bytes."""
 
     def __init__(self, max_message: int) -> None:
         self.max_message = max_message
@@ -77,24 +124,26 @@ class StreamAssembler:
     def buffered(self) -> int:
         return self._size
 
-    def add(self, data: bytes) -> tuple[int, bytes] | None:
-        """(msg id, message) when `data` completes one; FrameError if the stream is malformed."""
-        flags, msg_id, chunk = parse_stream(data)
-        if flags & FIRST:
-            self.reset()
-            self._id = msg_id
-        elif self._id is None:
-            raise reject(Reason.PAYLOAD, "continuation fragment without a first fragment")
-        self._size += len(chunk)
-        if self._size > self.max_message:
-            self.reset()
-            raise reject(Reason.OVERSIZE, f"message longer than {self.max_message} bytes")
-        self._parts.append(chunk)
-        if flags & LAST:
-            done = (self._id, b"".join(self._parts))
-            self.reset()
-            return done  # type: ignore[return-value]
-        return None
+    def add(self, data: bytes) -> list[tuple[int, bytes]]:
+        """Messages completed by this frame payload; FrameError if the stream is malformed
+        (the partial message is then dropped; the sender's ARQ cannot repair a forgery-free
+        malformation, so this only happens with a buggy peer)."""
+        done: list[tuple[int, bytes]] = []
+        for flags, msg_id, chunk in parse_segments(data):
+            if flags & FIRST:
+                self.reset()
+                self._id = msg_id
+            elif self._id is None:
+                raise reject(Reason.PAYLOAD, "continuation segment without a first segment")
+            self._size += len(chunk)
+            if self._size > self.max_message:
+                self.reset()
+                raise reject(Reason.OVERSIZE, f"message longer than {self.max_message} bytes")
+            self._parts.append(chunk)
+            if flags & LAST:
+                done.append((self._id, b"".join(self._parts)))  # type: ignore[arg-type]
+                self.reset()
+        return done
 
 
 def split_datagram(msg_id: int, payload: bytes, room: int) -> list[bytes]:
