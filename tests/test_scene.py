@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from hal.interfaces import ViewAngles
 from hal.scene import LABEL_NAMES, SCENES, Label, render
@@ -113,3 +115,13 @@ def test_bad_input_is_named(kwargs, message):
     args = {"scene": "black", "view": ViewAngles(90.0), "size": (16, 16)} | kwargs
     with pytest.raises(ValueError, match=message):
         render(**args)
+
+
+@settings(max_examples=25, deadline=None)
+@given(elevation=st.floats(5.0, 90.0), azimuth=st.floats(-720.0, 720.0),
+       h=st.integers(8, 40), w=st.integers(8, 40), scene=st.sampled_from(SCENES))
+def test_any_view_and_odd_size_gives_a_full_labelled_frame(elevation, azimuth, h, w, scene):
+    r = render(scene, ViewAngles(elevation, azimuth), (h, w), seed=1, bands="multispectral")
+    assert r.image.shape == (h, w, 6) and r.mask.shape == (h, w)
+    assert np.all(r.mask > 0)
+    assert r.image[..., :5].max() <= 255 and r.image[..., 5].min() > 27000
