@@ -19,6 +19,8 @@ COMMANDS: tuple[str, ...] = (
     "compare",
     "pdfs",
     "resolve",
+    "keygen",
+    "linktest",
     "demo",
 )
 
