@@ -179,6 +179,9 @@ def models_packet(
     """Build a MODELS packet from the fitter's results keyed by (label, band index)."""
     codec = PercentileCodec.for_levels(levels)
     censored = censored or {}
+    stray = set(censored) - {lab for lab, _ in fits}
+    if stray:
+        raise ValueError(f"censored fractions for labels without models: {sorted(stray)}")
     records = []
     for label in sorted({lab for lab, _ in fits}):
         per_band = [fits.get((label, b)) for b in range(len(bands))]
@@ -229,7 +232,7 @@ def _censored(v: Any, n: int) -> list[tuple[float, float]]:
         raise FrameError(f"censored blob has {len(blob)} bytes, expected {n * _CENSOR.size}")
     out = []
     for low, high in _CENSOR.iter_unpack(blob):
-        if low + high > CENSOR_SCALE:
+        if low + high > CENSOR_SCALE + 1:  # two halves may each round up
             raise FrameError("censored fractions of a label add up to more than 1")
         out.append((low / CENSOR_SCALE, high / CENSOR_SCALE))
     return out

@@ -122,6 +122,13 @@ def test_encoding_refuses_incomplete_or_inconsistent_fits():
         encode_models(_fits(2, 3), bands=("R", "G", "B"), **dict(HEADER, measured=(95.0, 0.0)))
     with pytest.raises(ValueError, match="censored"):
         encode_models(_fits(1, 3), bands=("R", "G", "B"), censored={1: (1.5, 0.0)}, **HEADER)
+    with pytest.raises(ValueError, match="labels without models"):
+        encode_models(_fits(1, 3), bands=("R", "G", "B"), censored={9: (0.1, 0.0)}, **HEADER)
+
+
+def test_censored_halves_that_round_up_still_travel():
+    packet = decode(encode_models(_fits(1, 3), bands=("R", "G", "B"), censored={1: (0.5, 0.5)}, **HEADER))
+    assert abs(packet.labels[0].censored_low - 0.5) <= 1 / 65535
 
 
 def test_angles_travel_at_a_hundredth_of_a_degree_and_azimuth_wraps():
