@@ -135,13 +135,15 @@ class DynamixelServoBus:
 
     def move(self, goals_deg: dict[int, float]) -> None:
         ticks = {sid: deg_to_ticks(deg) for sid, deg in goals_deg.items()}  # all checked first
+        if not ticks:
+            return
         with self._lock:
             self._goals.update(ticks)
             group = sdk.GroupSyncWrite(self._port, self._ph, Reg.GOAL_POSITION, 4)
             for sid, t in ticks.items():
                 group.addParam(sid, list(t.to_bytes(4, "little")))
             # Broadcast: no status comes back, so only a transmit failure is visible.
-            self._call(min(ticks, default=0), "sync write goal", lambda: (group.txPacket(), 0), alerts=False)
+            self._call(min(ticks), "sync write goal", lambda: (group.txPacket(), 0), alerts=False)
 
     def positions(self, servo_ids: list[int]) -> dict[int, float]:
         raw = self._sync_read(servo_ids, Reg.PRESENT_POSITION, 4)

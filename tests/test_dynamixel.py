@@ -193,3 +193,9 @@ def test_emulator_ignores_a_packet_with_a_bad_crc(emu):
 def test_missing_port_is_a_clear_error():
     with pytest.raises(HalError, match="/dev/does-not-exist"):
         DynamixelServoBus("/dev/does-not-exist")
+
+
+def test_empty_move_sends_nothing(bus, emu):
+    bus.move({})
+    assert bus.positions([1]) == {1: 0.0}
+    assert not [c for c in emu.history if c.call == "SYNC_WRITE"]
