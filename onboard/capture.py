@@ -92,13 +92,31 @@ class Pipeline:
         raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}")
 
     def move(self, view: ViewAngles) -> None:
-        timeout = self.cfg.sweep.settle_timeout_s
-        arm = self.hal.arm
-
-        self._retry("move", lambda: arm.move_to(view, timeout))  # waits until settled
+        """Send the goals, then poll until settled; each bus call has its own retries."""
+        arm, bus = self.hal.arm, self.hal.servo_bus
+        try:
+            goals = arm.joints_for(view)
+        except HalError as exc:  # outside the limits: retrying cannot help
+            raise PoseSkipped(f"move: {exc}") from None
+        ids = list(goals)
+        self._retry("move", lambda: bus.move(goals))
+        deadline = time.monotonic() + self.cfg.sweep.settle_timeout_s
+        while self._retry("settle", lambda: bus.is_moving(ids)):
+            if time.monotonic() > deadline:
+                raise PoseSkipped(f"settle: servos {ids} still moving after "
+                                  f"{self.cfg.sweep.settle_timeout_s:.1f} s")
+            self.pump()
+            self.sleep(0.005)
+        reached = self._retry("positions", lambda: bus.positions(ids))
+        tol = getattr(arm.joints, "tolerance_deg", 1.0)
+        for sid, goal in goals.items():
+            if abs(reached[sid] - goal) > tol:
+                raise PoseSkipped(f"move: servo {sid} stopped at {reached[sid]:.1f}°, short of {goal:.1f}°")
 
     def measure_view(self) -> ViewAngles:
-        return self._retry("tracker", lambda: view_from_orientation(self.hal.tracker.orientation()))
+        v = self._retry("tracker", lambda: view_from_orientation(self.hal.tracker.orientation()))
+        # Tracker noise can read a hair past straight down; a view elevation is at most 90°.
+        return ViewAngles(min(90.0, max(-90.0, v.elevation)), v.azimuth % 360.0)
 
     def frame(self) -> np.ndarray:
         def grab() -> np.ndarray:

@@ -467,7 +467,11 @@ class Segmentation:
         elif method == "scene":
             from hal.scene import render
 
-            view = ViewAngles(min(90.0, max(5.0, measured.elevation)), measured.azimuth)
+            view = measured
+            history = getattr(getattr(self.hal, "camera", None), "history", None)
+            if history and history[-1].call == "capture" and history[-1].args:
+                view = history[-1].args[0]  # the fake camera's true view of this frame
+            view = ViewAngles(min(90.0, max(5.0, view.elevation)), view.azimuth)
             labels = render(self.cfg.hal.scene, view, size=shape, seed=self.cfg.hal.seed).mask
         else:
             from onboard.isodata import isodata
