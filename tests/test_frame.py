@@ -1,0 +1,112 @@
+"""Frames, counters, replay window and key files."""
+import os
+
+import pytest
+
+from radio import FrameError
+from radio.auth import FileCounterStore, ReplayWindow
+from radio.frame import (OVERHEAD, Deframer, Frame, Kind, Reason, decode, encode, max_payload,
+                         reason_of)
+from radio.keys import KeyFileError, load_key, write_key
+
+KEY = bytes(range(32))
+
+
+def frame(payload=b"hello\x00world", counter=77):
+    return Frame(Kind.DATA, 3, 9, 200, counter, payload)
+
+
+def test_frame_round_trips_and_overhead_is_at_most_20_bytes():
+    f = frame()
+    wire = encode(f, KEY)
+    assert wire[0] == 0 and wire[-1] == 0 and b"\x00" not in wire[1:-1]
+    assert decode(wire[1:-1], KEY) == f
+    assert OVERHEAD <= 20
+
+
+@pytest.mark.parametrize("mtu", [40, 100, 255, 600])
+def test_max_payload_fills_but_never_exceeds_the_mtu(mtu):
+    n = max_payload(mtu)
+    assert len(encode(frame(b"\x01" * n), KEY)) <= mtu
+    assert len(encode(frame(b"\x01" * (n + 1 + mtu // 254)), KEY)) > mtu
+
+
+def test_every_single_bit_flip_is_rejected():
+    body = encode(frame(), KEY)[1:-1]
+    for bit in range(8 * len(body)):
+        bad = bytearray(body)
+        bad[bit // 8] ^= 1 << (bit % 8)
+        with pytest.raises(FrameError):
+            decode(bytes(bad), KEY)
+
+
+def test_wrong_key_is_a_tag_rejection():
+    with pytest.raises(FrameError) as e:
+        decode(encode(frame(), KEY)[1:-1], bytes(32))
+    assert reason_of(e.value) is Reason.TAG
+
+
+def test_deframer_resyncs_after_garbage_and_bounds_memory():
+    a, b = encode(frame(b"a"), KEY), encode(frame(b"b", 78), KEY)
+    d = Deframer(max_body=100)
+    bodies = d.feed(b"\x13\x37garbage" + a + b"\xff" * 500 + b + a[:5])
+    good = []
+    for x in bodies:
+        try:
+            good.append(decode(x, KEY).payload)
+        except FrameError:
+            pass
+    assert good == [b"a", b"b"]
+    assert d.oversize == 1
+    assert d.buffered <= 100
+
+
+def test_counters_survive_restarts_without_reuse(tmp_path):
+    path = tmp_path / "counters.json"
+    seen = set()
+    for _ in range(5):  # each store is a process killed after a few frames
+        store = FileCounterStore(path, block=8)
+        for _ in range(11):
+            c = store.next_tx(1, 2)
+            assert c not in seen and c > max(seen, default=0)
+            seen.add(c)
+    store.set_rx_floor(3, 2, 12345)
+    assert FileCounterStore(path).rx_floor(3, 2) == 12345
+
+
+def test_unreadable_counter_file_is_refused(tmp_path):
+    (tmp_path / "c.json").write_text("{not json")
+    with pytest.raises(ValueError, match="unreadable"):
+        FileCounterStore(tmp_path / "c.json")
+
+
+def test_replay_window_accepts_reordered_once_and_rejects_replays_and_stale():
+    w = ReplayWindow(size=8, floor=100)
+    assert w.check(100) is Reason.REPLAY and w.check(50) is Reason.STALE
+    for c in (105, 103, 104, 101):
+        assert w.check(c) is None
+        w.accept(c)
+    assert w.check(103) is Reason.REPLAY and w.check(102) is None
+    w.accept(200)
+    assert w.check(150) is Reason.STALE and w.check(195) is None
+
+
+def test_key_file_round_trip_and_clear_errors(tmp_path):
+    p = tmp_path / "link.key"
+    with pytest.raises(KeyFileError, match="no key, no link"):
+        load_key(p)
+    write_key(p)
+    assert os.stat(p).st_mode & 0o777 == 0o600
+    assert len(load_key(p)) == 32
+    with pytest.raises(FileExistsError):
+        write_key(p)
+    os.chmod(p, 0o644)
+    with pytest.raises(KeyFileError, match="chmod 600"):
+        load_key(p)
+    os.chmod(p, 0o600)
+    p.write_text("abcd\n")
+    with pytest.raises(KeyFileError, match="holds 2 bytes"):
+        load_key(p)
+    p.write_text("zz" * 32)
+    with pytest.raises(KeyFileError, match="hex"):
+        load_key(p)
