@@ -199,21 +199,25 @@ def _nearest_f32(x: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
         out[a:a + CHUNK_PIXELS] = np.argmin(xb @ m, axis=1)
 
 
-def _colour_lut(c: np.ndarray, m: np.ndarray) -> np.ndarray:
+_CELL = np.arange(32) * 8 + 3.5
+_GRID = np.stack(np.meshgrid(_CELL, _CELL, _CELL, indexing="ij"), -1).reshape(-1, 3)
+_GRID_SQ = (_GRID * _GRID).sum(axis=1)
+_CELL_RADIUS = np.sqrt(3) * 3.5
+
+
+def _colour_lut(c: np.ndarray) -> np.ndarray:
     """Label per 8x8x8 colour cell, or 255 where the cell straddles a decision boundary.
 
     For p in a cell with centre q, |p-ci|^2 - |p-cj|^2 differs from its value at q by
     at most 2*|p-q|*|ci-cj|; a cell whose margin beats that bound for every rival
     centre has one label for all its colours.
     """
-    g = np.arange(32) * 8 + 3.5
-    q = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
-    d = ((q[:, None, :] - c[None, :, :]) ** 2).sum(axis=2)
+    d = (c * c).sum(axis=1)[None, :] - 2.0 * (_GRID @ c.T)  # + |q|^2, common to all centres
     best = np.argmin(d, axis=1)
-    radius = np.sqrt(3) * 3.5
+    rows = np.arange(len(d))
     sep = np.sqrt(((c[:, None, :] - c[None, :, :]) ** 2).sum(axis=2))
-    margin = d - d[np.arange(len(q)), best][:, None] - 2 * radius * sep[best] - 1e-6
-    margin[np.arange(len(q)), best] = np.inf
+    margin = d - d[rows, best][:, None] - 2 * _CELL_RADIUS * sep[best] - 1e-6 * (1 + _GRID_SQ[:, None])
+    margin[rows, best] = np.inf
     lut = best.astype(np.uint8)
     lut[(margin <= 0).any(axis=1)] = 255
     return lut
@@ -247,11 +251,11 @@ def assign(data: np.ndarray, centres: np.ndarray) -> np.ndarray:
             key = chunk[:, 0] if bands == 1 else (chunk[:, 0] << 8) | chunk[:, 1]
             out[a:a + CHUNK_PIXELS] = table[key]
         return out.reshape(np.shape(data)[:-1])
-    lut = _colour_lut(c, m)
+    lut = _colour_lut(c)
     for a in range(0, len(x), CHUNK_PIXELS):
         chunk = x[a:a + CHUNK_PIXELS]
-        key = (chunk[:, 0] >> 3).astype(np.intp) << 10
-        key |= (chunk[:, 1] >> 3).astype(np.intp) << 5
+        key = (chunk[:, 0] >> 3).astype(np.uint16) << 10  # 15-bit cell index fits uint16
+        key |= (chunk[:, 1] >> 3).astype(np.uint16) << 5
         key |= chunk[:, 2] >> 3
         lab = lut[key]
         unsure = np.flatnonzero(lab == 255)
