@@ -52,10 +52,10 @@ class Surface:
 
 def smooth_noise(rng: np.random.Generator, size: int, scale: float) -> np.ndarray:
     """Periodic Gaussian-filtered white noise, rescaled to 0..1; scale is the blob size in pixels."""
-    freq = np.fft.fftfreq(size)
-    f2 = freq[:, None] ** 2 + freq[None, :] ** 2
-    spectrum = np.fft.fft2(rng.standard_normal((size, size))) * np.exp(-2.0 * (math.pi * scale) ** 2 * f2)
-    field = np.fft.ifft2(spectrum).real
+    f2 = np.fft.fftfreq(size)[:, None] ** 2 + np.fft.rfftfreq(size)[None, :] ** 2
+    white = rng.standard_normal((size, size), dtype=np.float32)
+    spectrum = np.fft.rfft2(white) * np.exp(-2.0 * (math.pi * scale) ** 2 * f2).astype(np.float32)
+    field = np.fft.irfft2(spectrum, s=(size, size))
     lo, hi = float(field.min()), float(field.max())
     return (field - lo) / max(hi - lo, 1e-12)
 
@@ -110,34 +110,36 @@ def _splat(s: Spheres, size: int) -> np.ndarray:
         sel = np.flatnonzero(reach == rad)
         off = np.arange(-rad, rad + 1)
         ox, oy = (a.ravel() for a in np.meshgrid(off, off))
-        px = np.floor(s.cx[sel]).astype(np.int64)[:, None] + ox
-        py = np.floor(s.cy[sel]).astype(np.int64)[:, None] + oy
-        d2 = (px + 0.5 - s.cx[sel, None]) ** 2 + (py + 0.5 - s.cy[sel, None]) ** 2
-        r2 = (s.r[sel] ** 2)[:, None]
-        inside = d2 < r2
-        z = s.cz[sel, None] + s.flatten[sel, None] * np.sqrt(np.maximum(r2 - d2, 0.0))
-        key = (np.clip(z * 256.0, 0, 2**30).astype(np.int64) << 32) | (sel[:, None] + 1)
-        cells = (py % size) * size + (px % size)
-        np.maximum.at(best, cells[inside], key[inside])
+        bx, by = np.floor(s.cx[sel]), np.floor(s.cy[sel])
+        # offsets from the grain centre in float32: sub-pixel accuracy is all a stamp needs
+        fx = (bx + 0.5 - s.cx[sel]).astype(np.float32)[:, None] + ox.astype(np.float32)
+        fy = (by + 0.5 - s.cy[sel]).astype(np.float32)[:, None] + oy.astype(np.float32)
+        room = (s.r[sel] ** 2).astype(np.float32)[:, None] - fx * fx - fy * fy
+        inside = room > 0
+        cz, flat = s.cz[sel, None].astype(np.float32), s.flatten[sel, None].astype(np.float32)
+        z = (cz + flat * np.sqrt(np.maximum(room, 0)))[inside]  # z >= 0: grains never sink below 0
+        key = ((z * 256.0).astype(np.int64) << 32) | np.broadcast_to(sel[:, None] + 1, inside.shape)[inside]
+        px = (bx.astype(np.int64)[:, None] + ox)[inside] % size
+        py = (by.astype(np.int64)[:, None] + oy)[inside] % size
+        np.maximum.at(best, py * size + px, key)
     return (best & 0xFFFFFFFF) - 1
 
 
-def _geometry(s: Spheres, owner: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """Exact height and unit normal of the owning sphere at each cell centre."""
-    height = np.zeros(size * size)
-    normal = np.zeros((size * size, 3))
+def _geometry(s: Spheres, owner: np.ndarray, cells: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """Exact height and unit normal at the centres of `cells` (flat indices), from their owning sphere."""
+    height = np.zeros(cells.size)
+    normal = np.zeros((cells.size, 3))
     normal[:, 2] = 1.0
-    cells = np.flatnonzero(owner >= 0)
-    o = owner[cells]
+    covered = owner[cells] >= 0
+    c, o = cells[covered], owner[cells[covered]]
     half = size / 2.0
-    dx = (cells % size + 0.5 - s.cx[o] + half) % size - half
-    dy = (cells // size + 0.5 - s.cy[o] + half) % size - half
-    r2 = s.r[o] ** 2
-    q = np.sqrt(np.maximum(r2 - dx * dx - dy * dy, 0.0))
-    height[cells] = s.cz[o] + s.flatten[o] * q
+    dx = (c % size + 0.5 - s.cx[o] + half) % size - half
+    dy = (c // size + 0.5 - s.cy[o] + half) % size - half
+    q = np.sqrt(np.maximum(s.r[o] ** 2 - dx * dx - dy * dy, 0.0))
+    height[covered] = s.cz[o] + s.flatten[o] * q
     qs = np.maximum(q, 0.05 * s.r[o])  # rim of a sphere: steep but finite slope
     n = np.stack([s.flatten[o] * dx / qs, s.flatten[o] * dy / qs, np.ones_like(qs)], axis=1)
-    normal[cells] = n / np.linalg.norm(n, axis=1, keepdims=True)
+    normal[covered] = n / np.linalg.norm(n, axis=1, keepdims=True)
     return height, normal
 
 
@@ -208,10 +210,10 @@ def build_surface(scene: str, seed: int, size: int, scale: float) -> Surface:
         if not np.all(flat_labels == label):
             spheres = spheres.subset(_near(labels, spheres, int(label), float(spheres.r.max()) + 1.0))
         owner = _splat(spheres, size)
-        h, n = _geometry(spheres, owner, size)
-        a = np.where((owner >= 0)[:, None], spheres.albedo[np.maximum(owner, 0)], np.asarray(m.substrate))
-        cells = flat_labels == label
-        height[cells], normal[cells], albedo[cells] = h[cells], n[cells], a[cells]
+        cells = np.flatnonzero(flat_labels == label)
+        height[cells], normal[cells] = _geometry(spheres, owner, cells, size)
+        o = owner[cells]
+        albedo[cells] = np.where((o >= 0)[:, None], spheres.albedo[np.maximum(o, 0)], np.asarray(m.substrate))
     lit = _lit(height.reshape(size, size)).ravel()
     direct = np.clip(normal @ light_vector(), 0.0, None) * lit
     irradiance = AMBIENT + (1.0 - AMBIENT) * direct
