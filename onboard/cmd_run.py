@@ -43,14 +43,9 @@ def _setup(args: argparse.Namespace):
 
 
 def _open_port(url: str, baud: int):
-    try:
-        from radio.serial_port import open_port  # type: ignore[attr-defined]
+    from radio.serial_port import open_url
 
-        return open_port(url, baud)
-    except ImportError:
-        import serial  # pyserial, the robot extra
-
-        return serial.serial_for_url(url, baudrate=baud, timeout=0)
+    return open_url(url, baud, timeout=0.005)
 
 
 def run(args: argparse.Namespace) -> int:

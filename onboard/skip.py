@@ -24,7 +24,10 @@ class HasPercentiles(Protocol):
 
 def label_counts(labels: np.ndarray, n_labels: int) -> np.ndarray:
     """Pixels per label id (0..n_labels-1); ids at or above n_labels are ignored."""
-    counts = np.bincount(labels.ravel(), minlength=n_labels)
+    flat = labels.reshape(-1)
+    counts = np.zeros(max(n_labels, 256), np.int64)
+    for a in range(0, flat.size, 1 << 16):  # bounded chunks: bincount widens to int64
+        counts += np.bincount(flat[a:a + (1 << 16)], minlength=counts.size)[:counts.size]
     return counts[:n_labels]
 
 
