@@ -225,7 +225,8 @@ class Johnson:
             z += dtype.type(xi)
             if not (abs(xi) + abs(lam) * math.exp(wmax) < 0.5 * float(info.max)):
                 # Only extreme parameters can overflow; guard them once per call.
-                np.nan_to_num(z, copy=False, nan=xi, posinf=info.max, neginf=-info.max)
+                fill = min(max(xi, -float(info.max)), float(info.max))  # xi itself may not fit the dtype
+                np.nan_to_num(z, copy=False, nan=fill, posinf=info.max, neginf=-info.max)
         return z
 
     def thresholds(self, levels: int = 256) -> np.ndarray:
