@@ -18,7 +18,7 @@ import numpy as np
 from onboard.johnson import Family, Johnson
 from tools.images import decode_png, encode_png
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -34,8 +34,11 @@ CREATE TABLE captures (
     space TEXT NOT NULL,
     bands TEXT NOT NULL,
     scene TEXT NOT NULL DEFAULT '',
+    light_elevation REAL, light_azimuth REAL,
+    source TEXT,
     UNIQUE (robot, sequence)
 );
+CREATE INDEX captures_by_source ON captures (robot, source);
 CREATE TABLE models (
     capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
     label INTEGER NOT NULL, band INTEGER NOT NULL,
@@ -59,6 +62,14 @@ CREATE TABLE masks (
 );
 """
 _TABLES = {"captures", "models", "masks"}
+# Upgrades from the keyed version to the next; each keeps every existing row.
+_MIGRATIONS: dict[int, str] = {
+    # illumination angles and the source file of a capture (dataset ingest)
+    1: "ALTER TABLE captures ADD COLUMN light_elevation REAL;"
+       "ALTER TABLE captures ADD COLUMN light_azimuth REAL;"
+       "ALTER TABLE captures ADD COLUMN source TEXT;"
+       "CREATE INDEX captures_by_source ON captures (robot, source);",
+}
 
 
 class CorruptDatabase(Exception):
@@ -76,6 +87,8 @@ class Capture:
     space: str
     band_names: tuple[str, ...]
     scene: str
+    illumination: tuple[float | None, float | None] = (None, None)
+    source: str | None = None
 
     @property
     def elevation(self) -> float:
@@ -147,6 +160,9 @@ class Store:
                                    f"PRAGMA application_id = {APPLICATION_ID}; COMMIT;")
             elif app_id != APPLICATION_ID or not _TABLES <= tables:
                 raise CorruptDatabase(f"database {p}: not a btfscout database; left untouched")
+            elif version < SCHEMA_VERSION and all(v in _MIGRATIONS for v in range(version, SCHEMA_VERSION)):
+                script = "".join(_MIGRATIONS[v] for v in range(version, SCHEMA_VERSION))
+                conn.executescript(f"BEGIN;{script}PRAGMA user_version = {SCHEMA_VERSION}; COMMIT;")
             elif version != SCHEMA_VERSION:
                 raise CorruptDatabase(
                     f"database {p}: schema version {version}, this tool reads {SCHEMA_VERSION}; left untouched"
@@ -184,10 +200,14 @@ class Store:
         band_names: Iterable[str],
         results: Mapping[tuple[int, int], Any],
         scene: str = "",
+        illumination: Any = None,
+        source: str | None = None,
     ) -> bool:
-        """Stores one capture with its models; False if (robot, sequence) was already there."""
+        """Stores one capture with its models; False if (robot, sequence) was already there.
+        `illumination` is the light's (elevation, azimuth) when known; `source` the image file."""
         cmd = _angles(commanded)
         meas = _angles(measured)
+        light = _angles(illumination)
         if meas[0] is None:
             raise ValueError("a capture needs its measured angle")
         rows = []
@@ -204,9 +224,11 @@ class Store:
             self._conn.execute("BEGIN IMMEDIATE")
             cur = self._conn.execute(
                 "INSERT OR IGNORE INTO captures (robot, sequence, time, cmd_elevation, cmd_azimuth,"
-                " elevation, azimuth, space, bands, scene) VALUES (?,?,?,?,?,?,?,?,?,?)",
+                " elevation, azimuth, space, bands, scene, light_elevation, light_azimuth, source)"
+                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (str(robot_id), int(sequence), float(time), cmd[0], cmd[1], meas[0], meas[1],
-                 str(space), json.dumps(list(band_names)), str(scene)),
+                 str(space), json.dumps(list(band_names)), str(scene), light[0], light[1],
+                 None if source is None else str(source)),
             )
             if cur.rowcount == 0:
                 self._conn.execute("ROLLBACK")
@@ -265,10 +287,17 @@ class Store:
         sql, args = self._capture_filter(robot, space, scene)
         rows = self._conn.execute(
             "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
-            " space, bands, scene FROM captures" + sql + " ORDER BY elevation, id", args
+            " space, bands, scene, light_elevation, light_azimuth, source FROM captures"
+            + sql + " ORDER BY elevation, id", args
         ).fetchall()
         return [Capture(r[0], r[1], r[2], r[3], (r[4], r[5]), (r[6], r[7]), r[8],
-                        tuple(json.loads(r[9])), r[10]) for r in rows]
+                        tuple(json.loads(r[9])), r[10], (r[11], r[12]), r[13]) for r in rows]
+
+    def sources(self, robot: str) -> set[str]:
+        """Source file names already stored for `robot` (what a resumed ingest skips)."""
+        rows = self._conn.execute(
+            "SELECT source FROM captures WHERE robot = ? AND source IS NOT NULL", (robot,))
+        return {r[0] for r in rows}
 
     def angles(self, robot: str | None = None, space: str | None = None,
                scene: str | None = None) -> list[float]:
