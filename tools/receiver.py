@@ -1,0 +1,223 @@
+"""The base station's receiving half: link events in, packets decoded and stored, answers out.
+
+`Receiver` turns one delivered payload into a stored capture, mask or a line to show.
+Storing happens before the link's next `poll`, so a packet is acknowledged only once it
+is in the database; a crash in between makes the robot send it again, and the database
+keeps it once because captures are unique by (robot, sequence).
+
+`HostSession` binds a `radio.link.Link` to a port (pyserial URL, pty fd, or the channel
+simulator) and pumps it: received payloads go to the Receiver, commands go out, and the
+robot's ACK/NACK answers are collected by command id.
+"""
+from __future__ import annotations
+
+import enum
+import secrets
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from onboard.fit import PercentileCodec, Z_LADDER
+from radio import FrameError
+from radio import packet as pk
+from radio.link import Delivered, Link, LinkDown, LinkStats, LinkUp
+from radio.serial_port import Port
+from tools.store import Store
+
+HOST_NODE, ROBOT_NODE, LINK_ID = 2, 1, 1
+
+
+class ItemKind(enum.StrEnum):
+    CAPTURE = "capture"
+    UNCHANGED = "unchanged"
+    MASK = "mask"
+    STATUS = "status"
+    LOG = "log"
+    ANSWER = "answer"
+    BAD = "bad"
+    OTHER = "other"
+
+
+@dataclass(frozen=True, slots=True)
+class Item:
+    """What one delivered payload became."""
+
+    kind: ItemKind
+    robot: int | None
+    seq: int | None
+    stored: bool
+    text: str
+    packet: Any = field(default=None, compare=False, repr=False)
+
+    def to_json(self) -> dict:
+        d: dict[str, Any] = {"kind": self.kind.value, "robot": self.robot, "seq": self.seq,
+                             "stored": self.stored, "text": self.text}
+        if self.packet is not None:
+            d["packet"] = packet_json(self.packet)
+        return d
+
+
+@dataclass(frozen=True, slots=True)
+class _Fit:
+    """A received model in the shape Store.add_capture reads (FitResult's fields)."""
+
+    model: Any
+    count: int
+    z: float
+    percentiles: tuple[float, float, float, float]
+    beta1: float
+    beta2: float
+    censored_low: int = 0
+    censored_high: int = 0
+
+
+def mask_key(seq: int) -> str:
+    """The key a capture's mask is stored under."""
+    return f"capture-{seq}"
+
+
+def _jsonable(v: Any) -> Any:
+    if isinstance(v, (bytes, bytearray)):
+        return v.hex()
+    if isinstance(v, enum.Enum):
+        return v.name
+    if isinstance(v, dict):
+        return {str(k): _jsonable(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_jsonable(x) for x in v]
+    if isinstance(v, (np.integer, np.floating)):
+        return v.item()
+    return v
+
+
+def packet_json(p: Any) -> dict:
+    """A decoded packet as a JSON-ready dict (documented in the README under `decode`)."""
+    out: dict[str, Any] = {"type": p.KIND.name}
+    if isinstance(p, pk.ModelsPacket):
+        out.update(robot=p.robot_id, seq=p.seq, time=p.time, commanded=list(p.commanded),
+                   measured=list(p.measured), space=p.feature_space, bands=list(p.bands),
+                   levels=p.levels, models=[
+                       {"label": lab, "band": b, "family": m.family.value, "gamma": m.gamma,
+                        "delta": m.delta, "xi": m.xi, "lam": m.lam}
+                       for (lab, b), m in sorted(p.models.items())],
+                   counts={str(r.label): r.count for r in p.labels})
+    elif isinstance(p, pk.MaskPacket):
+        out.update(robot=p.robot_id, seq=p.seq, frame_shape=list(p.frame_shape), shape=list(p.shape),
+                   labels=sorted(int(v) for v in set(p.values)))
+    else:
+        for name in p.__slots__:
+            if name != "extras":
+                out[name] = _jsonable(getattr(p, name))
+    if getattr(p, "extras", None):
+        out["extras"] = _jsonable(dict(p.extras))
+    return out
+
+
+class Receiver:
+    """Decodes delivered payloads and files them in `store`; counts what it saw."""
+
+    def __init__(self, store: Store, scene: str = "") -> None:
+        self.store, self.scene = store, scene
+        self.counts: dict[str, int] = {k.value: 0 for k in ItemKind}
+        self.duplicates = 0
+
+    def handle(self, payload: bytes) -> Item:
+        try:
+            p = pk.decode(payload)
+        except FrameError as exc:
+            return self._count(Item(ItemKind.BAD, None, None, False, f"undecodable packet: {exc}"))
+        if isinstance(p, pk.ModelsPacket):
+            item = self._models(p)
+        elif isinstance(p, pk.UnchangedPacket):
+            item = self._unchanged(p)
+        elif isinstance(p, pk.MaskPacket):
+            labels = p.full_size()
+            new = self.store.add_mask(mask_key(p.seq), labels, str(p.robot_id))
+            item = Item(ItemKind.MASK, p.robot_id, p.seq, new,
+                        f"mask {p.frame_shape[1]}x{p.frame_shape[0]} labels "
+                        f"{sorted(int(v) for v in set(p.values))}", p)
+        elif isinstance(p, pk.StatusPacket):
+            pose = "?" if p.pose is None else f"{p.pose[0]:.1f}/{p.pose[1]:.1f}"
+            item = Item(ItemKind.STATUS, p.robot_id, p.last_seq, False,
+                        f"{p.state.name.lower()} pose {pose} outbox {p.outbox_pending}: {p.text}", p)
+        elif isinstance(p, pk.LogPacket):
+            item = Item(ItemKind.LOG, p.robot_id, None, False, f"{p.level.name}: {p.text}", p)
+        elif isinstance(p, (pk.AckPacket, pk.NackPacket)):
+            verdict = "ACK" if isinstance(p, pk.AckPacket) else f"NACK {p.reason.name}"
+            item = Item(ItemKind.ANSWER, None, p.command_id, False, f"{verdict}: {p.text}", p)
+        else:
+            item = Item(ItemKind.OTHER, None, None, False, type(p).__name__, p)
+        return self._count(item)
+
+    def _count(self, item: Item) -> Item:
+        self.counts[item.kind.value] += 1
+        if item.kind in (ItemKind.CAPTURE, ItemKind.UNCHANGED, ItemKind.MASK) and not item.stored:
+            self.duplicates += 1
+        return item
+
+    def _models(self, p: pk.ModelsPacket) -> Item:
+        codec = PercentileCodec.for_levels(p.levels)
+        fits = {}
+        for rec in p.labels:
+            for band, codes in enumerate(rec.codes):
+                m = p.models[(rec.label, band)]
+                fits[(rec.label, band)] = _Fit(m, rec.count, Z_LADDER[rec.z_index], codec.decode(codes),
+                                               0.0, 0.0, round(rec.censored_low * rec.count),
+                                               round(rec.censored_high * rec.count))
+        new = self.store.add_capture(str(p.robot_id), p.seq, p.time, p.commanded, p.measured,
+                                     p.feature_space, p.bands, fits, scene=self.scene)
+        return Item(ItemKind.CAPTURE, p.robot_id, p.seq, new,
+                    f"capture at {p.measured[0]:.1f}° ({len(p.labels)} regions, {len(p.bands)} bands)", p)
+
+    def _unchanged(self, p: pk.UnchangedPacket) -> Item:
+        ref = next((c for c in self.store.captures(robot=str(p.robot_id)) if c.sequence == p.ref_seq), None)
+        if ref is None:
+            return Item(ItemKind.UNCHANGED, p.robot_id, p.seq, False,
+                        f"unchanged marker refers to capture {p.ref_seq}, which is not stored", p)
+        fits = {(m.label, m.band): m for m in self.store.models(ref.id)}
+        new = self.store.add_capture(str(p.robot_id), p.seq, p.time, p.commanded, p.measured,
+                                     ref.space, ref.band_names, fits, scene=ref.scene)
+        return Item(ItemKind.UNCHANGED, p.robot_id, p.seq, new,
+                    f"unchanged at {p.measured[0]:.1f}°: models of capture {p.ref_seq}", p)
+
+
+class HostSession:
+    """A Link bound to a port, feeding a Receiver; `step` does one read and one write."""
+
+    def __init__(self, link: Link, port: Port, receiver: Receiver,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.link, self.port, self.receiver, self.clock = link, port, receiver, clock
+        self.answers: dict[int, Item] = {}
+        self.last_delivery = clock()
+        self.up = False
+
+    def step(self) -> list[Item]:
+        data = self.port.read(4096)
+        now = self.clock()
+        events = self.link.receive(data, now) if data else []
+        items = []
+        for ev in [*events, *self.link.pop_events()]:
+            if isinstance(ev, Delivered):
+                item = self.receiver.handle(ev.payload)
+                self.last_delivery = now
+                if item.kind is ItemKind.ANSWER and item.seq is not None:
+                    self.answers[item.seq] = item
+                items.append(item)
+            elif isinstance(ev, (LinkUp, LinkDown)):
+                self.up = isinstance(ev, LinkUp)
+        out = self.link.poll(self.clock())
+        if out:
+            self.port.write(out)
+        return items
+
+    def command(self, name: pk.CommandName, args: dict | None = None) -> int:
+        """Queue one command; returns its id (the robot's ACK/NACK lands in `answers`)."""
+        cid = secrets.randbits(31)
+        body = pk.encode(pk.CommandPacket(cid, name, dict(args or {})))
+        self.link.send(body, self.clock())
+        return cid
+
+    def stats(self) -> LinkStats:
+        return self.link.stats()
