@@ -203,6 +203,10 @@ _CELL = np.arange(32) * 8 + 3.5
 _GRID = np.stack(np.meshgrid(_CELL, _CELL, _CELL, indexing="ij"), -1).reshape(-1, 3)
 _GRID_SQ = (_GRID * _GRID).sum(axis=1)
 _CELL_RADIUS = np.sqrt(3) * 3.5
+_SUB = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), -1).reshape(-1, 3)
+_V = np.arange(256, dtype=np.uint32)
+# Per-channel parts of one packed index: coarse cell (bits 16..30) | offset in the cell (bits 0..8).
+_PACK = tuple(((((_V >> 3) << s) << 16) | ((_V & 7) << t)).astype(np.uint32) for s, t in ((10, 6), (5, 3), (0, 0)))
 
 
 def _colour_lut(c: np.ndarray) -> np.ndarray:
@@ -223,48 +227,112 @@ def _colour_lut(c: np.ndarray) -> np.ndarray:
     return lut
 
 
-def assign(data: np.ndarray, centres: np.ndarray) -> np.ndarray:
-    """Nearest-centre label (uint8) for every pixel, in bounded chunks.
+class Labeller:
+    """Nearest-centre labelling with tables built once for a set of centres.
 
-    8-bit data with up to 3 bands goes through an exact lookup table; other data
-    through a float32 distance matmul.
+    Centres are a property of the scene, so the tables are built once and every frame
+    of the scene only looks labels up. 8-bit data with 3 bands uses two levels: a
+    32^3 table of colour cells, and an exact 8^3 sub-table only for the cells that
+    straddle a decision boundary (a few MB at most). 8-bit data with 1 or 2 bands
+    tabulates every value. Other data goes through a float32 distance matmul.
+    `names[i]` is the label written for centre i (default i), e.g. a palette id.
     """
+
+    def __init__(self, centres: np.ndarray, names: np.ndarray | None = None) -> None:
+        c = np.asarray(centres, dtype=np.float64)
+        if c.ndim != 2 or c.shape[1] < 1 or not 1 <= len(c) <= MAX_LABELS or not np.all(np.isfinite(c)):
+            raise ValueError(f"isodata: centres must be a finite (1..{MAX_LABELS}, bands) array, got {c.shape}")
+        self.centres = c
+        self.names = np.arange(len(c), dtype=np.uint8) if names is None else np.asarray(names, np.uint8)
+        if self.names.shape != (len(c),):
+            raise ValueError(f"isodata: {len(self.names)} names for {len(c)} centres")
+        self._m = _distance_matrix(c)
+        self._table: np.ndarray | None = None  # 1-2 bands: label per value
+        self._base: np.ndarray | None = None  # 3 bands: sub-table offset per coarse cell
+        self._fine: np.ndarray | None = None
+
+    @property
+    def bands(self) -> int:
+        return self.centres.shape[1]
+
+    def _general(self, x: np.ndarray, out: np.ndarray) -> None:
+        if len(self.centres) == 1:
+            out[:] = self.names[0]
+        else:
+            _nearest_f32(x, self._m, out)
+            out[:] = self.names[out]
+
+    def _build_small(self) -> np.ndarray:
+        b = self.bands
+        grid = np.stack(np.meshgrid(*[np.arange(256)] * b, indexing="ij"), -1).reshape(-1, b)
+        table = np.empty(len(grid), dtype=np.uint8)
+        self._general(grid, table)
+        return table
+
+    def _build_colour(self) -> None:
+        coarse = _colour_lut(self.centres) if len(self.centres) > 1 else np.zeros(32768, np.uint8)
+        unsure = np.flatnonzero(coarse == 255)
+        n = len(self.centres)
+        # Blocks 0..n-1 are constant (one per centre), then one exact block per unsure cell.
+        fine = np.empty((n + len(unsure)) * 512, dtype=np.uint8)
+        fine[:n * 512] = np.repeat(self.names, 512)
+        base = coarse.astype(np.uint32) * 512
+        base[unsure] = (n + np.arange(len(unsure), dtype=np.uint32)) * 512
+        cells = np.stack([unsure >> 10, (unsure >> 5) & 31, unsure & 31], 1) * 8
+        step = max(1, CHUNK_PIXELS // 512)
+        for a in range(0, len(unsure), step):
+            colours = (cells[a:a + step, None, :] + _SUB[None]).reshape(-1, 3)
+            lo = (n + a) * 512
+            self._general(colours, fine[lo:lo + len(colours)])
+        self._base, self._fine = base, fine
+
+    def assign(self, data: np.ndarray) -> np.ndarray:
+        """Label (uint8) of the nearest centre for every pixel of (..., bands) data, in bounded chunks."""
+        x = _pixels(data)
+        if x.shape[1] != self.bands:
+            raise ValueError(f"isodata: centres shape {self.centres.shape} does not fit data with {x.shape[1]} bands")
+        out = np.empty(len(x), dtype=np.uint8)
+        if x.dtype != np.uint8 or self.bands > 3 or len(self.centres) == 1:
+            self._general(x, out)
+        elif self.bands < 3:
+            if self._table is None:
+                self._table = self._build_small()
+            for a in range(0, len(x), CHUNK_PIXELS):
+                chunk = x[a:a + CHUNK_PIXELS]
+                key = chunk[:, 0].astype(np.intp)
+                if self.bands == 2:
+                    key = (key << 8) | chunk[:, 1]
+                np.take(self._table, key, out=out[a:a + CHUNK_PIXELS])
+        else:
+            if self._fine is None:
+                self._build_colour()
+            pr, pg, pb = _PACK
+            for a in range(0, len(x), CHUNK_PIXELS):
+                chunk = x[a:a + CHUNK_PIXELS]
+                key = np.take(pr, chunk[:, 0])
+                key += np.take(pg, chunk[:, 1])
+                key += np.take(pb, chunk[:, 2])
+                idx = np.take(self._base, key >> 16)
+                idx += key & 0xFFFF
+                np.take(self._fine, idx, out=out[a:a + CHUNK_PIXELS])
+        return out.reshape(np.shape(data)[:-1])
+
+
+def assign(data: np.ndarray, centres: np.ndarray) -> np.ndarray:
+    """Nearest-centre label (uint8) for every pixel, in bounded chunks (see `Labeller`)."""
     x = _pixels(data)
     c = np.asarray(centres, dtype=np.float64)
     if c.ndim != 2 or c.shape[1] != x.shape[1] or not 1 <= len(c) <= MAX_LABELS:
         raise ValueError(f"isodata: centres shape {c.shape} does not fit data with {x.shape[1]} bands")
-    m = _distance_matrix(c)
-    out = np.empty(len(x), dtype=np.uint8)
-    bands = x.shape[1]
-    if x.dtype != np.uint8 or bands > 3 or len(c) == 1:
-        if len(c) == 1:
-            out[:] = 0
-        else:
-            _nearest_f32(x, m, out)
-        return out.reshape(np.shape(data)[:-1])
-    if bands < 3:  # every possible value tabulated exactly
-        grid = np.stack(np.meshgrid(*[np.arange(256)] * bands, indexing="ij"), -1).reshape(-1, bands)
-        table = np.empty(len(grid), dtype=np.uint8)
-        _nearest_f32(grid, m, table)
-        for a in range(0, len(x), CHUNK_PIXELS):
-            chunk = x[a:a + CHUNK_PIXELS].astype(np.intp)
-            key = chunk[:, 0] if bands == 1 else (chunk[:, 0] << 8) | chunk[:, 1]
-            out[a:a + CHUNK_PIXELS] = table[key]
-        return out.reshape(np.shape(data)[:-1])
-    lut = _colour_lut(c)
-    for a in range(0, len(x), CHUNK_PIXELS):
-        chunk = x[a:a + CHUNK_PIXELS]
-        key = (chunk[:, 0] >> 3).astype(np.uint16) << 10  # 15-bit cell index fits uint16
-        key |= (chunk[:, 1] >> 3).astype(np.uint16) << 5
-        key |= chunk[:, 2] >> 3
-        lab = lut[key]
-        unsure = np.flatnonzero(lab == 255)
-        if len(unsure):
-            fix = np.empty(len(unsure), dtype=np.uint8)
-            _nearest_f32(chunk[unsure], m, fix)
-            lab[unsure] = fix
-        out[a:a + CHUNK_PIXELS] = lab
-    return out.reshape(np.shape(data)[:-1])
+    return Labeller(c).assign(data)
+
+
+def spread(sample: np.ndarray, centres: np.ndarray) -> float:
+    """Mean distance from each sample row to its nearest centre: how well centres fit data."""
+    x = np.asarray(sample, dtype=np.float64)
+    c = np.asarray(centres, dtype=np.float64)
+    d2 = (x * x).sum(axis=1)[:, None] + (c * c).sum(axis=1)[None, :] - 2.0 * (x @ c.T)
+    return float(np.sqrt(np.maximum(d2.min(axis=1), 0.0)).mean())
 
 
 def isodata(data: np.ndarray, params: IsodataParams = IsodataParams()) -> IsodataResult:

@@ -13,7 +13,7 @@ import numpy as np
 
 from onboard.features import FeatureFrame
 from onboard.imageio import read_png
-from onboard.isodata import IsodataParams, isodata
+from onboard.isodata import IsodataParams, Labeller, fit_centres, spread, subsample
 
 MAX_LABEL = 255
 
@@ -204,6 +204,10 @@ class SegmentConfig:
     palette_size: int = 16
     mask_side: int = 64  # longest side of the MASK packet's label map
     change_fraction: float = 0.02  # share of MASK cells that must differ to resend
+    # Centres are refitted when the mean distance to the nearest centre on a small sample
+    # grows past (1 + refit_drift) times its value when they were fitted; 0: every frame.
+    refit_drift: float = 0.25
+    drift_sample: int = 2000
 
     def __post_init__(self) -> None:
         if not isinstance(self.method, SegmentMethod):
@@ -212,10 +216,17 @@ class SegmentConfig:
             raise ValueError("segmentation: method 'mask' needs mask_path")
         if not 0 <= self.change_fraction <= 1:
             raise ValueError(f"segmentation: change_fraction must be in 0..1, got {self.change_fraction}")
+        if not (np.isfinite(self.refit_drift) and self.refit_drift >= 0) or self.drift_sample < 1:
+            raise ValueError("segmentation: refit_drift must be >= 0 and drift_sample >= 1")
 
 
 class Segmenter:
-    """Labels for each feature frame; `changed` says whether a new MASK is due."""
+    """Labels for each feature frame; `changed` says whether a new MASK is due.
+
+    ISODATA centres belong to the scene, not the frame: they are fitted once, matched to
+    the palette, and baked into a `Labeller`; later frames are only looked up. A cheap
+    drift check on a small sample refits when the centres no longer fit the view.
+    """
 
     def __init__(self, config: SegmentConfig, palette: Palette | None = None) -> None:
         self.config = config
@@ -224,6 +235,10 @@ class Segmenter:
         self._sent: np.ndarray | None = None
         self.palette: Palette | None = None
         self._mask: np.ndarray | None = None
+        self._labeller: Labeller | None = None
+        self._fit_spread = 0.0
+        self._frames = 0
+        self.refits = 0  # how many times centres were fitted (for STATUS and tests)
         if config.method is SegmentMethod.MASK:
             # read at start so a bad mask file stops the runtime before the first pose
             self._mask = load_mask(config.mask_path, config.n_labels, colours=config.mask_colours)
@@ -242,16 +257,35 @@ class Segmenter:
                                  f"{self._mask.shape[0]}, the frame is {shape[1]}x{shape[0]}")
             labels = self._mask
         else:
-            res = isodata(frame.data, self.config.isodata)
-            labels = self.palette.match(res.centres)[res.labels]
-        self._note(labels)
+            labels = self._labels_isodata(frame.data)
+        self.note(labels)
         return labels
+
+    def new_scene(self) -> None:
+        """Forget the scene's centres: the next frame fits them again."""
+        self._labeller = None
+
+    def _labels_isodata(self, data: np.ndarray) -> np.ndarray:
+        p = self.config.isodata
+        x = data.reshape(-1, data.shape[-1])
+        self._frames += 1
+        check = subsample(x, self.config.drift_sample, p.seed + self._frames)
+        lab = self._labeller
+        if (lab is None or lab.bands != x.shape[1] or self.config.refit_drift == 0
+                or spread(check, lab.centres) > self._fit_spread * (1 + self.config.refit_drift)):
+            centres = fit_centres(subsample(x, p.subsample, p.seed), p)
+            lab = self._labeller = Labeller(centres, self.palette.match(centres))
+            # One level of slack keeps a near-perfect fit from refitting on noise.
+            self._fit_spread = spread(check, centres) + 1.0
+            self.refits += 1
+        return lab.assign(data)
 
     def force_send(self) -> None:
         """The next map counts as changed (the host asked for the mask)."""
         self._sent = None
 
-    def _note(self, labels: np.ndarray) -> None:
+    def note(self, labels: np.ndarray) -> None:
+        """Record this frame's label map (from any source) and set `changed`."""
         small = downsample_labels(labels, self.config.mask_side)
         sent = self._sent
         self.changed = (
