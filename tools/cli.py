@@ -16,6 +16,7 @@ COMMANDS: tuple[str, ...] = (
     "fit",
     "mask",
     "synth",
+    "ingest",
     "compare",
     "pdfs",
     "resolve",
