@@ -1,4 +1,4 @@
-"""Shared helpers for the benchmark modules: timing, sections, the machine header."""
+"""Shared helpers for the benchmark modules: the run context, timing, sections, plots, the machine."""
 from __future__ import annotations
 
 import os
@@ -6,9 +6,22 @@ import platform
 import sys
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+@dataclass(frozen=True)
+class Context:
+    """How a benchmark runs: `quick` shrinks sizes and repeats to a smoke test; plots go to `out`."""
+    quick: bool = False
+    out: Path = HERE
+
+    def pick(self, full, quick):
+        return quick if self.quick else full
 
 
 @dataclass(frozen=True)
@@ -33,6 +46,38 @@ def best_time(fn: Callable[[], object], repeat: int = 7, warmup: int = 1) -> flo
     return best
 
 
+def paired_times(fns: dict[str, Callable[[], object]], repeat: int = 7) -> dict[str, float]:
+    """Best time of each function, the calls interleaved round by round so that a burst of
+    load from other processes hits every contender alike (a ratio from one run stays fair)."""
+    for fn in fns.values():
+        fn()
+    best = {k: float("inf") for k in fns}
+    for _ in range(repeat):
+        for k, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            best[k] = min(best[k], time.perf_counter() - t0)
+    return best
+
+
+def figure(ncols: int = 1, nrows: int = 1, size: tuple[float, float] = (6.4, 4.2), **kw):
+    """A matplotlib figure on the Agg backend (no display needed)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt.subplots(nrows, ncols, figsize=(size[0] * ncols, size[1] * nrows), squeeze=False, **kw)
+
+
+def save(fig, ctx: Context, name: str) -> str:
+    """Write the figure as `name` under ctx.out; the markdown image line for RESULTS.md."""
+    import matplotlib.pyplot as plt
+    ctx.out.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(ctx.out / name, dpi=90)
+    plt.close(fig)
+    return f"![{name}]({name})"
+
+
 def cpu_model() -> str:
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as f:
@@ -45,10 +90,14 @@ def cpu_model() -> str:
 
 
 def machine_lines() -> list[str]:
+    try:
+        load = "%.2f %.2f %.2f" % os.getloadavg()
+    except OSError:
+        load = "unknown"
     return [
         f"- platform: {platform.platform()}",
         f"- CPU: {cpu_model()}",
-        f"- cores: {os.cpu_count()}",
+        f"- cores: {os.cpu_count()} (load average at start: {load}; the machine is shared)",
         f"- python: {sys.version.split()[0]}",
         f"- numpy: {np.__version__}",
     ]
