@@ -125,6 +125,9 @@ _ARGS: dict[CommandName, dict[str, Any]] = {
         "azimuth": lambda v: want_float(v, "azimuth", -360.0, 360.0, allow_int=True),
     },
     CommandName.SWEEP: {
+        "start": lambda v: want_float(v, "sweep start", -90.0, 90.0, allow_int=True),
+        "stop": lambda v: want_float(v, "sweep stop", -90.0, 90.0, allow_int=True),
+        "step": lambda v: want_float(v, "sweep step", 0.1, 180.0, allow_int=True),
         "elevations": lambda v: _angle_list(v, "elevations", -90.0, 90.0),
         "azimuths": lambda v: _angle_list(v, "azimuths", -360.0, 360.0),
     },
@@ -135,6 +138,24 @@ _ARGS: dict[CommandName, dict[str, Any]] = {
     CommandName.REBOOT_SERVO: {"servo_id": lambda v: want_int(v, "servo id", 0, 252)},
     CommandName.SEND_MASK: {"seq": lambda v: want_int(v, "capture seq", 0, UINT32)},
 }
+# Key sets a command accepts (default: exactly the keys of _ARGS), plus optional keys.
+# SWEEP is (start, stop, step) as in the issue, or an explicit list of elevations.
+_FORMS: dict[CommandName, tuple[frozenset[str], ...]] = {
+    CommandName.SWEEP: (frozenset({"start", "stop", "step"}), frozenset({"elevations"})),
+}
+_OPTIONAL: dict[CommandName, frozenset[str]] = {CommandName.SWEEP: frozenset({"azimuths"})}
+
+
+def _check_args(name: CommandName, args: dict) -> dict[str, Any]:
+    spec = _ARGS[name]
+    optional = _OPTIONAL.get(name, frozenset())
+    forms = _FORMS.get(name, (frozenset(spec),))
+    given = set(args)
+    if not any(given - optional == form for form in forms):
+        want = " or ".join(str(sorted(f)) + (f" (+ optional {sorted(optional)})" if optional else "")
+                           for f in forms)
+        raise FrameError(f"{name.name} takes arguments {want}, got {sorted(map(str, args))}")
+    return {k: spec[k](args[k]) for k in spec if k in given}
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,10 +178,7 @@ class CommandPacket:
         name = want_enum(f[1], CommandName, "command")
         if not isinstance(f[2], dict):
             raise FrameError(f"{name.name} arguments must be a map")
-        spec = _ARGS[name]
-        if set(f[2]) != set(spec):
-            raise FrameError(f"{name.name} takes arguments {sorted(spec)}, got {sorted(map(str, f[2]))}")
-        return cls(cid, name, {k: check(f[2][k]) for k, check in spec.items()}, extras)
+        return cls(cid, name, _check_args(name, f[2]), extras)
 
 
 @dataclass(frozen=True, slots=True)
