@@ -1,0 +1,137 @@
+"""Correlated Gaussian fields for synthesis: the grain (autocorrelation) and the joint colour.
+
+A region's bands share one spatial autocorrelation (measured at `onboard.dependence.LAGS`
+along rows and columns). It is modelled as separable, r(dy, dx) = r_y(dy) r_x(dx); each 1-D
+sequence is the measured lags joined log-linearly (exact for exponential decay), continued
+past the last lag with the decay rate of the last two, and made a valid autocorrelation by
+alternating projections (non-negative spectrum <-> the measured values). White noise drawn
+straight in the frequency domain, shaped by the spectrum's square root and transformed
+once, gives a unit-variance stationary field; B such fields mixed by the Cholesky factor
+of the band copula give z with both the grain and the cross-band correlation. Each band
+then goes through its Johnson quantile function, so every marginal stays exact.
+"""
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+import scipy.fft as sfft
+
+from onboard.dependence import LAGS, Dependence
+
+_PROJECTIONS = 12
+
+
+def nearest_correlation(m: np.ndarray, floor: float = 1e-6) -> np.ndarray:
+    """The nearest valid correlation matrix: symmetric, unit diagonal, eigenvalues >= floor."""
+    m = np.asarray(m, dtype=np.float64)
+    if m.ndim != 2 or m.shape[0] != m.shape[1] or not np.all(np.isfinite(m)):
+        raise ValueError(f"need a finite square matrix, got shape {m.shape}")
+    a = 0.5 * (m + m.T)
+    np.fill_diagonal(a, 1.0)
+    for _ in range(50):
+        w, v = np.linalg.eigh(a)
+        if w.min() >= floor * 0.5:
+            break
+        a = (v * np.maximum(w, floor)) @ v.T
+        d = np.sqrt(np.diag(a))
+        a = a / np.outer(d, d)
+        np.fill_diagonal(a, 1.0)
+    return np.clip(a, -1.0, 1.0)
+
+
+def cholesky(dep: Dependence) -> np.ndarray:
+    """Lower factor L with L L^T = the copula (projected to a valid one when quantization broke it)."""
+    return np.linalg.cholesky(nearest_correlation(dep.matrix()))
+
+
+def blend(lo: Dependence, hi: Dependence, weight: float) -> Dependence:
+    """Angle blend: a convex mix of correlation matrices is one, so linear mixing stays valid."""
+    if not 0.0 <= weight <= 1.0:
+        raise ValueError(f"blend weight must lie in [0, 1], got {weight}")
+    if lo.n_bands != hi.n_bands:
+        raise ValueError(f"cannot blend {lo.n_bands}-band and {hi.n_bands}-band dependence")
+    mix = lambda a, b: tuple(float(np.clip((1 - weight) * x + weight * y, -1, 1)) for x, y in zip(a, b))  # noqa: E731
+    return Dependence(mix(lo.corr, hi.corr), mix(lo.dx, hi.dx), mix(lo.dy, hi.dy))
+
+
+def _target(lags: tuple[float, ...], n: int) -> np.ndarray:
+    """Autocorrelation at 0..n-1 on a ring of n: measured lags joined log-linearly, decaying tail."""
+    known_h = np.array((0, *LAGS), dtype=np.float64)
+    known_r = np.array((1.0, *lags), dtype=np.float64).clip(-0.99, 0.999)
+    h = np.minimum(np.arange(n), n - np.arange(n)).astype(np.float64)  # ring distance
+    r = np.interp(h, known_h, known_r)
+    for i in range(len(known_h) - 1):
+        a, b = known_r[i], known_r[i + 1]
+        if a > 0.02 and b > 0.02:  # both clearly positive: geometric between them
+            seg = (h > known_h[i]) & (h < known_h[i + 1])
+            t = (h[seg] - known_h[i]) / (known_h[i + 1] - known_h[i])
+            r[seg] = a * (b / a) ** t
+    last, prev, step = known_r[-1], known_r[-2], known_h[-1] - known_h[-2]
+    q = (last / prev) ** (1.0 / step) if 0.0 < last < prev else 0.5
+    tail = h > known_h[-1]
+    r[tail] = last * np.minimum(q, 0.95) ** (h[tail] - known_h[-1])
+    return r
+
+
+@lru_cache(maxsize=64)
+def spectrum(lags: tuple[float, ...], n: int) -> np.ndarray:
+    """Non-negative power spectrum (mean 1) whose autocorrelation best matches `lags` on a ring of n."""
+    want = _target(lags, n)
+    fixed = np.zeros(n, dtype=bool)
+    fixed[:max(LAGS) + 1] = True
+    fixed[n - max(LAGS):] = True
+    fixed &= np.minimum(np.arange(n), n - np.arange(n)) < n // 2 + 1
+    r = want.copy()
+    for _ in range(_PROJECTIONS):
+        s = np.maximum(np.fft.rfft(r).real, 0.0)
+        r = np.fft.irfft(s, n)
+        r[fixed] = want[fixed]
+    s = np.maximum(np.fft.rfft(r).real, 0.0)
+    total = (2.0 * s.sum() - s[0] - (s[-1] if n % 2 == 0 else 0.0)) / n  # = r(0) of the result
+    return s / total if total > 0 else np.ones_like(s)
+
+
+def _fast(n: int) -> int:
+    return sfft.next_fast_len(max(n, 2 * max(LAGS) + 2), real=True)
+
+
+def gaussian_fields(shape: tuple[int, int], dep: Dependence, rng: np.random.Generator) -> np.ndarray:
+    """B x H x W float32 standard normal fields with the region's grain and band copula."""
+    h, w = shape
+    ny, nx = _fast(h), _fast(w)
+    k = np.arange(ny)
+    full_y = np.sqrt(spectrum(dep.dy, ny))[np.minimum(k, ny - k)]  # all ny frequencies of the y axis
+    amp = (full_y[:, None] * np.sqrt(spectrum(dep.dx, nx))[None, :]).astype(np.float32)
+    # Columns 0 and Nyquist keep only their real part after the transform: twice the power.
+    amp[:, 0] *= math.sqrt(2.0)
+    if nx % 2 == 0:
+        amp[:, -1] *= math.sqrt(2.0)
+    amp *= np.float32(math.sqrt(ny * nx / 2.0))
+    n_bands = dep.n_bands
+    out = np.empty((n_bands, h, w), dtype=np.float32)
+    for b in range(n_bands):
+        white = rng.standard_normal((ny, nx // 2 + 1, 2), dtype=np.float32).view(np.complex64)[..., 0]
+        white *= amp
+        out[b] = sfft.irfft2(white, s=(ny, nx), workers=-1)[:h, :w]
+    if n_bands > 1:
+        mixed = np.tensordot(cholesky(dep).astype(np.float32), out.reshape(n_bands, -1), axes=1)
+        out = mixed.reshape(n_bands, h, w).astype(np.float32, copy=False)
+    return out
+
+
+def empirical_autocorrelation(values: np.ndarray, mask: np.ndarray, lag: int, axis: int) -> float:
+    """Pearson correlation of values at pixel pairs `lag` apart along `axis`, both inside `mask`."""
+    v = np.asarray(values, dtype=np.float64)
+    if axis == 1:
+        a, b, ma, mb = v[:, :-lag], v[:, lag:], mask[:, :-lag], mask[:, lag:]
+    elif axis == 0:
+        a, b, ma, mb = v[:-lag], v[lag:], mask[:-lag], mask[lag:]
+    else:
+        raise ValueError(f"axis must be 0 or 1, got {axis}")
+    both = ma & mb
+    x, y = a[both], b[both]
+    if x.size < 2 or x.std() == 0 or y.std() == 0:
+        return 0.0
+    return float(np.corrcoef(x, y)[0, 1])
