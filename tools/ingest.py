@@ -1,0 +1,192 @@
+"""Building a model database from an image dataset, in parallel, resumable.
+
+Every image is fitted with the robot's own FrameFitter per (label, band) by a worker: a
+local process pool by default, or a Dask distributed cluster. Results come back to one
+writer in file-name order, so the database is the same whatever the executor and however
+many workers ran. Each image is one capture of the "robot" `dataset:<absolute folder>`,
+keyed by its file name (`source`); images already stored are skipped, so an interrupted
+run continues where it stopped.
+"""
+from __future__ import annotations
+
+import collections
+import os
+from concurrent.futures import Executor, ProcessPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+
+import numpy as np
+
+from onboard.fit import FitResult, FrameFitter
+from tools.datasets import Angles, DatasetImage, Layout, scan
+from tools.images import ImageError, feature_bands, read_image, read_mask
+from tools.store import Store
+
+# Feature spaces an ingest may store: pca needs a per-image basis the database does not hold.
+INGEST_SPACES = ("rgb", "hsv", "gray")
+NADIR = 90.0
+
+
+class IngestError(ValueError):
+    """A dataset, mask or executor problem; the message names it."""
+
+
+@dataclass(frozen=True, slots=True)
+class Job:
+    """One image to fit: everything a worker needs, picklable."""
+
+    name: str
+    path: str
+    mask: str | None
+    space: str
+
+
+@dataclass(frozen=True, slots=True)
+class Fitted:
+    name: str
+    band_names: tuple[str, ...]
+    results: dict[tuple[int, int], FitResult]
+    mask: np.ndarray | None  # the labels used, when they came from a per-image mask
+
+
+@dataclass(frozen=True, slots=True)
+class IngestReport:
+    robot: str
+    total: int
+    skipped: int
+    stored: int
+
+
+def dataset_robot(root: str | Path) -> str:
+    """The robot id under which a dataset's captures are stored."""
+    return f"dataset:{Path(root).resolve()}"
+
+
+def fit_job(job: Job) -> Fitted:
+    """Fit one image (runs in a worker). Raises IngestError naming the file."""
+    try:
+        image = read_image(job.path)
+        labels = read_mask(job.mask, image.shape[:2]) if job.mask else np.zeros(image.shape[:2], np.uint8)
+        feats, _ = feature_bands(image, job.space)
+    except (ImageError, ValueError) as exc:
+        raise IngestError(str(exc)) from None
+    fitter = FrameFitter(int(labels.max()) + 1, feats.data.shape[2], bins=feats.levels)
+    fitter.add(feats.data, labels)
+    return Fitted(job.name, tuple(feats.band_names), fitter.fit(), labels if job.mask else None)
+
+
+def _mask_for(image: DatasetImage, mask: Path | None) -> str | None:
+    if mask is None:
+        return None
+    if mask.is_dir():  # one mask per image, same stem
+        per_image = mask / (Path(image.name).stem + ".png")
+        if not per_image.is_file():
+            raise IngestError(f"mask {per_image}: no such file (masks folder has none for {image.name})")
+        return str(per_image)
+    return str(mask)
+
+
+def _ordered(executor: Executor, fn: Callable[[Job], Fitted], jobs: list[Job],
+             window: int) -> Iterator[Fitted]:
+    """Results in job order with at most `window` jobs in flight (bounded memory)."""
+    pending: collections.deque = collections.deque()
+    it = iter(jobs)
+    for job in it:
+        pending.append(executor.submit(fn, job))
+        if len(pending) >= window:
+            break
+    while pending:
+        result = pending.popleft().result()
+        nxt = next(it, None)
+        if nxt is not None:
+            pending.append(executor.submit(fn, nxt))
+        yield result
+
+
+def _executor(workers: int, scheduler: str | None):
+    """(executor, closer, worker count) for a process pool or a Dask cluster."""
+    if scheduler is None:
+        pool = ProcessPoolExecutor(max_workers=workers)
+        return pool, lambda: pool.shutdown(cancel_futures=True), workers
+    from distributed import Client
+
+    try:
+        client = Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise IngestError(f"scheduler {scheduler}: cannot connect ({exc})") from None
+    n = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info().get("workers", {}).values()))
+    return client.get_executor(pure=False), client.close, n
+
+
+def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str | Path | None = None,
+           space: str = "rgb", workers: int | None = None, scheduler: str | None = None,
+           table: str | Path | None = None, default_elevation: float = NADIR,
+           on_total: Callable[[int], None] | None = None,
+           on_image: Callable[[str], None] | None = None) -> IngestReport:
+    """Fit and store every not-yet-stored image of the dataset at `root`.
+
+    `workers=0` fits in this process; otherwise a process pool of `workers` (default: the
+    CPU count), or the Dask cluster at `scheduler` (e.g. tcp://host:8786).
+    """
+    if space not in INGEST_SPACES:
+        raise IngestError(f"feature space {space!r}: ingest stores one of {', '.join(INGEST_SPACES)}")
+    if not 0.0 <= default_elevation <= 90.0:
+        raise IngestError(f"default elevation {default_elevation:g} outside 0..90 degrees")
+    images = scan(root, layout, table)
+    mask_path = None if mask is None else Path(mask)
+    if mask_path is not None and not mask_path.exists():
+        raise IngestError(f"mask {mask_path}: no such file or folder")
+    robot = dataset_robot(root)
+    with Store.open(db) as store:
+        done = store.sources(robot)
+        todo = [im for im in images if im.name not in done]
+        jobs = [Job(im.name, str(im.path), _mask_for(im, mask_path), space) for im in todo]
+        if mask_path is not None and mask_path.is_file() and jobs:
+            try:
+                store.add_mask(robot, read_mask(mask_path), robot)
+            except ImageError as exc:
+                raise IngestError(str(exc)) from None
+        stored = 0
+        if jobs:
+            by_name = {im.name: im for im in todo}
+            results, close = _run(jobs, workers, scheduler)  # connects before any work is shown
+            try:
+                if on_total:
+                    on_total(len(jobs))
+                for fitted in results:
+                    _store(store, robot, by_name[fitted.name], fitted, space, Path(root).name,
+                           default_elevation)
+                    stored += 1
+                    if on_image:
+                        on_image(fitted.name)
+            finally:
+                close()
+        elif on_total:
+            on_total(0)
+    return IngestReport(robot, len(images), len(images) - len(todo), stored)
+
+
+def _run(jobs: list[Job], workers: int | None,
+         scheduler: str | None) -> tuple[Iterator[Fitted], Callable[[], object]]:
+    """(results in job order, closer of the executor)."""
+    if scheduler is None and workers == 0:
+        return map(fit_job, jobs), lambda: None
+    n = workers or os.cpu_count() or 1
+    if n < 0:
+        raise IngestError(f"workers must be >= 0, got {n}")
+    executor, close, n = _executor(n, scheduler)
+    return _ordered(executor, fit_job, jobs, window=4 * n), close
+
+
+def _store(store: Store, robot: str, image: DatasetImage, fitted: Fitted, space: str,
+           scene: str, default_elevation: float) -> None:
+    a = image.angles or Angles(default_elevation, 0.0)
+    seq = store.next_sequence(robot)
+    # the file's modification time, so the database does not depend on when it was built
+    mtime = image.path.stat().st_mtime
+    light = (a.light_elevation, a.light_azimuth) if a.has_light else None
+    store.add_capture(robot, seq, mtime, None, (a.elevation, a.azimuth), space, fitted.band_names,
+                      fitted.results, scene=scene, illumination=light, source=image.name)
+    if fitted.mask is not None:
+        store.add_mask(f"{robot}/{seq}", fitted.mask, robot)
