@@ -7,6 +7,7 @@ with exit status 2. Relative paths are resolved against the config file's direct
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -19,7 +20,7 @@ class ConfigError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class HalConfig:
-    body: str = "fake"  # fake | emulated | real
+    body: str = ""  # fake | emulated | real; empty: BTF_HAL decides, or the runtime refuses
     scene: str = "black"
     size: tuple[int, int] = (120, 160)  # camera frame (height, width)
     fault_rate: float = 0.0
@@ -61,6 +62,7 @@ class SweepConfig:
 class FeatureConfig:
     space: str = "rgb"  # rgb | hsv | gray | pca | raw
     bands: tuple[str, ...] = ()  # empty: every band of the space
+    bins_16bit: int = 4096  # histogram bins over 0..65535 for 16-bit sensors (memory: labels x bands x bins)
 
 
 @dataclass(frozen=True, slots=True)
@@ -75,6 +77,7 @@ class SegmentConfig:
     max_merges: int = 2
     iterations: int = 10
     subsample: int = 20_000
+    refit_drift: float = 0.25  # refit ISODATA centres when their fit degrades by this fraction; 0: every frame
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,15 +119,15 @@ _TYPES: dict[type, dict[str, Any]] = {
     SweepConfig: {"start": float, "stop": float, "step": float, "azimuths": (float, None),
                   "autostart": bool, "settle_timeout_s": float, "retries": int,
                   "pose_tolerance_deg": float},
-    FeatureConfig: {"space": str, "bands": (str, None)},
+    FeatureConfig: {"space": str, "bands": (str, None), "bins_16bit": int},
     SegmentConfig: {"method": str, "mask": Path, "n_labels": int, "k": int, "min_samples": int,
                     "split_std": float, "merge_distance": float, "max_merges": int,
-                    "iterations": int, "subsample": int},
+                    "iterations": int, "subsample": int, "refit_drift": float},
     SkipConfig: {"min_pixels": int, "percentile_precision": float, "unchanged_tolerance": float,
                  "skip_measured_pose": bool},
 }
 CHOICES = {
-    "hal.body": ("fake", "emulated", "real"),
+    "hal.body": ("", "fake", "emulated", "real"),
     "hal.scene": ("black", "white", "mixed", "field"),
     "features.space": ("rgb", "hsv", "gray", "pca", "raw"),
     "segment.method": ("isodata", "mask", "scene"),
@@ -234,7 +237,11 @@ def check(cfg: Config) -> None:
             raise ConfigError("segment.method = 'mask' needs segment.mask (a PNG or .npy label file)")
         if not sg.mask.is_file():
             raise ConfigError(f"segment.mask: no such file {sg.mask}")
-    if sg.method == "scene" and cfg.hal.body != "fake":
+    if not 2 <= cfg.features.bins_16bit <= 65536:
+        raise ConfigError(f"features.bins_16bit must lie in [2, 65536], got {cfg.features.bins_16bit}")
+    if sg.refit_drift < 0:
+        raise ConfigError(f"segment.refit_drift must be >= 0, got {sg.refit_drift}")
+    if sg.method == "scene" and (cfg.hal.body or os.environ.get("BTF_HAL", "")) != "fake":
         raise ConfigError("segment.method = 'scene' needs hal.body = 'fake' (ground truth)")
     if cfg.outbox_quota_bytes < 4096:
         raise ConfigError("outbox_quota_bytes must be at least 4096")

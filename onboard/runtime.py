@@ -13,6 +13,8 @@ Before the base was ever heard, an autonomous sweep runs and its packets wait in
 from __future__ import annotations
 
 import enum
+import json
+import os
 import time
 from collections import deque
 from dataclasses import dataclass, replace
@@ -436,77 +438,79 @@ def _flat_status(st: dict) -> dict:
 
 
 class Segmentation:
-    """Labels per frame for `segment.method`; `changed` says the host needs a new MASK."""
+    """Labels per frame for `segment.method`, through `onboard.segment`.
+
+    isodata: a `Segmenter` with centres fitted once per scene and a palette of clutter
+    types persisted in `state_dir/palette.json`, so labels mean the same across views and
+    restarts. mask: the label file, read at start. scene: the fake camera's own mask of
+    the frame it rendered (ground truth). `changed` comes from the Segmenter in every case.
+    """
 
     def __init__(self, cfg: Config, hal: Any = None) -> None:
+        from onboard import segment as sg_mod
+        from onboard.isodata import IsodataParams
+
         self.cfg = cfg
         self.hal = hal
-        self._mask = None
-        self._last = None
-        self._palette = None
         sg = cfg.segment
-        if sg.method == "mask":
-            self._mask = _load_mask(sg.mask, sg.n_labels)
-        elif sg.method == "isodata":
-            from onboard.isodata import IsodataParams
+        self.palette_path = cfg.state_dir / "palette.json"
+        try:
+            params = IsodataParams(k=sg.k, min_samples=sg.min_samples, split_std=sg.split_std,
+                                   merge_distance=sg.merge_distance, max_merges=sg.max_merges,
+                                   iterations=sg.iterations, subsample=sg.subsample, seed=cfg.hal.seed)
+            method = sg_mod.SegmentMethod.MASK if sg.method == "mask" else sg_mod.SegmentMethod.ISODATA
+            scfg = sg_mod.SegmentConfig(method, mask_path=None if sg.mask is None else str(sg.mask),
+                                        n_labels=sg.n_labels, isodata=params,
+                                        palette_size=min(sg.n_labels, sg_mod.MAX_LABEL + 1),
+                                        refit_drift=sg.refit_drift)
+            self.segmenter = sg_mod.Segmenter.from_config(scfg, self._read_palette())
+        except ValueError as exc:
+            raise ConfigError(f"segment: {exc}") from None
+        self._saved = self._record()
 
-            self._params = IsodataParams(k=sg.k, min_samples=sg.min_samples, split_std=sg.split_std,
-                                         merge_distance=sg.merge_distance, max_merges=sg.max_merges,
-                                         iterations=sg.iterations, subsample=sg.subsample,
-                                         seed=cfg.hal.seed)
+    def _read_palette(self) -> dict | None:
+        if self.cfg.segment.method != "isodata" or not self.palette_path.exists():
+            return None
+        try:
+            rec = json.loads(self.palette_path.read_text())
+        except (OSError, ValueError) as exc:
+            raise ValueError(f"palette file {self.palette_path} is unreadable ({exc}); "
+                             "remove it to start a new palette") from None
+        if not isinstance(rec, dict):
+            raise ValueError(f"palette file {self.palette_path} does not hold a palette record")
+        return rec
+
+    def _record(self) -> dict | None:
+        pal = self.segmenter.palette
+        return None if pal is None else pal.to_record()
+
+    def _save_palette(self) -> None:
+        rec = self._record()
+        if rec is None or rec == self._saved:
+            return
+        tmp = self.palette_path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(rec))
+        os.replace(tmp, self.palette_path)
+        self._saved = rec
+
+    def force_send(self) -> None:
+        """The next capture sends its label map whether or not it changed."""
+        self.segmenter.force_send()
 
     def __call__(self, feats: Any, frame: Any, measured: ViewAngles) -> tuple[Any, bool]:
-        import numpy as np
-
         method = self.cfg.segment.method
-        shape = frame.shape[:2]
-        if method == "mask":
-            if self._mask.shape != shape:
-                raise PoseSkipped(f"mask shape {self._mask.shape} does not match the frame {shape}")
-            labels = self._mask
-        elif method == "scene":
-            from hal.scene import render
-
-            view = measured
-            history = getattr(getattr(self.hal, "camera", None), "history", None)
-            if history and history[-1].call == "capture" and history[-1].args:
-                view = history[-1].args[0]  # the fake camera's true view of this frame
-            view = ViewAngles(min(90.0, max(5.0, view.elevation)), view.azimuth)
-            labels = render(self.cfg.hal.scene, view, size=shape, seed=self.cfg.hal.seed).mask
+        if method == "scene":
+            labels = getattr(getattr(self.hal, "camera", None), "last_mask", None)
+            if labels is None or labels.shape != feats.data.shape[:2]:
+                raise PoseSkipped("segment: the camera has no ground-truth mask for this frame")
+            self.segmenter.note(labels)
         else:
-            from onboard.isodata import isodata
-
-            labels = self._match_palette(isodata(feats.data, self._params))
-        changed = self._last is None or self._last.shape != labels.shape or \
-            float(np.mean(self._last != labels)) > 0.05
-        if changed:
-            self._last = labels.copy()
-        return labels, changed
-
-    def _match_palette(self, result: Any) -> Any:
-        try:
-            from onboard.segment import Palette  # keeps labels consistent across views
-        except ImportError:
-            return result.labels
-        if self._palette is None:
-            self._palette = Palette()
-        return self._palette.relabel(result.centres, result.labels)
-
-
-def _load_mask(path: Any, n_labels: int) -> Any:
-    try:
-        from onboard.segment import load_mask
-
-        return load_mask(path, n_labels=n_labels)
-    except ImportError:
-        import numpy as np
-
-        labels = np.load(path)
-        if labels.max(initial=0) >= n_labels:
-            raise ConfigError(f"segment.mask {path}: labels above n_labels = {n_labels}")
-        return labels.astype(np.uint8)
-    except ValueError as exc:
-        raise ConfigError(f"segment.mask {path}: {exc}") from None
+            try:
+                labels = self.segmenter.labels_for(feats)
+            except ValueError as exc:
+                raise PoseSkipped(f"segment: {exc}") from None
+            self._save_palette()
+        return labels, self.segmenter.changed
 
 
 # -- binding to radio.link over a byte port ----------------------------------------------

@@ -13,7 +13,11 @@ FORMATS = {"rgb": ("BGR3", "RGB3"), "multispectral": ("MSP6",)}
 
 
 class FakeCamera:
-    """`capture` renders `scene` from `true_view()`; bands "rgb" or "multispectral" as in hal.scene."""
+    """`capture` renders `scene` from `true_view()`; bands "rgb" or "multispectral" as in hal.scene.
+
+    `last_mask` is the scene's true label map of the last frame returned (None before the
+    first), so ground-truth segmentation never renders the view a second time.
+    """
 
     def __init__(self, scene: str, true_view: Callable[[], ViewAngles], seed: int = 0,
                  size: tuple[int, int] = (480, 640), bands: str = "rgb", faults: Faults | None = None,
@@ -28,6 +32,7 @@ class FakeCamera:
         self.retries = retries
         self.history: list[Call] = []
         self.is_open = False
+        self.last_mask: np.ndarray | None = None
 
     def open(self, width: int, height: int, pixel_format: str = "BGR3") -> None:
         if pixel_format not in FORMATS[self.bands]:
@@ -47,9 +52,10 @@ class FakeCamera:
                 self.history.append(Call("capture", (), "drop"))
                 continue
             view = self.true_view()
-            image = render(self.scene, view, size=self.size, seed=self.seed, bands=self.bands).image
+            rendered = render(self.scene, view, size=self.size, seed=self.seed, bands=self.bands)
             self.history.append(Call("capture", (view,), "ok"))
-            return image
+            self.last_mask = rendered.mask
+            return rendered.image
         raise HalError(f"fake camera: no frame after {self.retries + 1} tries (frames dropped)")
 
     def close(self) -> None:
