@@ -110,14 +110,19 @@ def gaussian_fields(shape: tuple[int, int], dep: Dependence, rng: np.random.Gene
         amp[:, -1] *= math.sqrt(2.0)
     amp *= np.float32(math.sqrt(ny * nx / 2.0))
     n_bands = dep.n_bands
-    out = np.empty((n_bands, h, w), dtype=np.float32)
-    for b in range(n_bands):
+    fields = []
+    for _ in range(n_bands):
         white = rng.standard_normal((ny, nx // 2 + 1, 2), dtype=np.float32).view(np.complex64)[..., 0]
         white *= amp
-        out[b] = sfft.irfft2(white, s=(ny, nx), workers=-1)[:h, :w]
+        fields.append(sfft.irfft2(white, s=(ny, nx), workers=-1)[:h, :w])
+    out = np.stack(fields)
     if n_bands > 1:
-        mixed = np.tensordot(cholesky(dep).astype(np.float32), out.reshape(n_bands, -1), axes=1)
-        out = mixed.reshape(n_bands, h, w).astype(np.float32, copy=False)
+        low = cholesky(dep).astype(np.float32)
+        # Band b mixes fields 0..b (lower factor); updating from the last band reuses the originals.
+        for b in range(n_bands - 1, -1, -1):
+            out[b] *= low[b, b]
+            for j in range(b):
+                out[b] += low[b, j] * out[j]
     return out
 
 
@@ -135,3 +140,21 @@ def empirical_autocorrelation(values: np.ndarray, mask: np.ndarray, lag: int, ax
     if x.size < 2 or x.std() == 0 or y.std() == 0:
         return 0.0
     return float(np.corrcoef(x, y)[0, 1])
+
+
+def region_z(mask: np.ndarray, label: int, dep: Dependence,
+             rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """(selector of the region's pixels, B x n correlated z), drawn over the region's bounding box only."""
+    rows = np.flatnonzero(np.any(mask == label, axis=1))
+    if not rows.size:
+        return np.zeros(mask.shape, dtype=bool), np.zeros((dep.n_bands, 0), dtype=np.float32)
+    r0, r1 = rows[0], rows[-1] + 1
+    cols = np.flatnonzero(np.any(mask[r0:r1] == label, axis=0))
+    c0, c1 = cols[0], cols[-1] + 1
+    inner = mask[r0:r1, c0:c1] == label
+    fields = gaussian_fields(inner.shape, dep, rng)
+    sel = np.zeros(mask.shape, dtype=bool)
+    sel[r0:r1, c0:c1] = inner
+    if inner.all():  # the region fills its box: no gather needed
+        return sel, fields.reshape(dep.n_bands, -1)
+    return sel, fields[:, inner]

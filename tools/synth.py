@@ -13,9 +13,12 @@ from typing import Mapping, Protocol
 
 import numpy as np
 
+from onboard.dependence import Dependence
 from onboard.johnson import Johnson
+from tools.field import blend, region_z
 
 Models = Mapping[tuple[int, int], Johnson]
+Dependences = Mapping[int, Dependence]  # per label; labels without one are drawn independently
 
 
 class MissingModels(ValueError):
@@ -53,11 +56,27 @@ def _output(mask: np.ndarray, n_bands: int, levels: int) -> np.ndarray:
     return np.zeros(mask.shape + (n_bands,), dtype=np.uint8 if levels <= 256 else np.uint16)
 
 
-def synthesize(mask: np.ndarray, models: Models, rng: np.random.Generator, levels: int = 256) -> np.ndarray:
-    """An H x W x B image: every region's pixels drawn independently from its models."""
+def _correlated(dep: Dependence | None, n_bands: int) -> bool:
+    return dep is not None and dep.n_bands == n_bands
+
+
+def _pixels(model: Johnson, z: np.ndarray, levels: int) -> np.ndarray:
+    return np.clip(np.rint(model.x_of_z(z)), 0, levels - 1)
+
+
+def synthesize(mask: np.ndarray, models: Models, rng: np.random.Generator, levels: int = 256,
+               dependence: Dependences | None = None) -> np.ndarray:
+    """An H x W x B image: each region's pixels drawn from its models, with the region's grain
+    and band copula (a correlated field, `tools.field`) when `dependence` has it, else independently."""
     n_bands = _bands(models)
     out = _output(mask, n_bands, levels)
     for label in _check(mask, models, n_bands):
+        dep = (dependence or {}).get(label)
+        if _correlated(dep, n_bands):
+            sel, z = region_z(mask, label, dep, rng)
+            for b in range(n_bands):
+                out[sel, b] = _pixels(models[(label, b)], z[b], levels)
+            continue
         sel = mask == label
         n = int(sel.sum())
         for b in range(n_bands):
@@ -66,8 +85,11 @@ def synthesize(mask: np.ndarray, models: Models, rng: np.random.Generator, level
 
 
 def interpolate(lo: Models, hi: Models, weight: float, mask: np.ndarray,
-                rng: np.random.Generator, levels: int = 256) -> np.ndarray:
-    """Quantile-space blend: x = (1 - w) x_lo(z) + w x_hi(z), rounded and clipped to the levels."""
+                rng: np.random.Generator, levels: int = 256,
+                dependence: tuple[Dependences | None, Dependences | None] = (None, None)) -> np.ndarray:
+    """Quantile-space blend: x = (1 - w) x_lo(z) + w x_hi(z), rounded and clipped to the levels.
+    z is a correlated field where both angles (or the only one that has it) carry dependence,
+    blended linearly across the angles (a mix of correlation matrices stays one)."""
     if not 0.0 <= weight <= 1.0:
         raise ValueError(f"interpolation weight must lie in [0, 1], got {weight}")
     n_bands = max(_bands(lo), _bands(hi))
@@ -75,10 +97,17 @@ def interpolate(lo: Models, hi: Models, weight: float, mask: np.ndarray,
     labels = _check(mask, hi, n_bands, " at the upper neighbouring angle")
     out = _output(mask, n_bands, levels)
     for label in labels:
-        sel = mask == label
+        d_lo, d_hi = ((d or {}).get(label) for d in dependence)
+        d_lo, d_hi = (d if _correlated(d, n_bands) else None for d in (d_lo, d_hi))
+        dep = blend(d_lo, d_hi, weight) if d_lo and d_hi else (d_lo or d_hi)
+        if dep is not None:
+            sel, zs = region_z(mask, label, dep, rng)
+        else:
+            sel = mask == label
+            zs = None
         n = int(sel.sum())
         for b in range(n_bands):
-            z = rng.standard_normal(n)
+            z = rng.standard_normal(n) if zs is None else zs[b]
             x = (1.0 - weight) * lo[(label, b)].x_of_z(z) + weight * hi[(label, b)].x_of_z(z)
             out[sel, b] = np.clip(np.rint(x), 0, levels - 1)
     return out
@@ -106,13 +135,20 @@ def neighbours(angles: list[float], angle: float) -> tuple[float, float, float]:
 
 
 def synthesize_at(source: _ModelSource | Mapping[float, Models], mask: np.ndarray, angle: float,
-                  rng: np.random.Generator, levels: int = 256) -> np.ndarray:
-    """An image at `angle` from models by angle (a mapping, or a Store's models_by_angle())."""
+                  rng: np.random.Generator, levels: int = 256,
+                  dependence: Mapping[float, Dependences] | None = None,
+                  independent: bool = False) -> np.ndarray:
+    """An image at `angle` from models by angle (a mapping, or a Store's models_by_angle()).
+    Dependence by angle comes from `dependence`, else from the source's dependence_by_angle()
+    when it has one; `independent` ignores it and draws every pixel on its own."""
     by_angle = source.models_by_angle() if hasattr(source, "models_by_angle") else source
+    if dependence is None and hasattr(source, "dependence_by_angle"):
+        dependence = source.dependence_by_angle()
+    deps = {} if independent or dependence is None else dependence
     lo, hi, w = neighbours(list(by_angle), float(angle))
     if lo == hi:
-        return synthesize(mask, by_angle[lo], rng, levels)
-    return interpolate(by_angle[lo], by_angle[hi], w, mask, rng, levels)
+        return synthesize(mask, by_angle[lo], rng, levels, deps.get(lo))
+    return interpolate(by_angle[lo], by_angle[hi], w, mask, rng, levels, (deps.get(lo), deps.get(hi)))
 
 
 # --- the MODELS.json document that `btf-host fit --json` prints ----------------------------
