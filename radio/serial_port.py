@@ -1,8 +1,11 @@
 """Binds a Link to a port: any pyserial URL (a device, a pty path, `loop://`) or a raw fd."""
 from __future__ import annotations
 
+import fcntl
 import os
 import select
+import sys
+import termios
 import time
 from typing import Callable, Protocol
 
@@ -30,7 +33,8 @@ class FdPort:
 
     @property
     def in_waiting(self) -> int:
-        return 1 if select.select([self.fd], [], [], 0)[0] else 0
+        buf = fcntl.ioctl(self.fd, termios.FIONREAD, b"\0\0\0\0")
+        return int.from_bytes(buf, sys.byteorder)
 
     def read(self, size: int = 1) -> bytes:
         if not select.select([self.fd], [], [], self.timeout)[0]:
@@ -53,8 +57,11 @@ class SerialLink:
     """Pumps bytes between a port and a Link; `step` reads what is there and writes what's due."""
 
     def __init__(self, link: Link, port: Port, clock: Callable[[], float] = time.monotonic,
-                 chunk: int = 4096) -> None:
-        self.link, self.port, self.clock, self.chunk = link, port, clock, chunk
+                 chunk: int = 4096, max_write: int = 1024) -> None:
+        # max_write paces the link to what a port's buffer absorbs per step, so a full
+        # window never blocks a write while the other end is not reading.
+        self.link, self.port, self.clock = link, port, clock
+        self.chunk, self.max_write = chunk, max_write
 
     def step(self) -> list[Event]:
         """One read (waiting at most the port's timeout) and one write."""
@@ -62,7 +69,7 @@ class SerialLink:
         data = self.port.read(min(max(waiting, 1), self.chunk))
         now = self.clock()
         events = self.link.receive(data, now) if data else self.link.pop_events()
-        out = self.link.poll(now)
+        out = self.link.poll(now, self.max_write)
         if out:
             self.port.write(out)
         return events + self.link.pop_events()

@@ -1,0 +1,189 @@
+"""The sans-I/O link: sessions, ARQ, dedup across restarts, replay/forgery rejection, liveness."""
+import os
+import tty
+
+from radio.auth import FileCounterStore, MemoryCounterStore
+from radio.link import Acked, Delivered, Link, LinkDown, LinkUp
+from radio.serial_port import FdPort, SerialLink, open_url
+
+KEY = bytes(range(32))
+
+
+def pair(**kw):
+    robot = Link(1, 0, 5, KEY, MemoryCounterStore(), **kw)
+    host = Link(0, 1, 5, KEY, MemoryCounterStore(), **kw)
+    return robot, host
+
+
+def pump(a, b, t, seconds, dt=0.01, tap=None):
+    """Exchange bytes losslessly; returns (events at a, events at b, end time)."""
+    ea, eb = [], []
+    end = t + seconds
+    while t < end:
+        ab, ba = a.poll(t), b.poll(t)
+        if tap:
+            tap(ab)
+        eb += b.receive(ab, t) + b.pop_events()
+        ea += a.receive(ba, t) + a.pop_events()
+        t += dt
+    return ea, eb, t
+
+
+def delivered(events):
+    return [(e.msg_id, e.payload) for e in events if isinstance(e, Delivered)]
+
+
+def test_messages_arrive_once_in_order_and_are_acked():
+    robot, host = pair()
+    msgs = {i: os.urandom(10 + 37 * i) for i in range(1, 40)}
+    for i, m in msgs.items():
+        robot.send(m, 0.0, msg_id=i)
+    er, eh, _ = pump(robot, host, 0.0, 3.0)
+    assert delivered(eh) == list(msgs.items())
+    assert [e.msg_id for e in er if isinstance(e, Acked)] == list(msgs)
+    assert robot.idle and robot.queued_bytes == 0
+    assert any(isinstance(e, LinkUp) for e in eh)
+
+
+def test_commands_flow_the_other_way_with_automatic_ids():
+    robot, host = pair()
+    ids = [host.send(b"cmd%d" % i, 0.0) for i in range(5)]
+    er, eh, _ = pump(robot, host, 0.0, 1.0)
+    assert [p for _, p in delivered(er)] == [b"cmd%d" % i for i in range(5)]
+    assert [e.msg_id for e in eh if isinstance(e, Acked)] == ids
+
+
+def test_sender_restart_resends_unacked_and_receiver_reacks_without_redelivery(tmp_path):
+    store = FileCounterStore(tmp_path / "c.json")
+    host = Link(0, 1, 5, KEY, MemoryCounterStore())
+    robot = Link(1, 0, 5, KEY, store)
+    robot.send(b"capture-1", 0.0, msg_id=1)
+    # Host delivers, but every ACK back to the robot is lost: the robot never sees Acked.
+    t = 0.0
+    got = []
+    while not got and t < 2.0:
+        got += delivered(host.receive(robot.poll(t), t))
+        if not got:
+            robot.receive(host.poll(t), t)
+        t += 0.01
+    assert got == [(1, b"capture-1")]
+    # The robot is killed and restarted: same outbox row, fresh Link, same counter file.
+    robot2 = Link(1, 0, 5, KEY, FileCounterStore(tmp_path / "c.json"))
+    robot2.send(b"capture-1", t, msg_id=1)
+    robot2.send(b"capture-2", t, msg_id=2)
+    er, eh, _ = pump(robot2, host, t, 2.0)
+    assert delivered(eh) == [(2, b"capture-2")]
+    assert {e.msg_id for e in er if isinstance(e, Acked)} == {1, 2}
+    assert host.stats().duplicates == 1
+
+
+def test_receiver_restart_asks_for_a_new_session_and_nothing_is_lost():
+    robot, host = pair()
+    robot.send(b"a", 0.0, msg_id=1)
+    _, eh, t = pump(robot, host, 0.0, 0.5)
+    assert delivered(eh) == [(1, b"a")]
+    host2 = Link(0, 1, 5, KEY, MemoryCounterStore())
+    robot.send(b"b", t, msg_id=2)
+    er, eh2, _ = pump(robot, host2, t, 2.0)
+    assert delivered(eh2) == [(2, b"b")]
+    assert 2 in {e.msg_id for e in er if isinstance(e, Acked)}
+
+
+def test_replayed_frames_are_rejected_and_counted():
+    robot, host = pair()
+    captured = []
+    robot.send(b"x" * 300, 0.0, msg_id=9)
+    _, eh, t = pump(robot, host, 0.0, 1.0, tap=captured.append)
+    assert delivered(eh) == [(9, b"x" * 300)]
+    for wire in captured:
+        assert not delivered(host.receive(wire, t))
+    rej = host.stats().rejected
+    assert rej.get("replay", 0) + rej.get("stale", 0) >= len([w for w in captured if w])
+
+
+def test_replay_after_receiver_restart_is_not_accepted(tmp_path):
+    store = FileCounterStore(tmp_path / "host.json")
+    robot = Link(1, 0, 5, KEY, MemoryCounterStore())
+    host = Link(0, 1, 5, KEY, store)
+    captured = []
+    robot.send(b"move arm", 0.0, msg_id=3)
+    _, eh, t = pump(robot, host, 0.0, 1.0, tap=captured.append)
+    assert len(delivered(eh)) == 1
+    host2 = Link(0, 1, 5, KEY, FileCounterStore(tmp_path / "host.json"))
+    events = []
+    for wire in captured:
+        events += host2.receive(wire, t)
+    assert not delivered(events)
+
+
+def test_forged_frames_are_rejected_and_counted():
+    robot, host = pair()
+    forger = Link(1, 0, 5, bytes(32), MemoryCounterStore(start=10**9))
+    forger.send(b"FORGED", 0.0, reliable=False)
+    _, eh, _ = pump(robot, host, 0.0, 0.5)
+    assert not delivered(host.receive(forger.poll(0.5), 0.5))
+    assert host.stats().rejected["tag"] >= 2  # its SYN and its datagram
+
+
+def test_frames_for_another_link_or_from_another_sender_are_rejected():
+    robot, host = pair()
+    other = Link(1, 0, 6, KEY, MemoryCounterStore())
+    host.receive(other.poll(0.0), 0.0)
+    host.receive(host.poll(0.0), 0.0)  # its own frames echoed back
+    rej = host.stats().rejected
+    assert rej["link"] == 1 and rej["sender"] == 1
+
+
+def test_link_down_after_silence_and_up_again():
+    robot, host = pair(heartbeat=0.2, link_timeout=1.0)
+    er, eh, t = pump(robot, host, 0.0, 1.0)
+    assert host.up and robot.up
+    host.poll(t + 2.0)
+    assert any(isinstance(e, LinkDown) for e in host.pop_events())
+    assert not host.up
+    _, eh, _ = pump(robot, host, t + 2.0, 1.0)
+    assert any(isinstance(e, LinkUp) for e in eh) and host.up
+
+
+def test_unreliable_datagrams_are_reassembled_and_deduplicated():
+    robot, host = pair()
+    mid = robot.send(b"s" * 500, 0.0, reliable=False)
+    captured = []
+    _, eh, t = pump(robot, host, 0.0, 0.5, tap=captured.append)
+    assert delivered(eh) == [(mid, b"s" * 500)]
+
+
+def test_bounded_queue_refuses_more():
+    robot, _ = pair(max_queue_bytes=1000)
+    robot.send(b"x" * 900, 0.0, msg_id=1)
+    try:
+        robot.send(b"x" * 200, 0.0, msg_id=2)
+    except RuntimeError as exc:
+        assert "queued" in str(exc)
+    else:
+        raise AssertionError("QueueFull not raised")
+
+
+def test_two_links_over_a_real_pty_pair():
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    robot, host = pair()
+    a = SerialLink(robot, open_url(os.ttyname(slave), timeout=0.005))
+    b = SerialLink(host, FdPort(master, timeout=0.005))
+    msgs = [os.urandom(200 + i) for i in range(10)]
+    for i, m in enumerate(msgs):
+        robot.send(m, 0.0, msg_id=i + 1)
+    got, acked = [], set()
+    try:
+        for _ in range(400):
+            for e in b.step():
+                if isinstance(e, Delivered):
+                    got.append(e.payload)
+            acked |= {e.msg_id for e in a.step() if isinstance(e, Acked)}
+            if len(acked) == len(msgs):
+                break
+    finally:
+        a.close()
+        b.close()
+    assert got == msgs and acked == set(range(1, 11))
