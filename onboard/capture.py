@@ -47,6 +47,7 @@ class Capture:
     mask_changed: bool = False
     unchanged: bool = False
     stride: int = 1
+    pca: PcaBasis | None = None  # the scene's basis, on the first capture made with it
 
 
 def feature_spec(cfg: Config) -> FeatureSpec:
@@ -72,6 +73,7 @@ class Pipeline:
         self.sleep = sleep
         self.spec = feature_spec(cfg)
         self.pca: PcaBasis | None = None
+        self.pca_pending = False  # fitted, not yet attached to a capture
         self._fitter: FrameFitter | None = None
         self._previous: dict[tuple[int, int], dict[tuple[int, int], FitResult]] = {}
         self.faults: list[str] = []  # every retried fault, for STATUS
@@ -129,25 +131,33 @@ class Pipeline:
 
     # -- the capture -------------------------------------------------------------------
 
-    def fitter(self, n_bands: int) -> FrameFitter:
-        if self._fitter is None or self._fitter.counts.shape[1] != n_bands:
-            self._fitter = FrameFitter(self.cfg.segment.n_labels, n_bands, bins=256)
+    def fitter(self, n_bands: int, levels: int = 256) -> FrameFitter:
+        """One preallocated fitter; 16-bit bands get `features.bins_16bit` bins tiling the
+        spread range [-1/2, 65535.5], the range the MODELS codec uses for 65536 levels."""
+        n_labels = self.cfg.segment.n_labels
+        bins = 256 if levels <= 256 else self.cfg.features.bins_16bit
+        span = None if levels <= 256 else (-0.5, levels - 0.5)
+        f = self._fitter
+        if f is None or f.counts.shape != (n_labels, n_bands, bins) or (f.lo, f.hi) != (span or (0.0, 255.0)):
+            self._fitter = FrameFitter(n_labels, n_bands, bins=bins, value_range=span)
         return self._fitter
 
     def process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles) -> Capture:
         """Features, segmentation, skip rules and the fit for one frame."""
-        if self.spec.space is FeatureSpace.PCA and self.pca is None:
-            self.pca = PcaBasis.fit(frame)  # once per scene; sent with the scene
-        feats = compute(frame, self.spec, self.pca)
+        try:
+            if self.spec.space is FeatureSpace.PCA and self.pca is None:
+                self.pca = PcaBasis.fit(frame)  # once per scene; sent with the scene
+                self.pca_pending = True
+            feats = compute(frame, self.spec, self.pca)
+        except ValueError as exc:  # e.g. a band the camera does not have: skip with the reason
+            raise PoseSkipped(f"features: {exc}") from None
         labels, changed = self.segmenter(feats, frame, measured)
         n_labels = self.cfg.segment.n_labels
         counts = skip.label_counts(labels, n_labels)
         keep = skip.kept_labels(counts, self.cfg.skip.min_pixels)
         stride = skip.subsample_stride(counts, keep, self.cfg.skip.percentile_precision)
         data = feats.data
-        if feats.levels > 256:
-            raise PoseSkipped("16-bit bands need a deeper fitter than this runtime configures")
-        fitter = self.fitter(data.shape[2])
+        fitter = self.fitter(data.shape[2], feats.levels)
         fitter.reset()
         if stride > 1:
             # A deterministic pixel lattice: every stride-th pixel of each row block.
@@ -163,8 +173,10 @@ class Pipeline:
         same = skip.unchanged(self._previous.get(key), results, self.cfg.skip.unchanged_tolerance)
         if not same:  # compare with the last models sent, so slow drift is still caught
             self._previous[key] = results
+        pca = self.pca if self.pca_pending else None
+        self.pca_pending = False
         return Capture(commanded, measured, feats.band_names, feats.levels, results, dropped,
-                       labels, changed, same, stride)
+                       labels, changed, same, stride, pca)
 
     def capture(self, commanded: ViewAngles, move: bool = True) -> Capture:
         if move:
@@ -203,9 +215,12 @@ def _pose(v: ViewAngles) -> tuple[float, float]:
 
 
 def models_body(robot_id: int, seq: int, now: float, space: str, cap: Capture) -> tuple[int, bytes]:
+    """MODELS for a capture; the first capture of a PCA scene carries the basis in its extras."""
+    extras = cap.pca.to_extras() if cap.pca is not None else None
     body = pk.encode_models(cap.results, robot_id=robot_id, seq=seq, time=now,
                             commanded=_pose(cap.commanded), measured=_pose(cap.measured),
-                            feature_space=space, bands=cap.band_names, levels=cap.levels)
+                            feature_space=space, bands=cap.band_names, levels=cap.levels,
+                            extras=extras)
     return int(pk.Kind.MODELS), body
 
 

@@ -244,6 +244,38 @@ class PcaBasis:
         return PcaBasis(mean, rot, scale, offset)
 
 
+    # Packet extras carry lists of at most 64 scalars: a basis of up to 8 channels fits.
+    EXTRA_KEYS = ("pca_mean", "pca_rotation", "pca_scale", "pca_offset")
+
+    def to_extras(self) -> dict[str, list[float]]:
+        """The basis as packet extras (rotation flattened row by row), for the host to invert."""
+        if self.n > 8:
+            raise ValueError(f"pca: a {self.n}-channel basis does not fit packet extras (at most 8)")
+        return {"pca_mean": list(self.mean), "pca_rotation": [v for row in self.rotation for v in row],
+                "pca_scale": list(self.scale), "pca_offset": list(self.offset)}
+
+    @staticmethod
+    def from_extras(extras: dict) -> "PcaBasis | None":
+        """The basis in a packet's extras; None if it carries none, ValueError if malformed."""
+        keys = PcaBasis.EXTRA_KEYS
+        present = [k for k in keys if k in extras]
+        if not present:
+            return None
+        if len(present) != len(keys):
+            raise ValueError(f"pca extras: missing {sorted(set(keys) - set(present))}")
+        for k in keys:
+            v = extras[k]
+            if not isinstance(v, (list, tuple)) or any(type(x) not in (int, float) for x in v):
+                raise ValueError(f"pca extras: {k} must be a list of numbers")
+        flat = list(extras["pca_rotation"])
+        n = len(extras["pca_mean"])
+        if n == 0 or len(flat) != n * n:
+            raise ValueError(f"pca extras: rotation has {len(flat)} values for {n} channels")
+        rows = [flat[i * n:(i + 1) * n] for i in range(n)]
+        return PcaBasis.from_record({"mean": extras["pca_mean"], "rotation": rows,
+                                     "scale": extras["pca_scale"], "offset": extras["pca_offset"]})
+
+
 # --- compute --------------------------------------------------------------------------
 def _as_pixels(frame: np.ndarray, dtype: type, what: str) -> np.ndarray:
     if not isinstance(frame, np.ndarray) or frame.ndim != 3:

@@ -18,6 +18,7 @@ import os
 import time
 from collections import deque
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any, Callable, Protocol
 
 from hal.interfaces import ViewAngles
@@ -88,6 +89,7 @@ class Mode(enum.StrEnum):
     FAILSAFE = "failsafe"
 
 
+MAX_SWEEP_POSES = 4096
 SETTABLE = {
     "sweep": ("start", "stop", "step", "azimuths", "settle_timeout_s", "retries", "pose_tolerance_deg"),
     "skip": ("min_pixels", "percentile_precision", "unchanged_tolerance", "skip_measured_pose"),
@@ -115,6 +117,7 @@ class Runtime:
         self.outbox = outbox or Outbox(cfg.state_dir / "outbox.sqlite", cfg.outbox_quota_bytes)
         self.sweeps = SweepStore(cfg.state_dir)
         self.pipeline = Pipeline(cfg, hal, segmenter, pump=self.service, sleep=sleep)
+        self.pipeline.pca = _read_pca(cfg.state_dir / "pca.json")
         self.notifier = notifier or Notifier(address="")
         self.mode = Mode.IDLE
         self.progress: SweepProgress | None = None
@@ -280,6 +283,8 @@ class Runtime:
 
     def send_capture(self, cap: Capture) -> int:
         seq = self._seq.next()
+        if cap.pca is not None:  # the scene's basis survives restarts with the packet carrying it
+            _write_json(self.cfg.state_dir / "pca.json", cap.pca.to_record())
         self.pose = cap.measured
         self._last_labels = cap.labels
         if cap.mask_changed:
@@ -342,9 +347,14 @@ class Runtime:
             cap = self.pipeline.process(self.pipeline.frame(), commanded, measured)
             return True, {"seq": self.send_capture(cap), "models": len(cap.results)}
         if name == "SWEEP":
-            els = tuple(float(e) for e in args["elevations"])
-            azs = tuple(float(a) for a in args["azimuths"])
-            plan = SweepPlan(els[0], els[-1], 1.0, azs, els)
+            azs = tuple(float(a) for a in args.get("azimuths", self.cfg.sweep.azimuths))
+            if "elevations" in args:
+                els = tuple(float(e) for e in args["elevations"])
+                plan = SweepPlan(els[0], els[-1], 1.0, azs, els)
+            else:
+                plan = SweepPlan(float(args["start"]), float(args["stop"]), float(args["step"]), azs)
+            if len(plan.poses()) > MAX_SWEEP_POSES:
+                raise ValueError(f"sweep of {len(plan.poses())} poses exceeds {MAX_SWEEP_POSES}")
             p = self.start_sweep(resume=False, plan=plan)
             return True, {"sweep": p.sweep_id, "poses": len(p.poses)}
         if name == "ABORT":
@@ -363,8 +373,9 @@ class Runtime:
             self.hal.servo_bus.reboot(sid)
             return True, {"rebooted": sid}
         if name == "SEND_MASK":
-            if self._last_labels is None:
-                return False, "no label map yet: capture first"
+            if self._last_labels is None:  # none yet: the next capture sends its map
+                getattr(self.pipeline.segmenter, "force_send", lambda: None)()
+                return True, {"queued": False, "next_capture": True}
             self.queue(*wire.mask_body(self.cfg.robot_id, int(args.get("seq", self._seq.last or 0)),
                                        self._last_labels))
             return True, {"queued": True}
@@ -419,6 +430,22 @@ class Runtime:
             if self.mode is not Mode.SWEEPING:
                 self.sleep(tick_s)
         return 0
+
+
+def _write_json(path: Path, record: dict) -> None:
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps(record))
+    os.replace(tmp, path)
+
+
+def _read_pca(path: Path) -> Any:
+    """The scene's PCA basis saved before a restart (None if none or unreadable: refit)."""
+    from onboard.features import PcaBasis
+
+    try:
+        return PcaBasis.from_record(json.loads(path.read_text())) if path.exists() else None
+    except (OSError, ValueError, TypeError, AttributeError):
+        return None
 
 
 def _flat_status(st: dict) -> dict:
@@ -488,9 +515,7 @@ class Segmentation:
         rec = self._record()
         if rec is None or rec == self._saved:
             return
-        tmp = self.palette_path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(rec))
-        os.replace(tmp, self.palette_path)
+        _write_json(self.palette_path, rec)
         self._saved = rec
 
     def force_send(self) -> None:
