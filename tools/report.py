@@ -1,0 +1,148 @@
+"""An HTML report of a database: captures per angle, the models, synthetic beside measured
+images, histogram overlays and the metric tables; a self-contained directory of PNGs.
+
+Measured images are not in the database (the robot sends models, not pixels); pass
+`measured(scene, elevation) -> RGB image` to put them beside the synthetic ones.
+"""
+from __future__ import annotations
+
+import html
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from tools.images import write_image
+from tools.receiver import mask_key
+from tools.store import Capture, Store
+from tools.synth import MissingModels, synthesize
+
+Measured = Callable[[str, float], np.ndarray | None]
+_CSS = ("body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;"
+        "font-size:90%}td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}"
+        "img{image-rendering:pixelated;width:240px;margin:2px}.bad{color:#b00}.ok{color:#070}")
+
+
+def _table(head: list[str], rows: list[list[Any]]) -> str:
+    def cell(v: Any) -> str:
+        return f"{v:.4f}" if isinstance(v, float) else html.escape(str(v))
+    return ("<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>"
+            + "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in r) + "</tr>" for r in rows)
+            + "</table>")
+
+
+def capture_mask(store: Store, cap: Capture) -> np.ndarray | None:
+    """The robot's label map for a capture: its own MASK, or the latest one sent before it."""
+    for seq in range(cap.sequence, -1, -1):
+        m = store.mask(mask_key(seq), cap.robot)
+        if m is not None:
+            return m
+    return None
+
+
+def _hist_plot(path: Path, image: np.ndarray | None, mask: np.ndarray, models: dict, bands: tuple[str, ...],
+               title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(bands), figsize=(3.2 * len(bands), 2.4), squeeze=False)
+    x = np.arange(256)
+    for b, name in enumerate(bands):
+        ax = axes[0][b]
+        for lab in sorted({lab for lab, _ in models}):
+            if image is not None and image.shape[:2] == mask.shape and (mask == lab).any():
+                h = np.bincount(image[..., b][mask == lab], minlength=256) / (mask == lab).sum()
+                ax.bar(x, h, width=1.0, alpha=0.4, label=f"measured {lab}")
+            ax.plot(x, models[(lab, b)].level_probabilities(256), lw=1, label=f"Johnson {lab}")
+        ax.set_title(f"{title} {name}", fontsize=8)
+        ax.tick_params(labelsize=6)
+    axes[0][0].legend(fontsize=5)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+
+
+def _demo_sections(demo: Any) -> list[str]:
+    out = ["<h2>Mixed plate reproduction</h2><p>Correlation between the synthetic mixed plate "
+           "(black and white models, mixed mask) and its capture, beside the ceiling: two captures "
+           f"of the same plate with different grain seeds. The paper reports 0.97.</p>"]
+    rows = []
+    for r in demo.mixed:
+        for b in r["synthetic"]:
+            ratio = r["synthetic"][b] / r["ceiling"][b] if r["ceiling"][b] else 0.0
+            rows.append([f"{r['angle']:.1f}", b, r["synthetic"][b], r["ceiling"][b], ratio, 0.97])
+    out.append(_table(["angle", "band", "synthetic", "ceiling", "ratio", "paper"], rows))
+    out.append("<h2>Unseen angle (45°)</h2>")
+    out.append(_table(["plate", "fitted at 45°", "interpolated", "nearest measured", "neighbours"],
+                      [[s, u["fitted"], u["interpolated"], u["nearest"], f"{u['lo']:g}/{u['hi']:g}"]
+                       for s, u in demo.unseen.items()]))
+    out.append("<h2>Table 2: total histogram error per model</h2>")
+    peers = list(next(iter(demo.pdfs.values())).keys()) if demo.pdfs else []
+    out.append(_table(["scene", *peers], [[s, *[t[p] for p in peers]] for s, t in demo.pdfs.items()]))
+    out.append("<h2>Table 1: correlation per band on the field scene</h2>")
+    out.append(_table(["mask", "space", "regions", "band 1", "band 2", "band 3"],
+                      [[r["method"], r["space"], r["regions"], *r["correlation"].values()] for r in demo.table1]))
+    bars = demo.bars()
+    out.append("<h2>Bars</h2><ul>" + "".join(
+        f"<li class={'ok' if v else 'bad'}>{html.escape(k)}: {'met' if v else 'MISSED'}</li>"
+        for k, v in bars.items()) + "</ul>")
+    out.append(f"<p>Link: {html.escape(str(demo.link))}. Run time {demo.seconds:.1f} s.</p>")
+    return out
+
+
+def write_report(store: Store, out: Path, measured: Measured | None = None, demo: Any = None,
+                 size: tuple[int, int] | None = None, seed: int = 0) -> Path:
+    """Writes out/index.html and its PNGs; returns the HTML path."""
+    out.mkdir(parents=True, exist_ok=True)
+    if measured is None and demo is not None and size is not None:
+        from tools.demo import capture
+
+        def measured(scene: str, angle: float) -> np.ndarray | None:
+            return capture(scene, angle, size).image if scene else None
+    rng = np.random.default_rng(seed)
+    caps = store.captures()
+    parts = [f"<!doctype html><meta charset=utf-8><title>btfscout report</title><style>{_CSS}</style>",
+             f"<h1>btfscout report: {html.escape(store.path.name)}</h1>",
+             "<h2>Captures per angle</h2>",
+             _table(["scene", "robot", "seq", "commanded", "measured", "space", "models"],
+                    [[c.scene, c.robot, c.sequence, "" if c.commanded[0] is None else f"{c.commanded[0]:.1f}",
+                      f"{c.measured[0]:.2f}", c.space, len(store.models(c.id))] for c in caps])]
+    rows = []
+    for c in caps:
+        for m in store.models(c.id):
+            j = m.model
+            rows.append([c.scene, f"{c.elevation:.1f}", m.label, c.band_names[m.band] if m.band < len(c.band_names)
+                         else m.band, j.family.value, j.gamma, j.delta, j.xi, j.lam, m.count])
+    parts += ["<h2>Models</h2>", _table(["scene", "angle", "label", "band", "family", "gamma", "delta",
+                                         "xi", "lambda", "pixels"], rows)]
+    parts.append("<h2>Synthetic beside measured</h2>")
+    for k, c in enumerate(caps):
+        mask = capture_mask(store, c)
+        models = {(m.label, m.band): m.model for m in store.models(c.id)}
+        if mask is None or not models:
+            continue
+        name = f"{c.scene or 'robot' + c.robot}_{c.elevation:05.1f}_{c.sequence}"
+        try:
+            syn = synthesize(mask, models, rng)
+        except MissingModels as exc:
+            parts.append(f"<p>{html.escape(name)}: {html.escape(str(exc))}</p>")
+            continue
+        real = measured(c.scene, c.elevation) if measured else None
+        imgs = []
+        if real is not None and c.space == "rgb":
+            write_image(out / f"{name}_measured.png", real)
+            imgs.append(f"<img src='{name}_measured.png' title='measured'>")
+        if c.space == "rgb" and syn.shape[2] == 3:
+            write_image(out / f"{name}_synthetic.png", syn)
+            imgs.append(f"<img src='{name}_synthetic.png' title='synthetic'>")
+        _hist_plot(out / f"{name}_hist.png", real if c.space == "rgb" else None, mask, models,
+                   c.band_names, f"{c.scene} {c.elevation:.0f}°")
+        imgs.append(f"<img src='{name}_hist.png' style='width:480px' title='histograms'>")
+        parts.append(f"<h3>{html.escape(c.scene)} at {c.elevation:.1f}° (seq {c.sequence})</h3>" + "".join(imgs))
+    if demo is not None:
+        parts += _demo_sections(demo)
+    path = out / "index.html"
+    path.write_text("\n".join(parts), encoding="utf-8")
+    return path
