@@ -11,12 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from onboard.censor import censored_counts, fallback_probs, place, quantize
 from onboard.johnson import Johnson
-from onboard.percentile import model_from_percentiles, sl_band
+from onboard.percentile import contains, model_from_percentiles, sl_band
 
 __all__ = [
     "Z_LADDER", "FitResult", "PercentileCodec", "fit_histogram", "fit_values",
-    "model_from_percentiles", "sl_band", "z_for_count",
+    "model_from_percentiles", "rebuild", "sl_band", "z_for_count",
 ]
 
 # z values tried from the top; the packet sends the index of the one used.
@@ -51,6 +52,14 @@ class FitResult:
     percentiles: tuple[float, float, float, float]  # x(-3z), x(-z), x(z), x(3z), data units
     beta1: float  # squared skewness of the histogram, for diagnostics
     beta2: float  # kurtosis of the histogram
+    # Percentiles read at shift + (-3z, -z, z, 3z) on the normal scale (onboard.censor).
+    shift: float = 0.0
+    # Fractions of the pixels censored at the lowest and highest level (1/65535 fixed point).
+    censored_low: float = 0.0
+    censored_high: float = 0.0
+    fallback: bool = False  # the normal through the censor limits (onboard.censor)
+    # Points the support was widened to contain (None when the fitted support held the data).
+    support: tuple[float, float] | None = None
 
 
 class PercentileCodec:
@@ -104,10 +113,12 @@ class PercentileCodec:
         return hash((self.lo, self.hi, self.bits))
 
 
-def histogram_percentiles(counts: np.ndarray, probs, lo: float = 0.0, bin_width: float = 1.0) -> np.ndarray:
+def histogram_percentiles(counts: np.ndarray, probs, lo: float = 0.0, bin_width: float = 1.0,
+                          cum: np.ndarray | None = None) -> np.ndarray:
     """Quantiles at `probs` of a histogram whose bin k is centred on lo + k * bin_width,
     each bin's mass spread uniformly across its width."""
-    cum = np.cumsum(counts, dtype=np.float64)
+    if cum is None:
+        cum = np.cumsum(counts, dtype=np.float64)
     total = cum[-1]
     targets = np.asarray(probs, dtype=np.float64) * total
     k = np.minimum(np.searchsorted(cum, targets, side="left"), len(cum) - 1)
@@ -117,24 +128,28 @@ def histogram_percentiles(counts: np.ndarray, probs, lo: float = 0.0, bin_width:
     return lo + bin_width * (k - 0.5 + frac)
 
 
-def _betas(counts: np.ndarray, lo: float, bin_width: float) -> tuple[float, float]:
-    """beta1, beta2 of the spread histogram (uniform within each bin, so never degenerate)."""
+def _betas(counts: np.ndarray, lo: float, bin_width: float) -> tuple[np.ndarray, np.ndarray]:
+    """beta1, beta2 of each spread histogram row (uniform within each bin, so never degenerate)."""
     w = np.asarray(counts, dtype=np.float64)
-    w = w / w.sum()
-    c = lo + bin_width * np.arange(len(w))
-    mu = float(w @ c)
-    dv = c - mu
+    w = w / w.sum(axis=-1, keepdims=True)
+    c = lo + bin_width * np.arange(w.shape[-1])
+    # Row-wise sums (not matmul): the same numbers for a row alone or in a batch.
+    mu = (w * c).sum(axis=-1)
+    dv = c - mu[..., None]
+    dv2 = dv * dv
     h2 = bin_width * bin_width / 12.0
-    m2 = float(w @ (dv * dv)) + h2
-    m3 = float(w @ (dv ** 3 + 3.0 * dv * h2))
-    m4 = float(w @ (dv ** 4 + 6.0 * dv * dv * h2)) + bin_width ** 4 / 80.0
+    m2 = (w * dv2).sum(axis=-1) + h2
+    m3 = (w * dv * (dv2 + 3.0 * h2)).sum(axis=-1)
+    m4 = (w * dv2 * (dv2 + 6.0 * h2)).sum(axis=-1) + bin_width ** 4 / 80.0
     return m3 * m3 / m2 ** 3, m4 / (m2 * m2)
 
 
 def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
-                  codec: PercentileCodec | None = None, z: float | None = None) -> FitResult:
+                  codec: PercentileCodec | None = None, z: float | None = None,
+                  censor: bool = True) -> FitResult:
     """Fit one histogram (bin k centred on lo + k * bin_width). Percentiles are snapped
-    through `codec` (default: the range of the bins at 16 or 32 bits) before solving."""
+    through `codec` (default: the range of the bins at 16 or 32 bits) before solving.
+    With `censor`, mass piled up in the end bins is treated as censored (onboard.censor)."""
     counts = np.asarray(counts)
     if counts.ndim != 1 or counts.size == 0:
         raise ValueError(f"counts must be a non-empty 1-D array, got shape {counts.shape}")
@@ -155,14 +170,67 @@ def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
         bits = 16 if counts.size <= 256 else 32
         codec = PercentileCodec(lo - 0.5 * bin_width, lo + (counts.size - 0.5) * bin_width, bits)
     z = z_for_count(count) if z is None else z
-    if occupied.size == 1:
-        # One occupied bin: a constant region, sent as four equal percentiles.
-        pct = codec.snap([lo + bin_width * occupied[0]] * 4)
-    else:
-        pct = codec.snap(histogram_percentiles(counts, _probs(z), lo, bin_width))
-    model = model_from_percentiles(pct, z, count)
+    return _fit_rows(counts[None, :], [count], [z], lo, bin_width, codec, censor)[0]
+
+
+def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, bin_width: float,
+              codec: PercentileCodec, censor: bool = True) -> list[FitResult]:
+    """Fit each row of (rows, bins) counts; every row has pixels. Shared by fit_histogram and
+    FrameFitter.fit, so both give the same model for the same histogram."""
+    rows, bins = counts.shape
+    cum = np.cumsum(counts, axis=1, dtype=np.float64)
+    nz = counts > 0
+    first = np.argmax(nz, axis=1)
+    last = bins - 1 - np.argmax(nz[:, ::-1], axis=1)
     beta1, beta2 = _betas(counts, lo, bin_width)
-    return FitResult(model, count, z, pct, beta1, beta2)
+    if censor:
+        low_n, high_n = censored_counts(counts)
+    out = []
+    for i in range(rows):
+        count, z = totals[i], zs[i]
+        f0, f1 = int(first[i]), int(last[i])
+        if f0 == f1:
+            # One occupied bin: a constant region, sent as four equal percentiles.
+            pct = codec.snap([lo + bin_width * f0] * 4)
+            out.append(FitResult(Johnson.constant(pct[0]), count, z, pct, float(beta1[i]), float(beta2[i])))
+            continue
+        low = quantize(float(low_n[i]) / count) if censor else 0.0
+        high = quantize(float(high_n[i]) / count) if censor else 0.0
+        where = place(z, low, high, count, Z_LADDER)
+        normal_probs = None
+        if where.fallback:
+            normal_probs = fallback_probs(low, high)
+            ends = histogram_percentiles(counts[i], normal_probs, lo, bin_width, cum[i])
+            a = lo + bin_width * 0.5 if low > 0.0 else float(ends[0])
+            e = lo + bin_width * (bins - 1.5) if high > 0.0 else float(ends[1])
+            pct = codec.snap([a, a, e, e])
+        else:
+            probs = _probs(where.z) if where.shift_code == 0 else _shifted_probs(where.z, where.shift)
+            pct = codec.snap(histogram_percentiles(counts[i], probs, lo, bin_width, cum[i]))
+        model = model_from_percentiles(pct, where.z, count, shift=where.shift, normal_probs=normal_probs)
+        support = None
+        # Bounded supports must hold every occupied bin: a quarter bin beyond each end.
+        ends = codec.snap([lo + bin_width * (f0 - 0.75)] * 2 + [lo + bin_width * (f1 + 0.75)] * 2)
+        if not contains(model, (ends[0], ends[3])):
+            support = (ends[0], ends[3])
+            model = model_from_percentiles(pct, where.z, count, shift=where.shift,
+                                           normal_probs=normal_probs, support=support)
+        out.append(FitResult(model, count, where.z, pct, float(beta1[i]), float(beta2[i]),
+                             where.shift, low, high, where.fallback, support))
+    return out
+
+
+def rebuild(result: FitResult, percentiles=None) -> Johnson:
+    """The model from a result's (or the given, e.g. decoded) percentiles and its placement:
+    what the receiver computes from a packet."""
+    normal_probs = fallback_probs(result.censored_low, result.censored_high) if result.fallback else None
+    return model_from_percentiles(result.percentiles if percentiles is None else percentiles,
+                                  result.z, result.count, shift=result.shift,
+                                  normal_probs=normal_probs, support=result.support)
+
+
+def _shifted_probs(z: float, shift: float) -> tuple[float, float, float, float]:
+    return (_phi(shift - 3 * z), _phi(shift - z), _phi(shift + z), _phi(shift + 3 * z))
 
 
 def _probs(z: float) -> tuple[float, float, float, float]:
@@ -274,6 +342,8 @@ class FrameFitter:
         self._bases = (np.arange(n_labels, dtype=np.intp)[:, None] * n_bands
                        + np.arange(n_bands, dtype=np.intp)[None, :]) * bins
         self.empty_labels: tuple[int, ...] = ()
+        # 8-bit frames with few labels and bands: the whole index fits in 16 bits.
+        self._bases16 = self._bases.astype(np.uint16) if n_labels * n_bands * bins <= 65536 and bins == 256 else None
 
     def reset(self) -> None:
         self.counts[...] = 0
@@ -287,39 +357,41 @@ class FrameFitter:
         if height == 0 or width == 0:
             return
         step = max(1, self.chunk_pixels // width)
-        size = self.counts.size
         flat = self.counts.reshape(-1)
+        fast = self._bases16 is not None and self._unit_levels and frame.dtype == np.uint8
         for r0 in range(0, height, step):
             lab, vals = labels[r0:r0 + step], frame[r0:r0 + step]
             lmin, lmax = int(lab.min()), int(lab.max())
             if lmin < 0 or lmax >= self.n_labels:
                 bad = lmin if lmin < 0 else lmax
                 raise ValueError(f"label {bad} outside [0, {self.n_labels - 1}]")
-            # One gather of each pixel's (label, band) base offset, then add the bin index.
-            idx = np.take(self._bases, lab, axis=0)
-            if self._unit_levels and vals.dtype.kind in "ui":
-                self._check_range(vals)
-                np.add(idx, vals, out=idx, casting="unsafe")
+            if fast:
+                # Every (label, band, level) index fits 16 bits: gather and OR in 2-byte integers.
+                idx = np.take(self._bases16, lab, axis=0)
+                np.bitwise_or(idx, vals, out=idx)
             else:
-                idx += self._value_index(vals)
-            flat += np.bincount(idx.reshape(-1), minlength=size)
+                # One gather of each pixel's (label, band) base offset, then add the bin index.
+                idx = np.take(self._bases, lab, axis=0)
+                if self._unit_levels and vals.dtype.kind in "ui":
+                    self._check_range(vals)
+                    np.add(idx, vals, out=idx, casting="unsafe")
+                else:
+                    idx += self._value_index(vals)
+            flat += np.bincount(idx.reshape(-1), minlength=flat.size)
 
-    def fit(self, min_count: int = 1) -> dict[tuple[int, int], FitResult]:
+    def fit(self, min_count: int = 1, censor: bool = True) -> dict[tuple[int, int], FitResult]:
         """Fit every (label, band) with at least `min_count` pixels; others go to empty_labels."""
         totals = self.counts[:, 0, :].sum(axis=1)
-        results: dict[tuple[int, int], FitResult] = {}
-        empty = []
-        for label in range(self.n_labels):
-            count = int(totals[label])
-            if count < max(min_count, 1):
-                empty.append(label)
-                continue
-            z = z_for_count(count)
-            for band in range(self.n_bands):
-                results[(label, band)] = fit_histogram(
-                    self.counts[label, band], self.centre0, self.bin_width, self.codec, z)
-        self.empty_labels = tuple(empty)
-        return results
+        keep = [lab for lab in range(self.n_labels) if int(totals[lab]) >= max(min_count, 1)]
+        self.empty_labels = tuple(lab for lab in range(self.n_labels) if lab not in set(keep))
+        if not keep:
+            return {}
+        counts = [int(totals[lab]) for lab in keep for _ in range(self.n_bands)]
+        zs = [z_for_count(c) for c in counts]
+        rows = self.counts[keep].reshape(-1, self.bins)
+        fits = _fit_rows(rows, counts, zs, self.centre0, self.bin_width, self.codec, censor)
+        keys = [(lab, band) for lab in keep for band in range(self.n_bands)]
+        return dict(zip(keys, fits))
 
     def _checked(self, frame: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         frame, labels = np.asarray(frame), np.asarray(labels)

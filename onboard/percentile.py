@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from onboard.johnson import Family, Johnson
+from onboard.johnson import Family, Johnson, normal_ppf
 
 # ln d has a sampling sd of roughly 4 / sqrt(count); the SL band is one such sd wide on each
 # side, never narrower than the floor that keeps the SU/SB forms well conditioned.
@@ -17,6 +17,8 @@ _BAND_SD = 4.0
 _BAND_FLOOR = 1e-6
 # Gaps below this fraction of the span are lifted to it: no ratio can overflow.
 _GAP_FLOOR = 1e-9
+# The censored fallback's two normal deviates are kept at least this far apart.
+_MIN_DZ = 0.01
 
 
 def sl_band(count: int) -> float:
@@ -24,11 +26,17 @@ def sl_band(count: int) -> float:
     return max(_BAND_SD / math.sqrt(max(count, 1)), _BAND_FLOOR)
 
 
-def model_from_percentiles(percentiles, z: float, count: int) -> Johnson:
-    """The Johnson model through the four percentiles x(-3z), x(-z), x(z), x(3z).
+def model_from_percentiles(percentiles, z: float, count: int, *, shift: float = 0.0,
+                           normal_probs: tuple[float, float] | None = None,
+                           support: tuple[float, float] | None = None) -> Johnson:
+    """The Johnson model through the four percentiles x(s-3z), x(s-z), x(s+z), x(s+3z).
 
-    Deterministic: the host calls it on the transmitted percentiles to recompute the robot's
-    model bit for bit. All four equal means a constant region.
+    `shift` s moves the four points along the normal scale (censored data: keep them out of
+    the pile-up); the symmetric forms still apply with gamma lowered by s. `normal_probs`
+    (pa, pe) instead asks for the normal with P(X < a) = pa and P(X < e) = pe (the censored
+    fallback, see onboard.fit). `support` (lo, hi): points a bounded support must contain
+    (see `widen`). Deterministic: the host calls it on the transmitted values to recompute
+    the robot's model bit for bit. All four equal means a constant region.
     """
     if len(percentiles) != 4:
         raise ValueError(f"need four percentiles, got {len(percentiles)}")
@@ -39,9 +47,20 @@ def model_from_percentiles(percentiles, z: float, count: int) -> Johnson:
         raise ValueError(f"percentiles must be non-decreasing, got {percentiles}")
     if not (math.isfinite(z) and z > 0.0):
         raise ValueError(f"z must be positive, got {z}")
+    if not (math.isfinite(shift) and abs(shift) < 8.0):
+        raise ValueError(f"shift must be finite and below 8 in size, got {shift}")
     span = e - a
     if span == 0.0:
         return Johnson.constant(a)
+    if normal_probs is not None:
+        model = _normal_through(a, e, *normal_probs)
+    else:
+        model = _shifted(_symmetric(a, b, c, e, z, count), shift)
+    return model if support is None else widen(model, support, a, e)
+
+
+def _symmetric(a: float, b: float, c: float, e: float, z: float, count: int) -> Johnson:
+    span = e - a
     floor = _GAP_FLOOR * span
     m, n, p = max(e - c, floor), max(b - a, floor), max(c - b, floor)
     mid = 0.5 * (b + c)
@@ -63,6 +82,73 @@ def model_from_percentiles(percentiles, z: float, count: int) -> Johnson:
     if model is None:
         model = _normal(a, b, c, e, z)
     return model
+
+
+def _shifted(model: Johnson, shift: float) -> Johnson:
+    """Points at s + (-3z, -z, z, 3z): the model fitted as if symmetric has gamma - s."""
+    if shift == 0.0:
+        return model
+    if model.family is Family.SN:
+        return Johnson.normal(model.xi - shift * model.lam, model.lam)
+    return Johnson(model.family, model.gamma + shift, model.delta, model.xi, model.lam)
+
+
+def _normal_through(a: float, e: float, pa: float, pe: float) -> Johnson:
+    """The normal with P(X < a) = pa and P(X < e) = pe, a < e (0 < pa < pe < 1)."""
+    za, ze = float(normal_ppf(pa)), float(normal_ppf(pe))
+    if not ze - za >= _MIN_DZ:  # all the mass at the limits: a wide normal between them
+        mid = 0.5 * (za + ze)
+        za, ze = mid - 0.5 * _MIN_DZ, mid + 0.5 * _MIN_DZ
+    sd = max((e - a) / (ze - za), _GAP_FLOOR * (abs(a) + abs(e) + 1.0))
+    return Johnson.normal(a - sd * za, sd)
+
+
+def support_of(model: Johnson) -> tuple[float, float]:
+    """(lowest, highest) value of the support; infinite ends for unbounded families."""
+    if model.family is Family.SB:
+        return model.xi, model.xi + model.lam
+    if model.family is Family.SL:
+        return (model.xi, math.inf) if model.lam > 0 else (-math.inf, model.xi)
+    if model.family is Family.CONST:
+        return model.xi, model.xi
+    return -math.inf, math.inf
+
+
+def contains(model: Johnson, support: tuple[float, float]) -> bool:
+    lo, hi = support_of(model)
+    return model.family is Family.CONST or (lo <= support[0] and hi >= support[1])
+
+
+def widen(model: Johnson, support: tuple[float, float], a: float, e: float) -> Johnson:
+    """A bounded model whose support misses (lo, hi) gets its bounds moved out to them, and
+    gamma and delta re-solved so that the outer percentiles a < e keep their z: the bulk of
+    the fit stays where the data put it. Deterministic, so the receiver repeats it."""
+    if contains(model, support):
+        return model
+    lo, hi = min(support), max(support)
+    za, ze = float(model.z_of_x(a)), float(model.z_of_x(e))
+    try:
+        if model.family is Family.SB:
+            old_lo, old_hi = support_of(model)
+            new_lo, new_hi = min(old_lo, lo), max(old_hi, hi)
+            ga = math.log(a - new_lo) - math.log(new_hi - a)
+            ge = math.log(e - new_lo) - math.log(new_hi - e)
+            delta = (ze - za) / (ge - ga)
+            out = _checked(Family.SB, za - delta * ga, delta, new_lo, new_hi - new_lo)
+        else:  # SL: move the threshold
+            sign = 1.0 if model.lam > 0 else -1.0
+            xi = min(model.xi, lo) if sign > 0 else max(model.xi, hi)
+            ga, ge = math.log((a - xi) / model.lam), math.log((e - xi) / model.lam)
+            delta = (ze - za) / (sign * (ge - ga))
+            out = _checked(Family.SL, za - sign * delta * ga, delta, xi, model.lam)
+    except (OverflowError, ValueError, ZeroDivisionError):
+        out = None
+    if out is None or not contains(out, (lo, hi)):
+        # Only for degenerate points (a == e, or a percentile on a bound): the normal through
+        # the same centre and spread contains every value.
+        centre, spread = float(model.x_of_z(0.0)), float(model.x_of_z(1.0) - model.x_of_z(-1.0))
+        out = Johnson.normal(centre, max(0.5 * spread, _GAP_FLOOR * (abs(centre) + 1.0)))
+    return out
 
 
 def _normal(a: float, b: float, c: float, e: float, z: float) -> Johnson:

@@ -5,7 +5,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from onboard.fit import PercentileCodec, fit_histogram, model_from_percentiles
+from onboard.fit import PercentileCodec, fit_histogram, rebuild
 from onboard.johnson import Family, Johnson, normal_ppf
 
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -46,7 +46,7 @@ def test_any_histogram_gives_a_finite_model_and_in_range_pixels(h):
     assert all(math.isfinite(v) for v in (m.gamma, m.delta, m.xi, m.lam, r.beta1, r.beta2))
     assert all(-0.5 <= p <= 255.5 for p in r.percentiles)
     codec = PercentileCodec.for_levels(256)
-    assert model_from_percentiles(codec.decode(codec.encode(r.percentiles)), r.z, r.count) == m
+    assert rebuild(r, codec.decode(codec.encode(r.percentiles))) == m
     px = m.sample_pixels(500, np.random.default_rng(0))
     assert px.dtype == np.uint8
     x = m.sample(500, np.random.default_rng(1))

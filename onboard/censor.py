@@ -1,0 +1,156 @@
+"""Sensor limits: censored mass at the lowest and highest level, and where to read percentiles.
+
+A pixel at the top of a sensor's range says "at least this", not "this". The fitter counts such
+pixels as censored when the end level holds more than the neighbouring levels suggest, and then
+reads its four percentiles at s + (-3z, -z, z, 3z) on the normal scale, with z from the ladder
+and the shift s chosen so that none falls inside the censored mass. The fitted model then
+describes the whole distribution, beyond the limit too; sampling clips at the limit, which
+reproduces the pile-up by itself.
+
+Fallback: when the uncensored part is too thin for four percentiles (the window between the
+censored masses is narrower than six steps of the smallest z: roughly more than 80-90% at one
+limit, or both limits leaving little between), the model is the normal through the two points
+the data still pin down exactly: P(X < a) = pa and P(X < e) = pe, where a and e are the censor
+limits (or, at an uncensored end, the middle of the uncensored mass). Its clipped samples put
+exactly the censored fractions at the limits and spread the rest between, which is all such a
+histogram says. Everything here is deterministic from the transmitted fractions, so the receiver
+repeats it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from onboard.johnson import Family, Johnson, normal_ppf
+
+CENSOR_SCALE = 65535  # fractions travel as 1/65535 fixed point
+SHIFT_SCALE = 32  # shifts travel as int8 multiples of 1/32
+MAX_SHIFT_CODE = 127
+# Percentiles stay this much probability away from censored mass.
+MARGIN = 0.01
+# An end level is censored when it holds more than its neighbours extrapolate to, by more than
+# counting noise, and at least this many pixels. A clipping sensor's end level always means
+# "at most" / "at least", so erring towards censored only costs a little tail information.
+EXCESS = 1.1
+NOISE_SDS = 4.0
+MIN_CENSORED_PIXELS = 8
+
+
+@dataclass(frozen=True, slots=True)
+class Placement:
+    """Where the four percentiles are read: s + (-3z, -z, z, 3z), or the normal fallback."""
+
+    z: float
+    shift_code: int = 0
+    fallback: bool = False
+
+    @property
+    def shift(self) -> float:
+        return self.shift_code / SHIFT_SCALE
+
+
+def censored_counts(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Censored pixel counts at the lowest and highest bin of each row of (rows, bins) counts."""
+    c = np.asarray(counts)
+    if c.shape[-1] < 4:
+        zero = np.zeros(c.shape[:-1], dtype=c.dtype)
+        return zero, zero
+    return _censored_end(c[..., 0], c[..., 1], c[..., 2]), _censored_end(c[..., -1], c[..., -2], c[..., -3])
+
+
+def _censored_end(end: np.ndarray, next1: np.ndarray, next2: np.ndarray) -> np.ndarray:
+    n1, n2 = next1.astype(np.float64), next2.astype(np.float64)
+    # a density rising towards the limit extrapolates linearly; a falling one stays at next1
+    ref = np.maximum(n1, 2.0 * n1 - n2)
+    excess = end > EXCESS * ref + NOISE_SDS * np.sqrt(n1 + 1.0)
+    return np.where(excess & (end >= MIN_CENSORED_PIXELS), end, 0)
+
+
+def quantize(fraction: float) -> float:
+    """A censored fraction as it travels (1/65535 fixed point)."""
+    if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
+        raise ValueError(f"censored fraction {fraction} outside [0, 1]")
+    return round(fraction * CENSOR_SCALE) / CENSOR_SCALE
+
+
+def place(z_base: float, low: float, high: float, count: int, ladder: tuple[float, ...]) -> Placement:
+    """The widest ladder z (at most z_base) and a shift keeping s +- 3z clear of the censored
+    fractions `low` and `high`; the fallback when no ladder step fits."""
+    if low <= 0.0 and high <= 0.0:
+        return Placement(z_base)
+    outer = 3.0 * z_base
+    lo_z = max(-outer, _ppf(low + MARGIN)) if low > 0.0 else -outer
+    hi_z = min(outer, _ppf(1.0 - high - MARGIN)) if high > 0.0 else outer
+    if lo_z == -outer and hi_z == outer:
+        return Placement(z_base)  # the censored mass is beyond the outer percentiles
+    if hi_z - lo_z < 6.0 * z_base:
+        # Reach further into an uncensored tail, as far as the pixel count supports.
+        tail = _ppf(min(0.5, 8.0 / max(count, 1)))
+        lo_z = min(lo_z, max(tail, -2.0 * outer)) if low <= 0.0 else lo_z
+        hi_z = max(hi_z, min(-tail, 2.0 * outer)) if high <= 0.0 else hi_z
+    for z in ladder:
+        if z > z_base:
+            continue
+        # the lowest and highest shift codes keeping the window clear
+        lo_code = math.ceil((lo_z + 3.0 * z) * SHIFT_SCALE)
+        hi_code = math.floor((hi_z - 3.0 * z) * SHIFT_SCALE)
+        if lo_code <= hi_code:
+            code = min(max((lo_code + hi_code) // 2, -MAX_SHIFT_CODE), MAX_SHIFT_CODE)
+            if lo_code <= code <= hi_code:
+                return Placement(z, code)
+    return Placement(ladder[-1], 0, fallback=True)
+
+
+def _ppf(u: float) -> float:
+    return float(normal_ppf(min(max(u, 0.0), 1.0)))
+
+
+def fallback_probs(low: float, high: float) -> tuple[float, float]:
+    """(pa, pe): the probabilities below the fallback normal's two points. A censored end uses
+    its limit; an uncensored end the middle of the uncensored mass."""
+    pa = low if low > 0.0 else 0.5 * (1.0 - high)
+    pe = 1.0 - high if high > 0.0 else 1.0 - 0.5 * (1.0 - low)
+    return pa, pe
+
+
+# -- helpers for benchmarks and tests: move a model so that a fraction saturates ----------------
+
+
+def saturating(model: Johnson, high: float = 0.0, low: float = 0.0, levels: int = 256) -> Johnson:
+    """`model` translated (and, with both ends, scaled) so that `high` of its mass lies above
+    levels - 3/2 (read as the top level) and `low` below 1/2 (the bottom level). With one end
+    the other keeps the model's own width; with neither, the model is returned unchanged."""
+    if not (0.0 <= low < 1.0 and 0.0 <= high < 1.0 and low + high < 1.0):
+        raise ValueError(f"need 0 <= low, high and low + high < 1, got {low}, {high}")
+    if model.family is Family.CONST:
+        raise ValueError("a constant model cannot be made to saturate")
+    top, bottom = levels - 1.5, 0.5
+    if low > 0.0 and high > 0.0:
+        xa, xe = float(model.ppf(low)), float(model.ppf(1.0 - high))
+        scale = (top - bottom) / (xe - xa)
+        return _affine(model, scale, bottom - scale * xa)
+    if high > 0.0:
+        return _affine(model, 1.0, top - float(model.ppf(1.0 - high)))
+    if low > 0.0:
+        return _affine(model, 1.0, bottom - float(model.ppf(low)))
+    return model
+
+
+def _affine(m: Johnson, scale: float, offset: float) -> Johnson:
+    """The model of scale * X + offset (scale > 0)."""
+    if m.family is Family.SN:
+        return Johnson.normal(m.xi * scale + offset, m.lam * scale)
+    return Johnson(m.family, m.gamma, m.delta, m.xi * scale + offset, m.lam * scale)
+
+
+def expected_histogram(model: Johnson, count: int, levels: int = 256) -> np.ndarray:
+    """Integer counts summing to `count`: the model's level probabilities, tails folded into the
+    end levels as a clipping sensor does (largest remainders get the leftover pixels)."""
+    p = model.level_probabilities(levels) * count
+    base = np.floor(p).astype(np.int64)
+    short = count - int(base.sum())
+    if short > 0:
+        base[np.argsort(base - p, kind="stable")[:short]] += 1
+    return base
