@@ -1,23 +1,20 @@
-"""Cross-band and spatial dependence of a region, measured in the models' normal scores.
+"""Cross-band and spatial dependence of a region, measured on board in fixed memory.
 
-Every fitted model maps its band to a standard normal deviate z. Per region this module
-measures, in one bounded pass over a deterministic lattice of anchor pixels:
+Per region, in one bounded pass over a deterministic lattice of anchor pixels:
 
-  corr  the correlation matrix of the bands' z (a Gaussian copula), upper triangle;
-  dx    the autocorrelation of z at horizontal lags LAGS (band average);
+  corr  the correlation matrix of the bands' pixel values, upper triangle;
+  dx    the autocorrelation of the pixels at horizontal lags LAGS (band average);
   dy    the same at vertical lags.
 
-One spatial autocorrelation serves all bands of a region (space x band separable), so
-synthesis mixes identically filtered fields and keeps both the copula and the grain.
+These are plain Pearson correlations of the pixels, what an image comparison measures.
+The host turns them into the correlations of the models' normal scores z that reproduce
+them through the Johnson quantile functions (a Gaussian copula fitted by moment matching,
+`tools.field.latent`), so the robot needs no table of z per level and quantization needs
+no correction: the pixels are what they are. One spatial autocorrelation serves all bands
+of a region (space x band separable), so synthesis mixes identically filtered fields.
 
-Integer pixels carry the conditional mean of z within their level,
-E[Z | t_{k-1} < Z <= t_k] = (phi(t_{k-1}) - phi(t_k)) / (Phi(t_k) - Phi(t_{k-1})), so a level's
-z is unbiased for the model, and correlations are Pearson (normalised by the sample
-spread). Quantization then shrinks a correlation by sqrt(v1 v2), v the variance of the
-conditional means, which is above 0.99 once a band spreads over two or more levels.
-
-Memory is fixed: a table of levels per (label, band), accumulators per label, and at most
-`chunk` anchors gathered at a time; the frame itself is only indexed.
+Memory is fixed: accumulators per label and at most `chunk` anchors gathered at a time;
+the frame itself is only indexed.
 """
 from __future__ import annotations
 
@@ -27,18 +24,17 @@ from typing import Mapping
 
 import numpy as np
 
-from onboard.johnson import Family, Johnson, Z_CLIP, normal_cdf
+from onboard.johnson import Family, Johnson
 
 LAGS = (1, 2, 4, 8)
 MAX_ANCHORS = 65536
 MIN_PAIRS = 32  # fewer pairs than this: the correlation is reported as 0 (independent)
-_LUT_MAX_LEVELS = 4096
 _MAX_LAG = max(LAGS)
 
 
 @dataclass(frozen=True, slots=True)
 class Dependence:
-    """One region's dependence: band copula (upper triangle, row-major) and z autocorrelation."""
+    """One region's dependence: band correlations (upper triangle, row-major) and autocorrelation at LAGS."""
 
     corr: tuple[float, ...]
     dx: tuple[float, ...]
@@ -84,23 +80,6 @@ def bands_of(n_corr: int) -> int:
     return b
 
 
-def level_z(model: Johnson, levels: int) -> np.ndarray:
-    """Conditional mean of z within each integer level k (mass over [k - 1/2, k + 1/2])."""
-    if model.family is Family.CONST:
-        return np.zeros(levels)
-    t = model.thresholds(levels)
-    lo = np.concatenate(([-Z_CLIP], t))
-    hi = np.concatenate((t, [Z_CLIP]))
-    p = np.diff(normal_cdf(np.concatenate(([-Z_CLIP], t, [Z_CLIP]))))
-    phi = lambda z: np.exp(-0.5 * z * z) / math.sqrt(2.0 * math.pi)  # noqa: E731
-    with np.errstate(all="ignore"):
-        m = (phi(lo) - phi(hi)) / p
-    # A level the model gives (almost) no mass: its conditional mean is its nearer edge.
-    edge = np.where(np.abs(lo) < np.abs(hi), lo, hi)
-    m = np.where(p > 1e-12, m, edge)
-    return np.clip(np.nan_to_num(m, nan=0.0), lo, hi)
-
-
 def _anchor_step(h: int, w: int, max_anchors: int) -> int:
     return max(1, math.ceil(math.sqrt(h * w / max_anchors)))
 
@@ -109,7 +88,8 @@ def measure(
     data: np.ndarray, labels: np.ndarray, models: Mapping[tuple[int, int], Johnson],
     levels: int = 256, max_anchors: int = MAX_ANCHORS, chunk: int = 8192,
 ) -> dict[int, Dependence]:
-    """Dependence of every label that has a model for each band of `data` (H x W x B ints)."""
+    """Dependence of every label that has a model for each band of `data` (H x W x B pixels).
+    `levels` is accepted for symmetry with the fitter; pixel correlations do not need it."""
     if data.ndim == 2:
         data = data[..., None]
     if data.ndim != 3 or labels.shape != data.shape[:2]:
@@ -123,24 +103,11 @@ def measure(
     index = np.full(max(int(labels.max(initial=0)), max(regions)) + 1, -1, dtype=np.int64)
     index[regions] = np.arange(len(regions))
     n_reg = len(regions)
-    direct = levels > _LUT_MAX_LEVELS or not np.issubdtype(data.dtype, np.integer)
-    lut = None if direct else np.stack([
-        np.stack([level_z(models[(lab, b)], levels) for b in range(n_bands)]) for lab in regions
-    ])  # (regions, bands, levels)
     live = np.array([[models[(lab, b)].family is not Family.CONST for b in range(n_bands)]
                      for lab in regions])
 
-    def z_at(rr: np.ndarray, cc: np.ndarray, li: np.ndarray) -> np.ndarray:
-        pix = data[rr, cc]  # (n, B)
-        if lut is not None:
-            k = np.clip(pix.astype(np.int64), 0, levels - 1)
-            return lut[li[:, None], np.arange(n_bands)[None, :], k]
-        out = np.empty(pix.shape)
-        for j, lab in enumerate(regions):
-            sel = li == j
-            for b in range(n_bands):
-                out[sel, b] = models[(lab, b)].z_of_x(pix[sel, b].astype(np.float64))
-        return out
+    def pixels_at(rr: np.ndarray, cc: np.ndarray, li: np.ndarray) -> np.ndarray:
+        return data[rr, cc].astype(np.float64)  # (n, B)
 
     # Accumulators: anchors (n, sum z, sum z z') and pairs per direction and lag.
     n0 = np.zeros(n_reg)
@@ -160,7 +127,7 @@ def measure(
         rr, cc, li = rr[ok], cc[ok], li[ok]
         if not rr.size:
             continue
-        za = z_at(rr, cc, li)
+        za = pixels_at(rr, cc, li)
         n0 += np.bincount(li, minlength=n_reg)
         s1 += _sum_by(li, za, n_reg)
         s2 += _sum_by(li, za[:, :, None] * za[:, None, :], n_reg)
@@ -173,7 +140,7 @@ def measure(
                 if not sel.size:
                     continue
                 a, lk = za[sel], li[sel]
-                b = z_at(r2[sel], c2[sel], lk)
+                b = pixels_at(r2[sel], c2[sel], lk)
                 npair[d, k] += np.bincount(lk, minlength=n_reg)
                 for q, v in enumerate((a, b, a * a, b * b, a * b)):
                     ps[d, k, q] += _sum_by(lk, v, n_reg)

@@ -19,8 +19,11 @@ import numpy as np
 import scipy.fft as sfft
 
 from onboard.dependence import LAGS, Dependence
+from onboard.johnson import Family, Johnson
 
 _PROJECTIONS = 12
+_NODES = 48  # Gauss-Hermite nodes per axis for the pixel moments
+_BISECT = 30
 
 
 def nearest_correlation(m: np.ndarray, floor: float = 1e-6) -> np.ndarray:
@@ -54,6 +57,62 @@ def blend(lo: Dependence, hi: Dependence, weight: float) -> Dependence:
         raise ValueError(f"cannot blend {lo.n_bands}-band and {hi.n_bands}-band dependence")
     mix = lambda a, b: tuple(float(np.clip((1 - weight) * x + weight * y, -1, 1)) for x, y in zip(a, b))  # noqa: E731
     return Dependence(mix(lo.corr, hi.corr), mix(lo.dx, hi.dx), mix(lo.dy, hi.dy))
+
+
+def _moments(g1: np.ndarray, g2: np.ndarray, w: np.ndarray) -> tuple[float, float, float, float]:
+    m1, m2 = float(w @ g1), float(w @ g2)
+    return m1, m2, math.sqrt(max(float(w @ g1**2) - m1 * m1, 0.0)), math.sqrt(max(float(w @ g2**2) - m2 * m2, 0.0))
+
+
+def _pixel_corr(a: Johnson, b: Johnson, rho: float, levels: int) -> float:
+    """Pearson correlation of pixels x_a(Z1), x_b(Z2) (clipped to the levels) when corr(Z1, Z2) = rho."""
+    x, w = _gauss_hermite()
+    top = levels - 1
+    g1 = np.clip(a.x_of_z(x), 0, top)
+    m1, m2, s1, s2 = _moments(g1, np.clip(b.x_of_z(x), 0, top), w)
+    if s1 == 0.0 or s2 == 0.0:
+        return 0.0
+    z2 = rho * x[:, None] + math.sqrt(max(1.0 - rho * rho, 0.0)) * x[None, :]
+    e = float(w @ (g1[:, None] * np.clip(b.x_of_z(z2), 0, top)) @ w)
+    return (e - m1 * m2) / (s1 * s2)
+
+
+@lru_cache(maxsize=1)
+def _gauss_hermite() -> tuple[np.ndarray, np.ndarray]:
+    x, w = np.polynomial.hermite_e.hermegauss(_NODES)
+    return x, w / w.sum()
+
+
+@lru_cache(maxsize=4096)
+def latent_rho(a: Johnson, b: Johnson, target: float, levels: int = 256) -> float:
+    """The normal-score correlation whose pixels, through models a and b, correlate by `target`
+    (moment matching, NORTA); clipped to the reachable range when the target lies beyond it."""
+    if a.family is Family.CONST or b.family is Family.CONST:
+        return 0.0
+    lo, hi = -0.999, 0.999
+    if target >= _pixel_corr(a, b, hi, levels):
+        return hi
+    if target <= _pixel_corr(a, b, lo, levels):
+        return lo
+    for _ in range(_BISECT):  # pixel correlation increases with rho for increasing maps
+        mid = 0.5 * (lo + hi)
+        if _pixel_corr(a, b, mid, levels) < target:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
+
+
+def latent(dep: Dependence, models: tuple[Johnson, ...], levels: int = 256) -> Dependence:
+    """Measured pixel correlations -> the normal-score correlations synthesis draws with."""
+    n = len(models)
+    if dep.n_bands != n:
+        raise ValueError(f"dependence has {dep.n_bands} bands, models {n}")
+    iu = zip(*np.triu_indices(n, 1))
+    corr = tuple(latent_rho(models[i], models[j], r, levels) for (i, j), r in zip(iu, dep.corr))
+    live = [m for m in models if m.family is not Family.CONST] or list(models)
+    lag = lambda r: float(np.mean([latent_rho(m, m, r, levels) for m in live]))  # noqa: E731
+    return Dependence(corr, tuple(lag(r) for r in dep.dx), tuple(lag(r) for r in dep.dy))
 
 
 def _target(lags: tuple[float, ...], n: int) -> np.ndarray:

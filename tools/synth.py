@@ -15,7 +15,7 @@ import numpy as np
 
 from onboard.dependence import Dependence
 from onboard.johnson import Johnson
-from tools.field import blend, region_z
+from tools.field import blend, latent, region_z
 
 Models = Mapping[tuple[int, int], Johnson]
 Dependences = Mapping[int, Dependence]  # per label; labels without one are drawn independently
@@ -73,6 +73,7 @@ def synthesize(mask: np.ndarray, models: Models, rng: np.random.Generator, level
     for label in _check(mask, models, n_bands):
         dep = (dependence or {}).get(label)
         if _correlated(dep, n_bands):
+            dep = latent(dep, tuple(models[(label, b)] for b in range(n_bands)), levels)
             sel, z = region_z(mask, label, dep, rng)
             for b in range(n_bands):
                 out[sel, b] = _pixels(models[(label, b)], z[b], levels)
@@ -98,7 +99,8 @@ def interpolate(lo: Models, hi: Models, weight: float, mask: np.ndarray,
     out = _output(mask, n_bands, levels)
     for label in labels:
         d_lo, d_hi = ((d or {}).get(label) for d in dependence)
-        d_lo, d_hi = (d if _correlated(d, n_bands) else None for d in (d_lo, d_hi))
+        d_lo, d_hi = (latent(d, tuple(m[(label, b)] for b in range(n_bands)), levels)
+                      if _correlated(d, n_bands) else None for d, m in ((d_lo, lo), (d_hi, hi)))
         dep = blend(d_lo, d_hi, weight) if d_lo and d_hi else (d_lo or d_hi)
         if dep is not None:
             sel, zs = region_z(mask, label, dep, rng)
