@@ -23,6 +23,10 @@ COMMANDS: tuple[str, ...] = (
     "keygen",
     "linktest",
     "demo",
+    "listen",
+    "decode",
+    "cmd",
+    "report",
 )
 
 
