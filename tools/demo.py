@@ -133,12 +133,15 @@ def sweep_over_pty(work: Path, scene: str, robot_id: int, store: Store, cfg: Dem
     els = [float(e) for e in elevations]
     cid = session.command(pk.CommandName.SWEEP, {"elevations": els, "azimuths": [0.0]})
     done_at = None
+    skipped: list[str] = []
     t0 = time.monotonic()
     try:
         while time.monotonic() - t0 < cfg.robot_timeout_s:
             for item in session.step():
                 if item.kind in (ItemKind.CAPTURE, ItemKind.UNCHANGED):
                     tick(scene)
+                if item.kind is ItemKind.STATUS and item.packet.text.startswith("skipped pose"):
+                    skipped.append(item.packet.text)
                 if item.kind is ItemKind.STATUS and item.packet.text == "sweep done":
                     done_at = time.monotonic()
             if cid in session.answers and session.answers[cid].text.startswith("NACK"):
@@ -165,7 +168,8 @@ def sweep_over_pty(work: Path, scene: str, robot_id: int, store: Store, cfg: Dem
     st = session.stats()
     return {"rejected": sum(st.rejected.values()), "retransmissions": st.retransmissions,
             "delivered": st.delivered, "duplicates": st.duplicates,
-            "lost": radio.up.lost + radio.down.lost, "corrupted": radio.up.corrupted + radio.down.corrupted}
+            "lost": radio.up.lost + radio.down.lost, "corrupted": radio.up.corrupted + radio.down.corrupted,
+            "skipped": len(skipped)}
 
 
 # --- the experiments ---------------------------------------------------------------------
@@ -285,6 +289,9 @@ def run_demo(out: Path, cfg: DemoConfig = DemoConfig(), progress: bool = True) -
             for k, v in st.items():
                 res.link[k] = res.link.get(k, 0) + v
             res.captures[scene] = len(store.captures(scene=scene))
+            if res.captures[scene] < len(elevations):
+                raise RuntimeError(f"{scene} plate: {res.captures[scene]} of {len(elevations)} poses "
+                                   f"captured ({st['skipped']} skipped by the robot)")
         bar.close()
         by_scene = {s: store.models_by_angle(scene=s) for s in PLATES}
         steps = tqdm(total=4, desc="experiments", disable=not progress, leave=False)

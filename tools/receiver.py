@@ -116,9 +116,9 @@ def packet_json(p: Any) -> dict:
 
 
 class Receiver:
-    """Decodes delivered payloads and files them in `store`; counts what it saw."""
+    """Decodes delivered payloads and files them in `store` (None: show only); counts what it saw."""
 
-    def __init__(self, store: Store, scene: str = "") -> None:
+    def __init__(self, store: Store | None, scene: str = "") -> None:
         self.store, self.scene = store, scene
         self.counts: dict[str, int] = {k.value: 0 for k in ItemKind}
         self.duplicates = 0
@@ -128,7 +128,10 @@ class Receiver:
             p = pk.decode(payload)
         except FrameError as exc:
             return self._count(Item(ItemKind.BAD, None, None, False, f"undecodable packet: {exc}"))
-        if isinstance(p, pk.ModelsPacket):
+        if self.store is None and isinstance(p, (pk.ModelsPacket, pk.UnchangedPacket, pk.MaskPacket)):
+            item = Item(ItemKind.OTHER, getattr(p, "robot_id", None), getattr(p, "seq", None), False,
+                        f"{p.KIND.name} not stored (no database)", p)
+        elif isinstance(p, pk.ModelsPacket):
             item = self._models(p)
         elif isinstance(p, pk.UnchangedPacket):
             item = self._unchanged(p)

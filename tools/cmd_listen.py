@@ -1,0 +1,96 @@
+"""`btf-host listen`: receive, authenticate, store and acknowledge the robot's packets."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+from tools.cli import CliError
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser("listen", help="receive captures over a serial link into a database")
+    p.add_argument("--port", required=True, help="pyserial URL: /dev/ttyUSB0, a pty path, socket://host:port")
+    p.add_argument("--db", required=True, help="SQLite database (created if missing)")
+    p.add_argument("--key", required=True, help="link key file (btf-host keygen)")
+    p.add_argument("--baud", type=int, default=115200)
+    p.add_argument("--scene", default="", help="scene name to file the captures under")
+    p.add_argument("--until-idle", type=float, default=0.0, metavar="S",
+                   help="exit after S seconds without a delivered packet (0: run until Ctrl-C)")
+    p.add_argument("--json", action="store_true", help="one JSON object per received packet on stdout")
+    return p
+
+
+def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene: str = ""):
+    """(HostSession, Store or None) for the CLI commands; CliError for any bad input."""
+    from radio.auth import FileCounterStore, MemoryCounterStore
+    from radio.keys import KeyFileError, load_key
+    from radio.link import Link
+    from radio.serial_port import open_url
+    from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, Receiver
+    from tools.store import CorruptDatabase, Store
+
+    try:
+        key = load_key(key_file)
+    except KeyFileError as exc:
+        raise CliError(str(exc)) from None
+    store = None
+    if db is not None:
+        try:
+            store = Store.open(db)
+        except CorruptDatabase as exc:
+            raise CliError(str(exc)) from None
+    try:
+        # Counters beside the database survive restarts, so replays stay refused.
+        counters = (FileCounterStore(Path(db).with_name(Path(db).name + ".counters.json"))
+                    if db is not None else MemoryCounterStore())
+        port = open_url(port_url, baud, timeout=0.01)
+    except Exception as exc:
+        if store is not None:
+            store.close()
+        raise CliError(f"port {port_url}: cannot open: {exc}") from None
+    link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, key, counters, heartbeat=1.0, link_timeout=5.0)
+    return HostSession(link, port, Receiver(store, scene)), store
+
+
+def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    if args.until_idle < 0:
+        raise CliError(f"--until-idle {args.until_idle}: must not be negative")
+    session, store = open_session(args.port, args.key, args.db, args.baud, args.scene)
+    bar = tqdm(desc="captures", unit="cap", file=sys.stderr, disable=args.json or not sys.stderr.isatty())
+    try:
+        while True:
+            for item in session.step():
+                if args.json:
+                    print(json.dumps(item.to_json()), flush=True)
+                else:
+                    tqdm.write(f"{item.kind.value:>9} robot {item.robot} seq {item.seq}: {item.text}"
+                               + ("" if item.stored or item.kind.value not in ("capture", "mask", "unchanged")
+                                  else " (already stored)"))
+                if item.kind.value in ("capture", "unchanged") and item.stored:
+                    bar.update()
+            st = session.stats()
+            bar.set_postfix(link="up" if session.up else "down", rejected=sum(st.rejected.values()),
+                            retx=st.retransmissions, dup=st.duplicates, refresh=False)
+            if args.until_idle and time.monotonic() - session.last_delivery > args.until_idle:
+                break
+    except KeyboardInterrupt:
+        pass
+    finally:
+        bar.close()
+        session.port.close()
+        store.close()
+    st = session.stats()
+    c = session.receiver.counts
+    summary = {"captures": c["capture"] + c["unchanged"], "masks": c["mask"], "status": c["status"],
+               "logs": c["log"], "bad": c["bad"], "duplicates": session.receiver.duplicates,
+               "rejected": st.rejected, "retransmissions": st.retransmissions}
+    if args.json:
+        print(json.dumps({"kind": "summary", **summary}))
+    else:
+        print("received " + ", ".join(f"{k} {v}" for k, v in summary.items()), file=sys.stderr)
+    return 0
