@@ -22,7 +22,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     src.add_argument("--db", help="database of captures")
     src.add_argument("--model", help="MODELS.json: one document of `fit --json`, or a list of them")
     p.add_argument("--mask", required=True)
-    p.add_argument("--angle", type=float, required=True)
+    p.add_argument("--angle", required=True,
+                   help="view elevation, or EL,AZ[,LIGHT_EL,LIGHT_AZ] in degrees (several angles need --db)")
+    p.add_argument("--azimuth", type=float, help="view azimuth, degrees")
+    p.add_argument("--light-elevation", type=float, help="light elevation, degrees (with --light-azimuth)")
+    p.add_argument("--light-azimuth", type=float, help="light azimuth, degrees")
     p.add_argument("--out", required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--space", choices=SPACES, help="which stored feature space (--db)")
@@ -73,7 +77,46 @@ def _from_db(path: str, space: str | None) -> tuple[dict, str]:
     return by_angle, space
 
 
+def _run_direction(args: argparse.Namespace, direction) -> int:
+    """Several angles: barycentric quantile blending over the stored directions (tools.interp)."""
+    from tools.interp import models_by_direction, synthesize_at_direction
+
+    if not args.db:
+        raise CliError("synth: several angles need --db (a models document holds one angle)")
+    if args.space == "pca":
+        raise CliError("synth --db: pca bases are not stored yet; use --model from `fit --json`")
+    _, space = _from_db(args.db, args.space)
+    with Store.open(args.db, create=False) as store:
+        by_direction = models_by_direction(store, space=space)
+    try:
+        mask = read_mask(args.mask)
+    except ImageError as exc:
+        raise CliError(str(exc)) from None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ExtrapolationWarning)
+        try:
+            bands = synthesize_at_direction(by_direction, mask, direction, np.random.default_rng(args.seed))
+        except (MissingModels, ValueError) as exc:
+            raise CliError(str(exc)) from None
+    for w in caught:
+        print(f"btf-host: warning: {w.message}", file=sys.stderr)
+    try:
+        write_image(args.out, to_rgb(bands.astype(np.uint8), space))
+    except ImageError as exc:
+        raise CliError(str(exc)) from None
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    from tools.interp import requested_direction
+
+    try:
+        direction = requested_direction(args.angle, args.azimuth, args.light_elevation, args.light_azimuth)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if direction is not None:
+        return _run_direction(args, direction)
+    args.angle = float(args.angle)
     pca = None
     if args.db:
         if args.space == "pca":

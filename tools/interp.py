@@ -223,3 +223,21 @@ def synthesize_at_direction(by_direction: Mapping[Direction, Models], mask: np.n
     dirs = list(by_direction)
     weights = DirectionInterpolator(dirs).weights(query)
     return synthesize_blend(mask, [(w, by_direction[dirs[i]]) for i, w in weights], rng, levels)
+
+
+def requested_direction(angle: str, azimuth: float | None = None, light_elevation: float | None = None,
+                        light_azimuth: float | None = None) -> Direction | None:
+    """The direction asked for on the command line; None for a lone elevation (the 1-D path)."""
+    extra = (azimuth, light_elevation, light_azimuth)
+    if "," not in angle and all(v is None for v in extra):
+        try:
+            float(angle)
+        except ValueError:
+            raise ValueError(f"angle {angle!r}: expected EL[,AZ[,LIGHT_EL,LIGHT_AZ]] in degrees") from None
+        return None
+    d = parse_direction(angle)
+    if "," in angle and any(v is not None for v in extra):
+        raise ValueError(f"angle {angle!r}: give the angles either in --angle or as separate options")
+    if "," in angle:
+        return d
+    return Direction(d.elevation, 0.0 if azimuth is None else azimuth, light_elevation, light_azimuth)
