@@ -1,0 +1,133 @@
+"""On-board dependence measurement and its packet entry."""
+from __future__ import annotations
+
+import msgpack
+import numpy as np
+import pytest
+
+from onboard.dependence import LAGS, Dependence, corr_size, measure
+from onboard.fit import FrameFitter
+from radio import FrameError
+from radio import packet as pk
+from radio.packet_dependence import (
+    DEPENDENCE_KEY, decode_dependence, dependence_extras, encode_dependence, packet_dependence,
+)
+
+HEADER = dict(robot_id=1, seq=5, time=10.0, commanded=(60.0, 0.0), measured=(60.0, 0.0),
+              feature_space="rgb")
+
+
+def _fits(image: np.ndarray, labels: np.ndarray):
+    f = FrameFitter(int(labels.max()) + 1, image.shape[2], bins=256)
+    f.add(image, labels)
+    return f.fit(min_count=64)
+
+
+def _ar_image(h: int, w: int, phi: float, mix: float, seed: int) -> np.ndarray:
+    """Three bands sharing an AR(1) field along rows (lag-k correlation phi**k), mixed across bands."""
+    rng = np.random.default_rng(seed)
+    e = rng.standard_normal((3, h, w))
+    f = np.empty_like(e)
+    f[:, :, 0] = e[:, :, 0]
+    for c in range(1, w):
+        f[:, :, c] = phi * f[:, :, c - 1] + np.sqrt(1 - phi**2) * e[:, :, c]
+    z = np.stack([f[0], mix * f[0] + np.sqrt(1 - mix**2) * f[1], f[2]], axis=-1)
+    return np.clip(np.rint(120 + 25 * z), 0, 255).astype(np.uint8)
+
+
+def test_measures_row_autocorrelation_and_band_correlation_of_a_known_field():
+    img = _ar_image(200, 240, phi=0.8, mix=0.7, seed=1)
+    labels = np.zeros(img.shape[:2], dtype=np.int64)
+    models = {k: r.model for k, r in _fits(img, labels).items()}
+    dep = measure(img, labels, models)[0]
+    assert dep.dx == pytest.approx([0.8**k for k in LAGS], abs=0.05)
+    assert dep.dy == pytest.approx([0.0] * len(LAGS), abs=0.05)
+    assert dep.corr == pytest.approx([0.7, 0.0, 0.0], abs=0.05)
+
+
+def test_regions_are_measured_apart_and_pairs_never_cross_a_border():
+    img = _ar_image(120, 160, phi=0.9, mix=0.0, seed=2)
+    noise = np.random.default_rng(3).integers(90, 160, size=img.shape, dtype=np.uint8)
+    labels = np.zeros(img.shape[:2], dtype=np.int64)
+    labels[:, 80:] = 1
+    img[:, 80:] = noise[:, 80:]
+    models = {k: r.model for k, r in _fits(img, labels).items()}
+    deps = measure(img, labels, models)
+    assert deps[0].dx[0] > 0.8
+    assert abs(deps[1].dx[0]) < 0.06  # white noise region: no grain borrowed from its neighbour
+
+
+def test_constant_band_and_tiny_region_report_independence_not_nan():
+    img = np.full((40, 40, 2), 7, dtype=np.uint8)
+    img[..., 1] = np.random.default_rng(4).integers(0, 255, size=(40, 40))
+    labels = np.zeros((40, 40), dtype=np.int64)
+    models = {k: r.model for k, r in _fits(img, labels).items()}
+    dep = measure(img, labels, models)[0]
+    assert dep.corr == (0.0,)
+    assert all(np.isfinite(dep.dx)) and all(np.isfinite(dep.dy))
+
+
+def test_anchor_budget_bounds_the_work_but_keeps_the_estimate():
+    img = _ar_image(200, 240, phi=0.8, mix=0.5, seed=5)
+    labels = np.zeros(img.shape[:2], dtype=np.int64)
+    models = {k: r.model for k, r in _fits(img, labels).items()}
+    dep = measure(img, labels, models, max_anchors=4096, chunk=512)[0]
+    assert dep.dx[0] == pytest.approx(0.8, abs=0.06)
+
+
+def test_blob_round_trips_within_one_step_and_marks_absent_labels():
+    deps = {2: Dependence((0.5, -0.25, 1.0), (0.9, 0.7, 0.3, 0.0), (0.8, -0.1, 0.0, 0.05))}
+    blob = encode_dependence(deps, [2, 5], 3)
+    back = decode_dependence(blob, [2, 5], 3)
+    assert set(back) == {2}
+    for a, b in zip((*deps[2].corr, *deps[2].dx, *deps[2].dy), (*back[2].corr, *back[2].dx, *back[2].dy)):
+        assert abs(a - b) <= 0.5 / 127 + 1e-12
+
+
+@pytest.mark.parametrize("blob, reason", [
+    (b"\x00" * 10, "expected"),
+    (b"\x80" + b"\x00" * 10, "-128"),
+    ("text", "binary"),
+])
+def test_bad_blobs_are_refused_with_a_reason(blob, reason):
+    with pytest.raises(FrameError, match=reason):
+        decode_dependence(blob, [0], 3)
+
+
+def _fit_stub(n_labels: int):
+    img = _ar_image(64, 64, 0.5, 0.5, seed=6)
+    labels = (np.arange(64)[None, :] * n_labels // 64).repeat(64, axis=0)
+    return _fits(img, labels), labels, img
+
+
+@pytest.mark.parametrize("n_labels", [1, 2, 4, 8, 16])
+def test_packet_grows_11_bytes_per_rgb_region_plus_at_most_7(n_labels):
+    fits, labels, img = _fit_stub(n_labels)
+    models = {k: r.model for k, r in fits.items()}
+    deps = measure(img, labels, models)
+    regions = sorted({lab for lab, _ in fits})
+    plain = pk.encode_models(fits, bands=("R", "G", "B"), **HEADER)
+    extras = dependence_extras(deps, regions, 3)
+    rich = pk.encode_models(fits, bands=("R", "G", "B"), extras=extras, **HEADER)
+    growth = len(rich) - len(plain)
+    # 11 bytes a region; the entry itself costs 7 (array and map headers, key, blob header).
+    assert 11 * len(regions) < growth <= 11 * len(regions) + 7
+    if len(regions) >= 2:
+        assert growth <= 16 * len(regions)
+    packet = pk.decode(rich)
+    got = packet_dependence(packet)
+    assert set(got) == set(deps)
+    assert corr_size(3) + 2 * len(LAGS) == len(packet.extras[DEPENDENCE_KEY]) // len(regions)
+
+
+def test_a_packet_without_the_entry_has_no_dependence():
+    fits, _, _ = _fit_stub(2)
+    assert packet_dependence(pk.decode(pk.encode_models(fits, bands=("R", "G", "B"), **HEADER))) == {}
+
+
+def test_oversized_dependence_entry_is_refused_by_the_decoder():
+    fits, _, _ = _fit_stub(1)
+    body = msgpack.unpackb(pk.encode_models(fits, bands=("R", "G", "B"), **HEADER))
+    body.append({DEPENDENCE_KEY: b"\x00" * (256 * 128 + 1)})
+    with pytest.raises(FrameError, match="longer"):
+        pk.decode(msgpack.packb(body, use_bin_type=True))
