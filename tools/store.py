@@ -15,14 +15,24 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from onboard.dependence import Dependence
 from onboard.johnson import Family, Johnson
 from tools.images import decode_png, encode_png
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
+# Per region: band correlations and autocorrelation at onboard.dependence.LAGS (JSON lists).
+_DEPENDENCE = """
+CREATE TABLE dependence (
+    capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
+    label INTEGER NOT NULL,
+    corr TEXT NOT NULL, dx TEXT NOT NULL, dy TEXT NOT NULL,
+    PRIMARY KEY (capture, label)
+);
+"""
 _SCHEMA = """
 CREATE TABLE captures (
     id INTEGER PRIMARY KEY,
@@ -60,7 +70,7 @@ CREATE TABLE masks (
     data BLOB NOT NULL,
     UNIQUE (robot, key)
 );
-"""
+""" + _DEPENDENCE
 _TABLES = {"captures", "models", "masks"}
 # Upgrades from the keyed version to the next; each keeps every existing row.
 _MIGRATIONS: dict[int, str] = {
@@ -69,6 +79,8 @@ _MIGRATIONS: dict[int, str] = {
        "ALTER TABLE captures ADD COLUMN light_azimuth REAL;"
        "ALTER TABLE captures ADD COLUMN source TEXT;"
        "CREATE INDEX captures_by_source ON captures (robot, source);",
+    # grain and band correlation per region (onboard.dependence)
+    2: _DEPENDENCE,
 }
 
 
@@ -202,6 +214,7 @@ class Store:
         scene: str = "",
         illumination: Any = None,
         source: str | None = None,
+        dependence: Mapping[int, Dependence] | None = None,
     ) -> bool:
         """Stores one capture with its models; False if (robot, sequence) was already there.
         `illumination` is the light's (elevation, azimuth) when known; `source` the image file."""
@@ -239,6 +252,11 @@ class Store:
                 " p0, p1, p2, p3, z, count, beta1, beta2, censored_low, censored_high)"
                 " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 [(cid, *row) for row in rows],
+            )
+            self._conn.executemany(
+                "INSERT INTO dependence (capture, label, corr, dx, dy) VALUES (?,?,?,?,?)",
+                [(cid, int(lab), json.dumps(list(d.corr)), json.dumps(list(d.dx)), json.dumps(list(d.dy)))
+                 for lab, d in sorted((dependence or {}).items())],
             )
             self._conn.execute("COMMIT")
             return True
@@ -333,6 +351,26 @@ class Store:
                 latest[c.elevation] = c
         return {a: {(m.label, m.band): m.model for m in self.models(c.id)}
                 for a, c in sorted(latest.items())}
+
+    def dependence(self, capture: int) -> dict[int, Dependence]:
+        """The per-region dependence stored with a capture ({} when it carried none)."""
+        out = {}
+        for label, corr, dx, dy in self._conn.execute(
+                "SELECT label, corr, dx, dy FROM dependence WHERE capture = ? ORDER BY label", (capture,)):
+            try:
+                out[int(label)] = Dependence(*(tuple(float(v) for v in json.loads(x)) for x in (corr, dx, dy)))
+            except (ValueError, TypeError) as exc:
+                raise CorruptDatabase(f"database {self.path}: bad dependence for capture {capture}: {exc}") from None
+        return out
+
+    def dependence_by_angle(self, robot: str | None = None, space: str | None = None,
+                            scene: str | None = None) -> dict[float, dict[int, Dependence]]:
+        """For every measured elevation, the dependence of the capture models_by_angle uses."""
+        latest: dict[float, Capture] = {}
+        for c in self.captures(robot, space, scene):
+            if c.elevation not in latest or c.id > latest[c.elevation].id:
+                latest[c.elevation] = c
+        return {a: self.dependence(c.id) for a, c in sorted(latest.items())}
 
     def models_at(self, angle: float, robot: str | None = None, space: str | None = None,
                   scene: str | None = None, tolerance: float = 0.5) -> dict[tuple[int, int], Johnson]:
