@@ -1,0 +1,42 @@
+"""The end-to-end demo at reduced size: robots over a pty and a lossy radio, and the bars."""
+from pathlib import Path
+
+import pytest
+
+from tools.demo import DemoConfig, run_demo
+
+
+@pytest.fixture(scope="module")
+def result(tmp_path_factory):
+    out = tmp_path_factory.mktemp("demo")
+    return run_demo(out, DemoConfig(size=(48, 64), elevations=(30.0, 40.0, 50.0, 60.0)), progress=False)
+
+
+def test_every_pose_of_every_plate_crossed_the_lossy_link_into_the_database(result):
+    assert result.captures == {"black": 5, "white": 5, "mixed": 5}
+    assert result.link["delivered"] >= 15
+    assert (Path(result.db).parent / "report" / "index.html").is_file()
+
+
+def test_mixed_plate_reproduction_reaches_95_percent_of_the_two_seed_ceiling(result):
+    assert len(result.mixed) == 4
+    for row in result.mixed:
+        for band, value in row["synthetic"].items():
+            assert value >= 0.95 * row["ceiling"][band], (row["angle"], band)
+
+
+def test_unseen_angle_interpolation_beats_the_nearest_angle_and_stays_near_its_own_fit(result):
+    for plate, u in result.unseen.items():
+        assert u["interpolated"] <= 1.5 * u["fitted"], plate
+        assert u["interpolated"] < u["nearest"], plate
+
+
+def test_johnson_has_the_lowest_histogram_error_of_its_peers(result):
+    for scene, t in result.pdfs.items():
+        assert t["johnson"] < min(t["gaussian"], t["uniform"], t["weibull"]), scene
+
+
+def test_table1_covers_every_mask_method_in_both_spaces(result):
+    assert {(r["method"], r["space"]) for r in result.table1} == {
+        (m, s) for m in ("true", "isodata5", "isodata8", "kmeans", "felzenszwalb") for s in ("rgb", "hsv")}
+    assert all(-1.0 <= v <= 1.0 for r in result.table1 for v in r["correlation"].values())

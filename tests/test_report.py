@@ -1,0 +1,43 @@
+"""The HTML report: images, histograms and tables from a database; bad databases refused."""
+from tests.test_receiver import models_body
+from radio import packet as pk
+from tools.cli import main
+from tools.receiver import Receiver
+from tools.report import write_report
+from tools.store import Store
+
+
+def filled(path):
+    with Store.open(path) as s:
+        rx = Receiver(s, scene="mixed")
+        body, _, mask = models_body(1, 50.0)
+        rx.handle(pk.encode_mask(mask, robot_id=3, seq=1))
+        rx.handle(body)
+        rx.handle(models_body(2, 70.0)[0])  # no mask of its own: uses capture 1's
+    return path
+
+
+def test_report_has_the_captures_models_synthetic_images_and_histograms(tmp_path):
+    db = filled(tmp_path / "scene.db")
+    with Store.open(db) as s:
+        html = write_report(s, tmp_path / "rep").read_text()
+    assert html.count("<h3>") == 2
+    assert "SU" in html or "SB" in html or "SL" in html or "NORMAL" in html.upper()
+    pngs = sorted(p.name for p in (tmp_path / "rep").glob("*.png"))
+    assert len([p for p in pngs if p.endswith("_synthetic.png")]) == 2
+    assert len([p for p in pngs if p.endswith("_hist.png")]) == 2
+
+
+def test_report_cli_refuses_missing_corrupt_and_empty_databases(tmp_path, capsys):
+    assert main(["report", "--db", str(tmp_path / "none.db"), "--out", str(tmp_path / "r")]) == 2
+    bad = tmp_path / "bad.db"
+    bad.write_bytes(b"garbage" * 50)
+    assert main(["report", "--db", str(bad), "--out", str(tmp_path / "r")]) == 2
+    assert bad.read_bytes() == b"garbage" * 50
+    with Store.open(tmp_path / "empty.db"):
+        pass
+    assert main(["report", "--db", str(tmp_path / "empty.db"), "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 3 and "no such file" in err[0] and "not an SQLite" in err[1] and "no captures" in err[2]
+    assert main(["report", "--db", str(filled(tmp_path / "ok.db")), "--out", str(tmp_path / "r")]) == 0
+    assert (tmp_path / "r" / "index.html").is_file()
