@@ -13,26 +13,29 @@ from itertools import permutations
 
 import numpy as np
 
+from benchmarks.common import Context, Section
 from onboard.features import FeatureSpace, FeatureSpec, PcaBasis, compute
 from onboard.isodata import IsodataParams, isodata
 from onboard.segment import downsample_labels
 
 SIDE = 1000
 REPEATS = 5
+_REPEATS = [REPEATS]  # this run's repeat count
 CLUTTER = np.array([[194, 178, 128], [86, 125, 70], [112, 84, 62], [150, 150, 140]], float)
 
 
-def _scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+def _scene(seed: int = 0, side: int = SIDE) -> tuple[np.ndarray, np.ndarray]:
     """Four clutter types in irregular patches, with grain noise and shading."""
     rng = np.random.default_rng(seed)
     coarse = rng.integers(0, 4, (10, 10))
-    truth = np.kron(coarse, np.ones((SIDE // 10, SIDE // 10), np.int64))
-    shade = np.linspace(0.85, 1.1, SIDE)[None, :, None]
-    img = CLUTTER[truth] * shade + rng.normal(0, 9, (SIDE, SIDE, 3))
+    truth = np.kron(coarse, np.ones((side // 10, side // 10), np.int64))
+    shade = np.linspace(0.85, 1.1, side)[None, :, None]
+    img = CLUTTER[truth] * shade + rng.normal(0, 9, (side, side, 3))
     return np.clip(img, 0, 255).astype(np.uint8), truth
 
 
-def _best(fn, repeats: int = REPEATS) -> float:
+def _best(fn, repeats: int | None = None) -> float:
+    repeats = repeats or _REPEATS[0]
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
@@ -52,13 +55,13 @@ def _label_error(labels: np.ndarray, truth: np.ndarray) -> float:
     return 1.0 - best / truth.size
 
 
-def run() -> list[str]:
-    frame, truth = _scene()
+def run(ctx: Context | None = None) -> list[str]:
+    ctx = ctx or Context()
+    side, _REPEATS[0] = ctx.pick((SIDE, REPEATS), (100, 1))
+    frame, truth = _scene(side=side)
     band = frame[..., 1].ravel()
     ref = _best(lambda: np.percentile(band, (5, 25, 50, 75, 95)))
     lines = [
-        "## On-board features and segmentation (1 MP RGB frame)",
-        "",
         f"Yardstick: one `np.percentile` over a 1M-value band = {ref * 1e3:.1f} ms. "
         "The whole capture (this plus fit and encode) should stay within 4x.",
         "",
@@ -79,7 +82,7 @@ def run() -> list[str]:
     row("features pca (apply)", _best(lambda: compute(frame, FeatureSpec(FeatureSpace.PCA), pca=basis)))
 
     rgb = compute(frame, FeatureSpec(FeatureSpace.RGB))
-    for sub in (2000, 5000, 20000):
+    for sub in ctx.pick((2000, 5000, 20000), (2000,)):
         params = IsodataParams(k=4, subsample=sub, split_std=20, merge_distance=25)
         t = _best(lambda: isodata(rgb.data, params))
         err = _label_error(isodata(rgb.data, params).labels, truth)
@@ -93,8 +96,8 @@ def run() -> list[str]:
     hsv_total = _best(lambda: isodata(compute(frame, FeatureSpec(FeatureSpace.HSV)).data, params))
     row("hsv features + isodata (20k)", hsv_total)
     lines.append("")
-    return lines
+    return [Section("On-board features and segmentation (1 MP RGB frame)", lines)]
 
 
 if __name__ == "__main__":
-    print("\n".join(run()))
+    print("\n".join(run()[0].markdown()))

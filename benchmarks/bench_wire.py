@@ -11,6 +11,7 @@ import time
 
 import numpy as np
 
+from benchmarks.common import Context, Section
 from onboard.fit import PercentileCodec, fit_histogram, model_from_percentiles
 from radio.packet import decode, encode_models
 
@@ -81,26 +82,28 @@ def _best_time(fn, repeat: int = 5, number: int = 20) -> float:
     return best
 
 
-def run() -> list[str]:
+def run(ctx: Context | None = None) -> list[str]:
+    ctx = ctx or Context()
     header = dict(robot_id=1, seq=123_456, time=1.7e9, commanded=(45.0, 30.0),
                   measured=(44.9, 30.1), feature_space="rgb", bands=BANDS)
-    lines = ["## Wire: bytes per capture against quantization error", "",
+    lines = [
              f"MODELS body bytes for {len(BANDS)} bands (16-bit codes on the wire; "
              "8/12-bit: same body with codes bit-packed at that width).", "",
              "| labels | models | " + " | ".join(f"{b}-bit codes" for b in CODE_BITS)
              + " | encode µs | decode µs |",
              "|---:|---:|" + "---:|" * (len(CODE_BITS) + 2)]
-    for n in LABEL_COUNTS:
+    for n in ctx.pick(LABEL_COUNTS, (1, 2)):
         fits = _fits(n)
         body = encode_models(fits, **header)
         models = n * len(BANDS)
         sizes = [len(body) - models * 8 + math.ceil(models * 4 * b / 8) for b in CODE_BITS]
-        t_enc = _best_time(lambda: encode_models(fits, **header))
-        t_dec = _best_time(lambda: decode(body))
+        reps = ctx.pick((5, 20), (1, 1))
+        t_enc = _best_time(lambda: encode_models(fits, **header), *reps)
+        t_dec = _best_time(lambda: decode(body), *reps)
         lines.append(f"| {n} | {models} | " + " | ".join(str(s) for s in sizes)
                      + f" | {t_enc * 1e6:.0f} | {t_dec * 1e6:.0f} |")
-    hists = _histograms(60, seed=1)
-    lines += ["", "Quantization error in gray levels (60 fitted 8-bit histograms, against 32-bit codes):",
+    hists = _histograms(ctx.pick(60, 4), seed=1)
+    lines += ["", f"Quantization error in gray levels ({len(hists)} fitted 8-bit histograms, against 32-bit codes):",
               "", "| code bits | step | max percentile error | max model error, fitted range "
               "| median model error | max model error |",
               "|---:|---:|---:|---:|---:|---:|"]
@@ -110,8 +113,8 @@ def run() -> list[str]:
                      f"| {m_med:.2e} | {m_max:.2e} |")
     lines += ["", "Model error: max of |ppf(u) - ppf_ref(u)| over u in [Phi(-3z), Phi(3z)] "
               "(fitted range) or over u in [0.001, 0.999] (median and max over the histograms).", ""]
-    return lines
+    return [Section("Wire: bytes per capture against quantization error", lines)]
 
 
 if __name__ == "__main__":
-    print("\n".join(run()))
+    print("\n".join(run()[0].markdown()))

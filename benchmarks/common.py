@@ -71,8 +71,11 @@ def figure(ncols: int = 1, nrows: int = 1, size: tuple[float, float] = (6.4, 4.2
 def save(fig, ctx: Context, name: str) -> str:
     """Write the figure as `name` under ctx.out; the markdown image line for RESULTS.md."""
     import matplotlib.pyplot as plt
+    import warnings
     ctx.out.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # colorbar axes do not take part in tight_layout
+        fig.tight_layout()
     fig.savefig(ctx.out / name, dpi=90)
     plt.close(fig)
     return f"![{name}]({name})"
