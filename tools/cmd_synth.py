@@ -30,6 +30,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--out", required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--space", choices=SPACES, help="which stored feature space (--db)")
+    p.add_argument("--independent", action="store_true",
+                   help="draw every pixel on its own even when grain and band correlation are stored")
     return p
 
 
@@ -118,11 +120,15 @@ def run(args: argparse.Namespace) -> int:
         return _run_direction(args, direction)
     args.angle = float(args.angle)
     pca = None
+    dependence: dict = {}
     if args.db:
         if args.space == "pca":
             raise CliError("synth --db: pca bases are not stored yet; use --model from `fit --json`")
         by_angle, space = _from_db(args.db, args.space)
         levels = 256
+        if not args.independent:
+            with Store.open(args.db, create=False) as store:
+                dependence = store.dependence_by_angle(space=space)
     else:
         by_angle, space, levels, pca_rec = _from_json(args.model)
         pca = PcaBasis.from_record(pca_rec) if pca_rec else None
@@ -136,7 +142,8 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ExtrapolationWarning)
         try:
-            bands = synthesize_at(by_angle, mask, angle, np.random.default_rng(args.seed), levels)
+            bands = synthesize_at(by_angle, mask, angle, np.random.default_rng(args.seed), levels,
+                                  dependence=dependence, independent=args.independent)
         except MissingModels as exc:
             raise CliError(str(exc)) from None
     for w in caught:
