@@ -110,3 +110,31 @@ def test_interpolation_blends_dependence_and_the_flag_turns_it_off():
     assert np.abs(_autocorr(off, inside)[:, :, 0]).max() < 0.05
     half = interpolate(models, models, 0.5, labels, np.random.default_rng(3), dependence=(dep, None))
     assert np.abs(_autocorr(half, inside)[:, :, 0] - want).max() <= 0.1
+
+
+def test_store_keeps_dependence_and_synth_cli_uses_it_unless_independent(tmp_path):
+    from tools import cli
+    from tools.images import decode_png, encode_png
+    from tools.store import Store
+
+    img, labels = _case("white")
+    f = FrameFitter(int(labels.max()) + 1, 3, bins=256)
+    f.add(img, labels)
+    results = f.fit(min_count=64)
+    deps = measure(img, labels, {k: r.model for k, r in results.items()})
+    db = tmp_path / "c.db"
+    with Store.open(db) as store:
+        assert store.add_capture("bot", 1, 0.0, None, (60.0, 0.0), "rgb", ("R", "G", "B"), results,
+                                 dependence=deps)
+        assert store.dependence_by_angle() == {60.0: deps}
+    (tmp_path / "mask.png").write_bytes(encode_png(labels.astype(np.uint8)))
+    outs = {}
+    for flag in ([], ["--independent"]):
+        out = tmp_path / f"out{len(flag)}.png"
+        assert cli.main(["synth", "--db", str(db), "--mask", str(tmp_path / "mask.png"), "--angle", "60",
+                         "--out", str(out), *flag]) == 0
+        outs[bool(flag)] = decode_png(out.read_bytes())
+    inside = labels == 2
+    want = _autocorr(img, inside)[:, :, 0]
+    assert np.abs(_autocorr(outs[False], inside)[:, :, 0] - want).max() <= 0.1
+    assert np.abs(_autocorr(outs[True], inside)[:, :, 0]).max() < 0.05
