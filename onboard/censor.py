@@ -36,6 +36,9 @@ MARGIN = 0.01
 EXCESS = 1.1
 NOISE_SDS = 4.0
 MIN_CENSORED_PIXELS = 8
+# Smaller censored fractions are not reported unless they moved the percentiles: they cannot
+# matter to the model and would cost packet bytes.
+MIN_REPORTED = 0.005
 
 
 @dataclass(frozen=True, slots=True)

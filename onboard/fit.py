@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.censor import censored_counts, fallback_probs, place, quantize
+from onboard.censor import MIN_REPORTED, Placement, censored_counts, fallback_probs, place, quantize
 from onboard.johnson import Johnson
-from onboard.percentile import contains, model_from_percentiles, sl_band
+from onboard.percentile import model_from_percentiles, sl_band, support_of
 
 __all__ = [
     "Z_LADDER", "FitResult", "PercentileCodec", "fit_histogram", "fit_values",
@@ -58,8 +58,8 @@ class FitResult:
     censored_low: float = 0.0
     censored_high: float = 0.0
     fallback: bool = False  # the normal through the censor limits (onboard.censor)
-    # Points the support was widened to contain (None when the fitted support held the data).
-    support: tuple[float, float] | None = None
+    # Points the support was widened to reach, low and high (None: that side held the data).
+    support: tuple[float | None, float | None] | None = None
 
 
 class PercentileCodec:
@@ -197,6 +197,8 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
         low = quantize(float(low_n[i]) / count) if censor else 0.0
         high = quantize(float(high_n[i]) / count) if censor else 0.0
         where = place(z, low, high, count, Z_LADDER)
+        if where == Placement(z) and max(low, high) < MIN_REPORTED:
+            low = high = 0.0
         normal_probs = None
         if where.fallback:
             normal_probs = fallback_probs(low, high)
@@ -209,10 +211,12 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
             pct = codec.snap(histogram_percentiles(counts[i], probs, lo, bin_width, cum[i]))
         model = model_from_percentiles(pct, where.z, count, shift=where.shift, normal_probs=normal_probs)
         support = None
-        # Bounded supports must hold every occupied bin: a quarter bin beyond each end.
-        ends = codec.snap([lo + bin_width * (f0 - 0.75)] * 2 + [lo + bin_width * (f1 + 0.75)] * 2)
-        if not contains(model, (ends[0], ends[3])):
-            support = (ends[0], ends[3])
+        # Bounded supports must reach the centre of every occupied bin (so each has mass); only
+        # the side that falls short is recorded (it travels).
+        ends = codec.snap([lo + bin_width * f0] * 2 + [lo + bin_width * f1] * 2)
+        s_lo, s_hi = support_of(model)
+        if s_lo > ends[0] or s_hi < ends[3]:
+            support = (ends[0] if s_lo > ends[0] else None, ends[3] if s_hi < ends[3] else None)
             model = model_from_percentiles(pct, where.z, count, shift=where.shift,
                                            normal_probs=normal_probs, support=support)
         out.append(FitResult(model, count, where.z, pct, float(beta1[i]), float(beta2[i]),

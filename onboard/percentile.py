@@ -17,6 +17,8 @@ _BAND_SD = 4.0
 _BAND_FLOOR = 1e-6
 # Gaps below this fraction of the span are lifted to it: no ratio can overflow.
 _GAP_FLOOR = 1e-9
+# Points a support must reach, low and high; None where nothing is asked.
+Support = tuple[float | None, float | None]
 # The censored fallback's two normal deviates are kept at least this far apart.
 _MIN_DZ = 0.01
 
@@ -28,14 +30,14 @@ def sl_band(count: int) -> float:
 
 def model_from_percentiles(percentiles, z: float, count: int, *, shift: float = 0.0,
                            normal_probs: tuple[float, float] | None = None,
-                           support: tuple[float, float] | None = None) -> Johnson:
+                           support: Support | None = None) -> Johnson:
     """The Johnson model through the four percentiles x(s-3z), x(s-z), x(s+z), x(s+3z).
 
     `shift` s moves the four points along the normal scale (censored data: keep them out of
     the pile-up); the symmetric forms still apply with gamma lowered by s. `normal_probs`
     (pa, pe) instead asks for the normal with P(X < a) = pa and P(X < e) = pe (the censored
-    fallback, see onboard.fit). `support` (lo, hi): points a bounded support must contain
-    (see `widen`). Deterministic: the host calls it on the transmitted values to recompute
+    fallback, see onboard.fit). `support` (lo, hi): points a bounded support must contain,
+    None for a side without a requirement (see `widen`). Deterministic: the host calls it on the transmitted values to recompute
     the robot's model bit for bit. All four equal means a constant region.
     """
     if len(percentiles) != 4:
@@ -114,38 +116,41 @@ def support_of(model: Johnson) -> tuple[float, float]:
     return -math.inf, math.inf
 
 
-def contains(model: Johnson, support: tuple[float, float]) -> bool:
+def contains(model: Johnson, support: Support) -> bool:
+    """True if the model's support reaches both points (a None side asks nothing)."""
     lo, hi = support_of(model)
-    return model.family is Family.CONST or (lo <= support[0] and hi >= support[1])
+    return model.family is Family.CONST or (
+        (support[0] is None or lo <= support[0]) and (support[1] is None or hi >= support[1]))
 
 
-def widen(model: Johnson, support: tuple[float, float], a: float, e: float) -> Johnson:
-    """A bounded model whose support misses (lo, hi) gets its bounds moved out to them, and
-    gamma and delta re-solved so that the outer percentiles a < e keep their z: the bulk of
-    the fit stays where the data put it. Deterministic, so the receiver repeats it."""
+def widen(model: Johnson, support: Support, a: float, e: float) -> Johnson:
+    """A bounded model whose support misses (lo, hi), stretched (an affine map, so the family,
+    gamma and delta stay) just enough to hold them: SB maps its old bounds onto the widened
+    ones, SL pivots about its far outer percentile (e, or a when reflected). The quantile
+    function moves by at most the distance the bound moved. Deterministic, so the receiver
+    repeats it."""
     if contains(model, support):
         return model
-    lo, hi = min(support), max(support)
-    za, ze = float(model.z_of_x(a)), float(model.z_of_x(e))
+    lo, hi = support
     try:
         if model.family is Family.SB:
             old_lo, old_hi = support_of(model)
-            new_lo, new_hi = min(old_lo, lo), max(old_hi, hi)
-            ga = math.log(a - new_lo) - math.log(new_hi - a)
-            ge = math.log(e - new_lo) - math.log(new_hi - e)
-            delta = (ze - za) / (ge - ga)
-            out = _checked(Family.SB, za - delta * ga, delta, new_lo, new_hi - new_lo)
-        else:  # SL: move the threshold
-            sign = 1.0 if model.lam > 0 else -1.0
-            xi = min(model.xi, lo) if sign > 0 else max(model.xi, hi)
-            ga, ge = math.log((a - xi) / model.lam), math.log((e - xi) / model.lam)
-            delta = (ze - za) / (sign * (ge - ga))
-            out = _checked(Family.SL, za - sign * delta * ga, delta, xi, model.lam)
+            new_lo = old_lo if lo is None else min(old_lo, lo)
+            new_hi = old_hi if hi is None else max(old_hi, hi)
+            out = _checked(Family.SB, model.gamma, model.delta, new_lo, new_hi - new_lo)
+        elif model.lam > 0 and lo is not None:  # SL: threshold below the data
+            scale = (e - lo) / (e - model.xi)
+            out = _checked(Family.SL, model.gamma, model.delta, lo, model.lam * scale)
+        elif model.lam < 0 and hi is not None:  # reflected SL: threshold above the data
+            scale = (hi - a) / (model.xi - a)
+            out = _checked(Family.SL, model.gamma, model.delta, hi, model.lam * scale)
+        else:
+            out = None
     except (OverflowError, ValueError, ZeroDivisionError):
         out = None
-    if out is None or not contains(out, (lo, hi)):
-        # Only for degenerate points (a == e, or a percentile on a bound): the normal through
-        # the same centre and spread contains every value.
+    if out is None or not contains(out, support):
+        # Only for degenerate points (a percentile on a bound): the normal through the same
+        # centre and spread contains every value.
         centre, spread = float(model.x_of_z(0.0)), float(model.x_of_z(1.0) - model.x_of_z(-1.0))
         out = Johnson.normal(centre, max(0.5 * spread, _GAP_FLOOR * (abs(centre) + 1.0)))
     return out

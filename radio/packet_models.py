@@ -11,12 +11,20 @@ percentile is within 2**-9 < 0.01 gray level of the fitter's float value.
 Wire fields after [version, kind]:
   MODELS    robot, seq, time, cmd_el, cmd_az, meas_el, meas_az, feature_space, [bands],
             levels, labels_blob (>BBI per label: label, z index, count),
-            codes_blob (per label, per band, 4 codes), censored (nil | >HH per label) [, extras]
+            codes_blob (per label, per band, 4 codes), tails (nil | records) [, extras]
   UNCHANGED robot, seq, time, cmd_el, cmd_az, meas_el, meas_az, ref_seq [, extras]
 Angles are integer centidegrees (0.01 degree); censored fractions are 1/65535 fixed point.
+
+Tails: only the rare models that are not plain "label's z, no shift, nothing censored, support
+as fitted" get a record, so an ordinary model stays at 8 bytes. A record is >H (model index
+= label position * bands + band, times 16, plus flags), then with flag CENSORED >BbHH (z index,
+shift code in 1/32, censored low and high), then with SUPPORT_LOW the lowest and with
+SUPPORT_HIGH the highest occupied level (B up to 256 levels, else H): the fitted support fell
+short of it and was widened (onboard.fit). A support-only record costs 3 bytes. Flag FALLBACK (with CENSORED) marks the normal fallback of onboard.censor.
 """
 from __future__ import annotations
 
+import enum
 import math
 import struct
 from collections.abc import Mapping, Sequence
@@ -25,6 +33,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from onboard.censor import CENSOR_SCALE, MAX_SHIFT_CODE, SHIFT_SCALE, fallback_probs
 from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percentiles
 from onboard.johnson import Johnson
 from radio import FrameError
@@ -36,21 +45,53 @@ MAX_LABELS = 256
 MAX_BANDS = 16
 MAX_NAME = 16
 MIN_LEVELS, MAX_LEVELS = 2, 65536  # PercentileCodec.for_levels' range
-CENSOR_SCALE = 65535
 _LABEL = struct.Struct(">BBI")
-_CENSOR = struct.Struct(">HH")
+_TAIL_HEAD = struct.Struct(">H")
+_CENSOR = struct.Struct(">BbHH")
+
+
+class TailFlag(enum.IntFlag):
+    CENSORED = 1
+    FALLBACK = 2
+    SUPPORT_LOW = 4
+    SUPPORT_HIGH = 8
+
+
+@dataclass(frozen=True, slots=True)
+class Tail:
+    """A model's placement when it differs from its label's plain one (see module doc)."""
+
+    z_index: int
+    shift_code: int = 0
+    censored_low: float = 0.0
+    censored_high: float = 0.0
+    fallback: bool = False
+    support_low: int | None = None  # lowest occupied level, when the support was widened to it
+    support_high: int | None = None
 
 
 @dataclass(frozen=True, slots=True)
 class LabelModels:
-    """One region's wire record: shared fields, then four percentile codes per band."""
+    """One region's wire record: shared fields, four percentile codes per band, and a Tail
+    (or None) per band."""
 
     label: int
     count: int
     z_index: int
     codes: tuple[tuple[int, int, int, int], ...]
-    censored_low: float = 0.0
-    censored_high: float = 0.0
+    tails: tuple[Tail | None, ...] = ()
+
+    @property
+    def censored_low(self) -> float:
+        """The largest censored fraction at the low end over the label's bands."""
+        return max((t.censored_low for t in self.tails if t is not None), default=0.0)
+
+    @property
+    def censored_high(self) -> float:
+        return max((t.censored_high for t in self.tails if t is not None), default=0.0)
+
+    def tail(self, band: int) -> Tail | None:
+        return self.tails[band] if band < len(self.tails) else None
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,12 +117,13 @@ class ModelsPacket:
         if codes.size and (codes.min() < 0 or codes.max() > np.iinfo(dtype).max):
             raise ValueError(f"percentile codes do not fit {dtype}")
         labels = b"".join(_LABEL.pack(x.label, x.z_index, x.count) for x in self.labels)
-        censored = None
-        if any(x.censored_low or x.censored_high for x in self.labels):
-            censored = b"".join(
-                _CENSOR.pack(_censor_code(x.censored_low), _censor_code(x.censored_high))
-                for x in self.labels
-            )
+        code = struct.Struct(">B" if self.levels <= 256 else ">H")
+        records = []
+        for i, lab in enumerate(self.labels):
+            for band, t in enumerate(lab.tails):
+                if t is not None:
+                    records.append(_tail_bytes(i * len(self.bands) + band, t, code))
+        censored = b"".join(records) if records else None
         return [
             self.robot_id, self.seq, float(self.time),
             *angles_to_wire(self.commanded, "commanded"), *angles_to_wire(self.measured, "measured"),
@@ -118,7 +160,7 @@ class ModelsPacket:
             raise FrameError("percentile codes decrease within a model")
         if codes.size and codes.max() > (1 << codec.bits) - 1:
             raise FrameError(f"percentile code exceeds {codec.bits}-bit range")
-        censored = _censored(f[12], n)
+        tails = _tails(f[12], n, len(bands), struct.Struct(">B" if levels <= 256 else ">H"), levels)
         records, last = [], -1
         for i, (label, z_index, count) in enumerate(_LABEL.iter_unpack(label_blob)):
             if label <= last:
@@ -127,8 +169,7 @@ class ModelsPacket:
             if z_index >= len(Z_LADDER):
                 raise FrameError(f"z ladder index {z_index} outside 0..{len(Z_LADDER) - 1}")
             records.append(LabelModels(
-                label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]),
-                *censored[i],
+                label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]), tails[i],
             ))
         packet = cls(robot, seq, t, commanded, measured, space, bands, levels, tuple(records), extras)
         if compute:
@@ -187,15 +228,21 @@ def models_packet(
         per_band = [fits.get((label, b)) for b in range(len(bands))]
         if any(r is None for r in per_band):
             raise ValueError(f"label {label} lacks a model for some of the {len(bands)} bands")
-        if len({r.count for r in per_band}) != 1 or len({r.z for r in per_band}) != 1:
-            raise ValueError(f"label {label}: bands disagree on pixel count or z")
-        if per_band[0].z not in Z_LADDER:
-            raise ValueError(f"label {label}: z = {per_band[0].z} is not on the z ladder")
-        low, high = censored.get(label, (0.0, 0.0))
+        if len({r.count for r in per_band}) != 1:
+            raise ValueError(f"label {label}: bands disagree on pixel count")
+        for r in per_band:
+            if r.z not in Z_LADDER:
+                raise ValueError(f"label {label}: z = {r.z} is not on the z ladder")
+        plain = [r for r in per_band if not _special(r)]
+        z = (plain or per_band)[0].z
+        override = censored.get(label)
+        if override is not None:
+            for v in override:
+                _censor_code(v)
         records.append(LabelModels(
-            label, int(per_band[0].count), Z_LADDER.index(per_band[0].z),
+            label, int(per_band[0].count), Z_LADDER.index(z),
             tuple(tuple(int(c) for c in codec.encode(r.percentiles)) for r in per_band),
-            float(low), float(high),
+            tuple(_tail_of(r, z, override, codec) for r in per_band),
         ))
     if len(fits) != len(records) * len(bands):
         raise ValueError("fits hold band indices outside the band list")
@@ -205,34 +252,125 @@ def models_packet(
     )
 
 
+def _special(r: FitResult) -> bool:
+    return bool(r.shift or r.censored_low or r.censored_high or r.fallback or r.support)
+
+
+def _tail_of(r: FitResult, label_z: float, override: tuple[float, float] | None,
+             codec: PercentileCodec) -> Tail | None:
+    """The record a model needs beyond its label's fields, or None for a plain model. The
+    `censored` override of models_packet annotates fits that measured no censoring."""
+    low, high = r.censored_low, r.censored_high
+    if override is not None and not (low or high or r.fallback):
+        low, high = override
+    if not (r.z != label_z or r.shift or low or high or r.fallback or r.support):
+        return None
+    ends = (None, None) if r.support is None else tuple(
+        None if v is None else _level_of(v, codec) for v in r.support)
+    code = round(r.shift * SHIFT_SCALE)
+    if code / SHIFT_SCALE != r.shift or abs(code) > MAX_SHIFT_CODE:
+        raise ValueError(f"shift {r.shift} is not a multiple of 1/{SHIFT_SCALE} within the int8 range")
+    if r.fallback and (_censor_code(low) / CENSOR_SCALE, _censor_code(high) / CENSOR_SCALE) != (low, high):
+        raise ValueError("a fallback model needs its censored fractions in 1/65535 fixed point")
+    return Tail(Z_LADDER.index(r.z), code, float(low), float(high), bool(r.fallback), *ends)
+
+
+def _level_of(point: float, codec: PercentileCodec) -> int:
+    level = round(point)
+    if support_point(level, codec) != point:
+        raise ValueError(f"support point {point} is not a level")
+    return level
+
+
+def _tail_bytes(index: int, t: Tail, code: struct.Struct) -> bytes:
+    flags = TailFlag(0)
+    out = b""
+    if t.z_index or t.shift_code or t.censored_low or t.censored_high or t.fallback:
+        flags |= TailFlag.CENSORED | (TailFlag.FALLBACK if t.fallback else 0)
+        out += _CENSOR.pack(t.z_index, t.shift_code, _censor_code(t.censored_low), _censor_code(t.censored_high))
+    if t.support_low is not None:
+        flags |= TailFlag.SUPPORT_LOW
+        out += code.pack(t.support_low)
+    if t.support_high is not None:
+        flags |= TailFlag.SUPPORT_HIGH
+        out += code.pack(t.support_high)
+    return _TAIL_HEAD.pack(index << 4 | int(flags)) + out
+
+
+def _tails(v: Any, n: int, n_bands: int, code: struct.Struct, levels: int) -> list[tuple[Tail | None, ...]]:
+    out: list[list[Tail | None]] = [[None] * n_bands for _ in range(n)]
+    if v is None:
+        return [tuple(t) for t in out]
+    blob = want_bin(v, "censored and support records")
+    pos, last = 0, -1
+    while pos < len(blob):
+        if pos + _TAIL_HEAD.size > len(blob):
+            raise FrameError("censored and support records end inside a record")
+        (head,) = _TAIL_HEAD.unpack_from(blob, pos)
+        index, flags = head >> 4, head & 0xF
+        pos += _TAIL_HEAD.size
+        if index <= last or index >= n * n_bands:
+            raise FrameError(f"censored record for model {index}: out of order or past {n * n_bands} models")
+        if not flags or (flags & TailFlag.FALLBACK and not flags & TailFlag.CENSORED):
+            raise FrameError(f"censored record for model {index} has bad flags {flags:#x}")
+        last = index
+        z_index, shift, low, high, ends = 0, 0, 0, 0, [None, None]
+        if flags & TailFlag.CENSORED:
+            if pos + _CENSOR.size > len(blob):
+                raise FrameError("censored and support records end inside a record")
+            z_index, shift, low, high = _CENSOR.unpack_from(blob, pos)
+            pos += _CENSOR.size
+            if z_index >= len(Z_LADDER):
+                raise FrameError(f"censored record: z ladder index {z_index} outside 0..{len(Z_LADDER) - 1}")
+            if abs(shift) > MAX_SHIFT_CODE:
+                raise FrameError(f"censored record: shift code {shift} outside +-{MAX_SHIFT_CODE}")
+            if low + high > CENSOR_SCALE + 1:  # two halves may each round up
+                raise FrameError("censored fractions of a model add up to more than 1")
+        for side, flag in enumerate((TailFlag.SUPPORT_LOW, TailFlag.SUPPORT_HIGH)):
+            if flags & flag:
+                if pos + code.size > len(blob):
+                    raise FrameError("censored and support records end inside a record")
+                (ends[side],) = code.unpack_from(blob, pos)
+                pos += code.size
+                if ends[side] >= levels:
+                    raise FrameError(f"censored record: support level {ends[side]} outside 0..{levels - 1}")
+        out[index // n_bands][index % n_bands] = Tail(
+            z_index, shift, low / CENSOR_SCALE, high / CENSOR_SCALE, bool(flags & TailFlag.FALLBACK), *ends)
+    return [tuple(t) for t in out]
+
+
 def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, int], Johnson]:
     out = {}
     for rec in packet.labels:
-        z = Z_LADDER[rec.z_index]
         for band, codes in enumerate(rec.codes):
+            t = rec.tail(band)
+            z = Z_LADDER[rec.z_index if t is None or not _placed(t) else t.z_index]
+            kw: dict[str, Any] = {}
+            if t is not None:
+                kw["shift"] = t.shift_code / SHIFT_SCALE
+                if t.fallback:
+                    kw["normal_probs"] = fallback_probs(t.censored_low, t.censored_high)
+                if t.support_low is not None or t.support_high is not None:
+                    kw["support"] = tuple(None if v is None else support_point(v, codec)
+                                          for v in (t.support_low, t.support_high))
             try:
-                model = model_from_percentiles(codec.decode(codes), z, rec.count)
+                model = model_from_percentiles(codec.decode(codes), z, rec.count, **kw)
             except (ValueError, ArithmeticError) as exc:
                 raise FrameError(f"label {rec.label} band {band}: no model from codes {codes}: {exc}") from None
             out[(rec.label, band)] = model
     return out
 
 
+def support_point(level: int, codec: PercentileCodec) -> float:
+    """The fitter's support point for an occupied level (its snapped centre, onboard.fit)."""
+    return codec.snap([level] * 4)[0]
+
+
+def _placed(t: Tail) -> bool:
+    return bool(t.z_index or t.shift_code or t.censored_low or t.censored_high or t.fallback)
+
+
 def _censor_code(fraction: float) -> int:
     if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
         raise ValueError(f"censored fraction {fraction} outside [0, 1]")
     return round(fraction * CENSOR_SCALE)
-
-
-def _censored(v: Any, n: int) -> list[tuple[float, float]]:
-    if v is None:
-        return [(0.0, 0.0)] * n
-    blob = want_bin(v, "censored")
-    if len(blob) != n * _CENSOR.size:
-        raise FrameError(f"censored blob has {len(blob)} bytes, expected {n * _CENSOR.size}")
-    out = []
-    for low, high in _CENSOR.iter_unpack(blob):
-        if low + high > CENSOR_SCALE + 1:  # two halves may each round up
-            raise FrameError("censored fractions of a label add up to more than 1")
-        out.append((low / CENSOR_SCALE, high / CENSOR_SCALE))
-    return out
