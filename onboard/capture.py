@@ -16,11 +16,13 @@ from typing import Any, Callable, TypeVar
 import numpy as np
 
 from hal.interfaces import HalError, ViewAngles, view_from_orientation
-from onboard import skip
+from onboard import dependence, skip
+from onboard.dependence import Dependence
 from onboard.config import Config
 from onboard.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from onboard.fit import FitResult, FrameFitter
 from radio import packet as pk
+from radio.packet_dependence import dependence_extras
 
 T = TypeVar("T")
 
@@ -48,6 +50,7 @@ class Capture:
     unchanged: bool = False
     stride: int = 1
     pca: PcaBasis | None = None  # the scene's basis, on the first capture made with it
+    dependence: dict[int, Dependence] | None = None  # grain and band correlation, when configured
 
 
 def feature_spec(cfg: Config) -> FeatureSpec:
@@ -175,8 +178,11 @@ class Pipeline:
             self._previous[key] = results
         pca = self.pca if self.pca_pending else None
         self.pca_pending = False
+        dep = None
+        if self.cfg.features.dependence and results and not same:  # a bounded second pass
+            dep = dependence.measure(data, labels, {k: r.model for k, r in results.items()}, feats.levels)
         return Capture(commanded, measured, feats.band_names, feats.levels, results, dropped,
-                       labels, changed, same, stride, pca)
+                       labels, changed, same, stride, pca, dep)
 
     def capture(self, commanded: ViewAngles, move: bool = True) -> Capture:
         if move:
@@ -216,7 +222,8 @@ def _pose(v: ViewAngles) -> tuple[float, float]:
 
 def models_body(robot_id: int, seq: int, now: float, space: str, cap: Capture) -> tuple[int, bytes]:
     """MODELS for a capture; the first capture of a PCA scene carries the basis in its extras."""
-    extras = cap.pca.to_extras() if cap.pca is not None else None
+    extras = dict(cap.pca.to_extras()) if cap.pca is not None else {}
+    extras.update(dependence_extras(cap.dependence, sorted({lab for lab, _ in cap.results}), len(cap.band_names)))
     body = pk.encode_models(cap.results, robot_id=robot_id, seq=seq, time=now,
                             commanded=_pose(cap.commanded), measured=_pose(cap.measured),
                             feature_space=space, bands=cap.band_names, levels=cap.levels,

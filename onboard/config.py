@@ -63,6 +63,7 @@ class FeatureConfig:
     space: str = "rgb"  # rgb | hsv | gray | pca | raw
     bands: tuple[str, ...] = ()  # empty: every band of the space
     bins_16bit: int = 4096  # histogram bins over 0..65535 for 16-bit sensors (memory: labels x bands x bins)
+    dependence: bool = False  # also send grain and band correlation per region (onboard.dependence)
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,7 +120,7 @@ _TYPES: dict[type, dict[str, Any]] = {
     SweepConfig: {"start": float, "stop": float, "step": float, "azimuths": (float, None),
                   "autostart": bool, "settle_timeout_s": float, "retries": int,
                   "pose_tolerance_deg": float},
-    FeatureConfig: {"space": str, "bands": (str, None), "bins_16bit": int},
+    FeatureConfig: {"space": str, "bands": (str, None), "bins_16bit": int, "dependence": bool},
     SegmentConfig: {"method": str, "mask": Path, "n_labels": int, "k": int, "min_samples": int,
                     "split_std": float, "merge_distance": float, "max_merges": int,
                     "iterations": int, "subsample": int, "refit_drift": float},

@@ -7,6 +7,7 @@ import pytest
 
 from onboard.dependence import LAGS, Dependence, corr_size, measure
 from onboard.fit import FrameFitter
+from onboard.johnson import Johnson
 from radio import FrameError
 from radio import packet as pk
 from radio.packet_dependence import (
@@ -131,3 +132,48 @@ def test_oversized_dependence_entry_is_refused_by_the_decoder():
     body.append({DEPENDENCE_KEY: b"\x00" * (256 * 128 + 1)})
     with pytest.raises(FrameError, match="longer"):
         pk.decode(msgpack.packb(body, use_bin_type=True))
+
+
+def _pipeline(tmp_path, on: bool):
+    from onboard import config
+    from onboard.capture import Pipeline
+
+    path = tmp_path / "robot.toml"
+    path.write_text(f'[hal]\nbody = "fake"\n[segment]\nmethod = "scene"\n[features]\ndependence = {str(on).lower()}\n')
+    cfg = config.load(path)
+    return lambda labels: Pipeline(cfg, None, lambda f, fr, m: (labels, False))
+
+
+@pytest.mark.parametrize("on", [True, False])
+def test_capture_sends_dependence_only_when_configured(tmp_path, on):
+    from hal.interfaces import ViewAngles
+    from onboard.capture import models_body
+
+    img = _ar_image(96, 128, phi=0.8, mix=0.6, seed=8)
+    labels = np.zeros(img.shape[:2], dtype=np.uint8)
+    labels[:, 64:] = 1
+    cap = _pipeline(tmp_path, on)(labels).process(img, ViewAngles(90), ViewAngles(90))
+    _, body = models_body(1, 1, 0.0, "rgb", cap)
+    got = packet_dependence(pk.decode(body))
+    if on:
+        assert set(got) == {0, 1} and got[0].dx[0] == pytest.approx(0.8, abs=0.08)
+    else:
+        assert got == {}
+
+
+def test_dependence_memory_does_not_grow_with_the_frame():
+    import tracemalloc
+
+    def peak(n):
+        rng = np.random.default_rng(0)
+        img = rng.integers(0, 256, (n, n, 3), dtype=np.uint8)
+        labels = np.zeros((n, n), np.int64)
+        models = {(0, b): Johnson.normal(128.0, 70.0) for b in range(3)}
+        measure(img[:16, :16], labels[:16, :16], models)
+        tracemalloc.start()
+        measure(img, labels, models)
+        _, top = tracemalloc.get_traced_memory()
+        tracemalloc.stop()
+        return top
+
+    assert peak(1500) <= 1.2 * peak(400) + 200_000
