@@ -1,0 +1,77 @@
+"""Each benchmark module's --quick path runs on tiny inputs and writes well-formed results."""
+from __future__ import annotations
+
+import math
+import re
+
+import numpy as np
+import pytest
+
+from benchmarks.__main__ import discover, main, run_one
+from benchmarks.common import Context, Section
+from benchmarks.johnson_moments import shape_moments, solve_shape
+from benchmarks.moments_johnson import MomentFitError, fit_moments
+from onboard.johnson import Family
+
+EXPECTED = {"core", "onboard", "peers", "runtime", "sampling", "scene", "stability", "subsample", "synth",
+            "wire", "link"}
+
+
+def test_every_expected_benchmark_is_discovered():
+    assert EXPECTED <= set(discover())
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_quick_run_gives_titled_sections_with_tables_and_existing_plots(name, tmp_path):
+    sections = run_one(name, Context(quick=True, out=tmp_path))
+    assert sections and all(isinstance(s, Section) and s.title for s in sections)
+    text = "\n".join(line for s in sections for line in s.lines)
+    # Python prints a NaN or infinite figure as nan/inf; failures are named in words instead
+    assert not re.search(r"\b-?(nan|inf)\b", text), text
+    for table_row in (l for l in text.splitlines() if l.startswith("|")):
+        assert table_row.endswith("|")
+    header = [l for l in text.splitlines() if l.startswith("|")][:2]
+    if header:
+        assert header[0].count("|") == header[1].count("|")
+    for image in re.findall(r"!\[[^]]*\]\(([^)]+)\)", text):
+        assert (tmp_path / image).stat().st_size > 1000
+
+
+def test_runner_writes_results_headed_by_the_machine(tmp_path, capsys):
+    assert main(["wire", "--quick", "--out", str(tmp_path)]) == 0
+    text = (tmp_path / "RESULTS.md").read_text()
+    assert text.startswith("# Benchmark results")
+    assert "- CPU:" in text and "- cores:" in text and "## Wire" in text
+
+
+def test_runner_refuses_an_unknown_benchmark(tmp_path, capsys):
+    assert main(["nosuch", "--out", str(tmp_path)]) == 2
+    assert "no benchmarks/bench_nosuch.py" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("family,gamma,delta", [
+    (Family.SU, 0.5, 1.3), (Family.SU, -1.0, 2.0), (Family.SU, 0.0, 1.5),
+    (Family.SB, 0.5, 1.3), (Family.SB, -1.0, 0.7), (Family.SL, 0.3, 1.5)])
+def test_moments_reference_recovers_the_curve_from_its_exact_moments(family, gamma, delta):
+    mean, var, skew, b2 = shape_moments(family, gamma, delta)
+    model = fit_moments(100.0 + 20.0 * mean, 20.0 * math.sqrt(var), skew, b2)
+    assert model.family is family
+    u = np.linspace(0.02, 0.98, 25)
+    truth = 100.0 + 20.0 * _standard_ppf(family, gamma, delta, u)
+    assert np.max(np.abs(model.ppf(u) - truth)) < 1e-4
+
+
+def _standard_ppf(family, gamma, delta, u):
+    from onboard.johnson import Johnson
+    return Johnson(family, gamma, delta, 0.0, 1.0).ppf(u)
+
+
+def test_moments_reference_refuses_moments_below_the_impossible_boundary():
+    with pytest.raises(MomentFitError, match="beta1 \\+ 1"):
+        fit_moments(0.0, 1.0, 1.0, 1.5)
+
+
+def test_solve_shape_hits_the_requested_betas():
+    g, d = solve_shape(Family.SB, 0.7, 3.0)
+    _, _, skew, b2 = shape_moments(Family.SB, g, d)
+    assert skew == pytest.approx(0.7, abs=1e-6) and b2 == pytest.approx(3.0, abs=1e-5)
