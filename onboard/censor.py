@@ -39,6 +39,8 @@ MIN_CENSORED_PIXELS = 8
 # Smaller censored fractions are not reported unless they moved the percentiles: they cannot
 # matter to the model and would cost packet bytes.
 MIN_REPORTED = 0.005
+# A shifted fit must put the censored fractions beyond the limits to within this share (+1%).
+TOLERANCE = 0.25
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,15 +86,16 @@ def place(z_base: float, low: float, high: float, count: int, ladder: tuple[floa
     if low <= 0.0 and high <= 0.0:
         return Placement(z_base)
     outer = 3.0 * z_base
-    lo_z = max(-outer, _ppf(low + MARGIN)) if low > 0.0 else -outer
-    hi_z = min(outer, _ppf(1.0 - high - MARGIN)) if high > 0.0 else outer
+    # How far each side may go: clear of its censored mass ...
+    lo_cap = _ppf(low + MARGIN) if low > 0.0 else -math.inf
+    hi_cap = _ppf(1.0 - high - MARGIN) if high > 0.0 else math.inf
+    lo_z, hi_z = max(-outer, lo_cap), min(outer, hi_cap)
     if lo_z == -outer and hi_z == outer:
         return Placement(z_base)  # the censored mass is beyond the outer percentiles
     if hi_z - lo_z < 6.0 * z_base:
-        # Reach further into an uncensored tail, as far as the pixel count supports.
-        tail = _ppf(min(0.5, 8.0 / max(count, 1)))
-        lo_z = min(lo_z, max(tail, -2.0 * outer)) if low <= 0.0 else lo_z
-        hi_z = max(hi_z, min(-tail, 2.0 * outer)) if high <= 0.0 else hi_z
+        # ... and, when the window got narrow, into the tails as far as the pixel count supports.
+        tail = max(_ppf(min(0.5, 8.0 / max(count, 1))), -2.0 * outer)
+        lo_z, hi_z = max(tail, lo_cap), min(-tail, hi_cap)
     for z in ladder:
         if z > z_base:
             continue
@@ -104,6 +107,17 @@ def place(z_base: float, low: float, high: float, count: int, ladder: tuple[floa
             if lo_code <= code <= hi_code:
                 return Placement(z, code)
     return Placement(ladder[-1], 0, fallback=True)
+
+
+def reproduces(model: Johnson, low: float, high: float, lo_limit: float, hi_limit: float) -> bool:
+    """Whether the model's mass beyond the censor limits matches the censored fractions. A
+    shifted fit extrapolates into the censored region; when the uncensored part says too
+    little (a few occupied levels), that extrapolation can miss the pile-up, and the fitter
+    takes the fallback instead."""
+    for fraction, mass in ((low, float(model.cdf(lo_limit))), (high, 1.0 - float(model.cdf(hi_limit)))):
+        if fraction > 0.0 and abs(mass - fraction) > TOLERANCE * fraction + 0.01:
+            return False
+    return True
 
 
 def _ppf(u: float) -> float:

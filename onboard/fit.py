@@ -11,7 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.censor import MIN_REPORTED, Placement, censored_counts, fallback_probs, place, quantize
+from onboard.censor import (MIN_REPORTED, Placement, censored_counts, fallback_probs, place, quantize,
+                            reproduces)
 from onboard.johnson import Johnson
 from onboard.percentile import model_from_percentiles, sl_band, support_of
 
@@ -199,17 +200,12 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
         where = place(z, low, high, count, Z_LADDER)
         if where == Placement(z) and max(low, high) < MIN_REPORTED:
             low = high = 0.0
-        normal_probs = None
-        if where.fallback:
-            normal_probs = fallback_probs(low, high)
-            ends = histogram_percentiles(counts[i], normal_probs, lo, bin_width, cum[i])
-            a = lo + bin_width * 0.5 if low > 0.0 else float(ends[0])
-            e = lo + bin_width * (bins - 1.5) if high > 0.0 else float(ends[1])
-            pct = codec.snap([a, a, e, e])
-        else:
-            probs = _probs(where.z) if where.shift_code == 0 else _shifted_probs(where.z, where.shift)
-            pct = codec.snap(histogram_percentiles(counts[i], probs, lo, bin_width, cum[i]))
-        model = model_from_percentiles(pct, where.z, count, shift=where.shift, normal_probs=normal_probs)
+        if not where.fallback and where != Placement(z):
+            trial = _fit_placed(counts[i], cum[i], where, None, low, high, count, lo, bin_width, codec)[1]
+            if not reproduces(trial, low, high, lo + 0.5 * bin_width, lo + (bins - 1.5) * bin_width):
+                where = Placement(where.z, 0, fallback=True)
+        normal_probs = fallback_probs(low, high) if where.fallback else None
+        pct, model = _fit_placed(counts[i], cum[i], where, normal_probs, low, high, count, lo, bin_width, codec)
         support = None
         # Bounded supports must reach the centre of every occupied bin (so each has mass); only
         # the side that falls short is recorded (it travels).
@@ -222,6 +218,21 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
         out.append(FitResult(model, count, where.z, pct, float(beta1[i]), float(beta2[i]),
                              where.shift, low, high, where.fallback, support))
     return out
+
+
+def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_probs, low: float,
+                high: float, count: int, lo: float, bin_width: float, codec: PercentileCodec):
+    """(snapped percentiles, model) for one histogram read at `where`."""
+    bins = counts.size
+    if where.fallback:
+        ends = histogram_percentiles(counts, normal_probs, lo, bin_width, cum)
+        a = lo + bin_width * 0.5 if low > 0.0 else float(ends[0])
+        e = lo + bin_width * (bins - 1.5) if high > 0.0 else float(ends[1])
+        pct = codec.snap([a, a, e, e])
+    else:
+        probs = _probs(where.z) if where.shift_code == 0 else _shifted_probs(where.z, where.shift)
+        pct = codec.snap(histogram_percentiles(counts, probs, lo, bin_width, cum))
+    return pct, model_from_percentiles(pct, where.z, count, shift=where.shift, normal_probs=normal_probs)
 
 
 def rebuild(result: FitResult, percentiles=None) -> Johnson:

@@ -1,0 +1,208 @@
+"""Censored fitting: saturated and crushed end levels, the fallback, supports that hold the data."""
+import math
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from onboard.censor import (CENSOR_SCALE, censored_counts, expected_histogram, fallback_probs,
+                            place, saturating)
+from onboard.fit import Z_LADDER, FrameFitter, fit_histogram, rebuild
+from onboard.johnson import Family, Johnson
+from onboard.percentile import support_of
+from radio.packet import decode, encode_models
+
+def _scaled(family: Family, gamma: float, delta: float) -> Johnson:
+    """The shape with its 0.1%..99.9% range 100 levels wide, as in the recovery grid."""
+    unit = Johnson(family, gamma, delta, 0.0, 1.0)
+    lo, hi = unit.ppf([0.001, 0.999])
+    lam = 100.0 / (hi - lo)
+    return Johnson(family, gamma, delta, -lo * lam, lam)
+
+
+SHAPES = {
+    "normal": Johnson.normal(0.0, 16.0),
+    "SU": _scaled(Family.SU, 0.8, 1.5),
+    "SB": _scaled(Family.SB, 0.3, 0.9),
+    "lognormal": _scaled(Family.SL, 0.0, 1.5),
+}
+HEADER = dict(robot_id=1, seq=2, time=3.0, commanded=(10.0, 0.0), measured=(10.0, 0.0), feature_space="rgb")
+
+
+def _clipped(model: Johnson, rng, n: int = 100_000) -> np.ndarray:
+    x = np.clip(np.rint(model.sample(n, rng, dtype=np.float64)), 0, 255).astype(np.int64)
+    return np.bincount(x, minlength=256)
+
+
+def _l1(h: np.ndarray, model: Johnson, rng) -> float:
+    s = np.bincount(model.sample_pixels(int(h.sum()), rng), minlength=256)
+    return float(np.abs(h / h.sum() - s / s.sum()).sum())
+
+
+@pytest.mark.parametrize("side", ["high", "low"])
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_samples_of_a_fit_to_clipped_data_reproduce_it_up_to_40_percent(name, side):
+    rng = np.random.default_rng(11)
+    for fraction in (0.1, 0.25, 0.4):
+        h = _clipped(saturating(SHAPES[name], **{side: fraction}), rng)
+        r = fit_histogram(h)
+        got = r.censored_high if side == "high" else r.censored_low
+        assert abs(got - fraction) < 0.01
+        assert _l1(h, r.model, rng) <= 0.06, (fraction, r)
+
+
+@pytest.mark.parametrize("side", ["high", "low"])
+@pytest.mark.parametrize("name", sorted(SHAPES))
+def test_with_up_to_10_percent_censored_the_quantiles_stay_within_2_levels(name, side):
+    rng = np.random.default_rng(12)
+    u = np.linspace(0.01, 0.99, 197)
+    for fraction in (0.03, 0.06, 0.1):
+        truth = saturating(SHAPES[name], **{side: fraction})
+        r = fit_histogram(_clipped(truth, rng))
+        tq = truth.ppf(u)
+        inside = (tq > 0.5) & (tq < 254.5)
+        assert np.max(np.abs(r.model.ppf(u) - tq)[inside]) <= 2.0, (fraction, r)
+
+
+def test_plain_percentiles_would_have_missed_what_the_censored_fit_gets():
+    rng = np.random.default_rng(13)
+    truth = saturating(SHAPES["normal"], high=0.3)
+    h = _clipped(truth, rng)
+    censored, plain = fit_histogram(h), fit_histogram(h, censor=False)
+    assert censored.shift < 0 and censored.censored_high == pytest.approx(0.3, abs=0.01)
+    assert _l1(h, plain.model, rng) > 3 * _l1(h, censored.model, rng)
+
+
+def test_unsaturated_histograms_fit_exactly_as_without_censoring():
+    rng = np.random.default_rng(14)
+    for model in SHAPES.values():
+        placed = saturating(model, high=0.0)
+        h = _clipped(Johnson(placed.family, placed.gamma, placed.delta, placed.xi + 60, placed.lam)
+                     if placed.family is not Family.SN else Johnson.normal(128, 20), rng)
+        if h[0] or h[-1]:
+            continue
+        assert fit_histogram(h) == fit_histogram(h, censor=False)
+
+
+def test_a_sensor_end_is_censored_only_when_it_holds_more_than_its_neighbours_suggest():
+    smooth = np.zeros(256, dtype=np.int64)
+    smooth[200:] = 1000  # a flat density running into the limit: not censored
+    pile = smooth.copy()
+    pile[255] = 5000
+    low, high = censored_counts(np.stack([smooth, pile]))
+    assert list(low) == [0, 0] and list(high) == [0, 5000]
+
+
+def test_beyond_what_four_percentiles_can_see_the_fallback_normal_keeps_both_piles():
+    h = np.zeros(256, dtype=np.int64)
+    h[0], h[255] = 45_000, 45_000
+    h[100:110] = 1000
+    r = fit_histogram(h)
+    assert r.fallback and r.model.family is Family.SN
+    p = r.model.level_probabilities()
+    assert p[0] == pytest.approx(0.45, abs=1e-4) and p[255] == pytest.approx(0.45, abs=1e-4)
+    assert fallback_probs(r.censored_low, r.censored_high) == (r.censored_low, 1 - r.censored_high)
+
+
+def test_placement_never_reads_a_percentile_inside_the_censored_mass():
+    from onboard.johnson import normal_cdf
+    for low in (0.0, 0.05, 0.2, 0.4):
+        for high in (0.0, 0.1, 0.3, 0.5):
+            p = place(Z_LADDER[0], low, high, 100_000, Z_LADDER)
+            if p.fallback:
+                assert low + high >= 0.5
+                continue
+            pts = normal_cdf(p.shift + np.array([-3, 3]) * p.z)
+            assert pts[0] > low and pts[1] < 1 - high
+
+
+def test_censored_and_widened_models_travel_and_recompute_bit_for_bit():
+    rng = np.random.default_rng(15)
+    fits = {}
+    fits[(0, 0)] = fit_histogram(_clipped(saturating(SHAPES["SU"], high=0.3), rng, 20_000))
+    fits[(0, 1)] = fit_histogram(_clipped(saturating(SHAPES["normal"], low=0.2), rng, 20_000))
+    fits[(0, 2)] = fit_histogram(_clipped(SHAPES["normal"], rng, 20_000))
+    # a beta sample whose fitted SB support falls short of its highest level
+    v = np.clip(np.rint(255 * np.random.default_rng(5).beta(2, 5, 12848)), 0, 255).astype(np.int64)
+    for band in range(3):
+        fits[(2, band)] = fit_histogram(np.bincount(v, minlength=256))
+    h = np.zeros(256, dtype=np.int64)
+    h[0], h[255], h[120:125] = 9000, 9000, 400
+    for band in range(3):
+        fits[(1, band)] = fit_histogram(h)
+    assert any(f.support for f in fits.values()) and all(f.fallback for (lab, _), f in fits.items() if lab == 1)
+    packet = decode(encode_models(fits, bands=("R", "G", "B"), **HEADER))
+    for key, fit in fits.items():
+        assert packet.models[key] == fit.model
+    rec = {r.label: r for r in packet.labels}
+    assert abs(rec[0].tail(0).censored_high - fits[(0, 0)].censored_high) <= 0.5 / CENSOR_SCALE
+    assert rec[1].censored_low == pytest.approx(0.45, abs=1e-3)
+
+
+def test_plain_models_carry_no_record():
+    rng = np.random.default_rng(16)
+    fits = {(0, b): fit_histogram(_clipped(Johnson.normal(100 + 10 * b, 15), rng, 5000)) for b in range(3)}
+    body = encode_models(fits, bands=("R", "G", "B"), **HEADER)
+    assert all(t is None for t in decode(body).labels[0].tails)
+
+
+def test_frame_fitter_reports_per_band_saturation():
+    rng = np.random.default_rng(17)
+    frame = np.clip(rng.normal([128, 250, 5], 20, (200, 200, 3)), 0, 255).astype(np.uint8)
+    f = FrameFitter(1, 3)
+    f.add(frame, np.zeros((200, 200), dtype=np.uint8))
+    fits = f.fit()
+    assert fits[(0, 0)].censored_high == 0.0 and fits[(0, 1)].censored_high > 0.3
+    assert fits[(0, 2)].censored_low > 0.3 and fits[(0, 1)].shift < 0 < fits[(0, 2)].shift
+
+
+# -- properties ----------------------------------------------------------------------------------
+
+SETTINGS = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+@st.composite
+def censored_histograms(draw):
+    h = np.zeros(256, dtype=np.int64)
+    start = draw(st.integers(0, 250))
+    width = draw(st.integers(1, 256 - start))
+    h[start:start + width] = draw(st.lists(st.integers(0, 500), min_size=width, max_size=width))
+    h[start] += 1
+    ends = draw(st.sampled_from(["low", "high", "both"]))
+    total = int(h.sum())
+    if ends in ("low", "both"):
+        h[0] += int(total * draw(st.floats(0.0, 4.0)))
+    if ends in ("high", "both"):
+        h[255] += int(total * draw(st.floats(0.0, 4.0)))
+    return h
+
+
+@SETTINGS
+@given(censored_histograms())
+def test_any_censored_histogram_gives_a_finite_model_that_reproduces_its_limits(h):
+    r = fit_histogram(h)
+    m = r.model
+    assert all(math.isfinite(v) for v in (m.gamma, m.delta, m.xi, m.lam))
+    assert rebuild(r) == m
+    p = m.level_probabilities()
+    assert np.all(np.isfinite(p)) and abs(p.sum() - 1) < 1e-9
+    n = h.sum()
+    if r.censored_high:
+        assert p[255] >= 0.5 * r.censored_high
+    if r.censored_low:
+        assert p[0] >= 0.5 * r.censored_low
+    assert abs(r.censored_high - h[255] / n) < 1e-4 or r.censored_high == 0
+
+
+@SETTINGS
+@given(st.one_of(censored_histograms(), st.lists(st.integers(0, 300), min_size=256, max_size=256).map(np.array)))
+def test_the_support_of_every_fit_reaches_every_occupied_level(h):
+    if not h.any():
+        h = h.copy()
+        h[7] = 1
+    r = fit_histogram(h)
+    lo, hi = support_of(r.model)
+    occupied = np.flatnonzero(h)
+    # every occupied level's interval (k - 1/2, k + 1/2) meets the support
+    assert lo < occupied[0] + 0.5 and hi > occupied[-1] - 0.5, (r, occupied[[0, -1]])
