@@ -108,7 +108,7 @@ class Pipeline:
         deadline = time.monotonic() + self.cfg.sweep.settle_timeout_s
         while self._retry("settle", lambda: bus.is_moving(ids)):
             if time.monotonic() > deadline:
-                raise PoseSkipped(f"settle: servos {ids} still moving after "
+                raise PoseSkipped(f"settle failed: servos {ids} still moving after "
                                   f"{self.cfg.sweep.settle_timeout_s:.1f} s")
             self.pump()
             self.sleep(0.005)

@@ -1,0 +1,201 @@
+"""Runtime wiring: HAL body choice, segmentation methods, MASK/PCA packets, SWEEP, 16-bit bands."""
+import dataclasses
+import json
+
+import cv2
+import msgpack
+import numpy as np
+import pytest
+
+import hal.fakes.camera as fake_camera
+import hal.scene
+from hal.factory import build_hal
+from hal.fakes.camera import FakeCamera
+from hal.interfaces import HalError
+from onboard import config
+from onboard.config import ConfigError
+from onboard.features import PcaBasis
+from onboard.runtime import MemoryTransport, Received, Runtime, Segmentation
+from radio import FrameError
+from radio import packet as pk
+
+HAL = '[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\n'
+NO_AUTO = '[sweep]\nautostart = false\n'
+
+
+def load(tmp_path, text):
+    path = tmp_path / "robot.toml"
+    path.write_text(text)
+    return config.load(path)
+
+
+def make(tmp_path, text, hal=None):
+    cfg = load(tmp_path, text)
+    if hal is None:
+        hal = build_hal(cfg.hal)
+        hal.camera.open(cfg.hal.size[1], cfg.hal.size[0])
+    tr = MemoryTransport()
+    return Runtime(cfg, hal, tr, Segmentation(cfg, hal)), tr
+
+
+def decoded(tr):
+    return [pk.decode(body) for _, body in tr.sent]
+
+
+def command(rt, tr, cid, name, **args):
+    tr.deliver(Received(pk.encode(pk.CommandPacket(cid, name, args))))
+    rt.step()
+    return {p.command_id: p for p in decoded(tr) if isinstance(p, (pk.AckPacket, pk.NackPacket))}[cid]
+
+
+def test_hal_body_is_never_a_silent_fake(tmp_path, monkeypatch):
+    cfg = load(tmp_path, "[segment]\nmethod = 'isodata'\n")
+    assert cfg.hal.body == ""
+    with pytest.raises(HalError, match="no HAL body chosen"):
+        build_hal(cfg.hal, env={})
+    assert build_hal(cfg.hal, env={"BTF_HAL": "fake"}).body.value == "fake"
+    with pytest.raises(ConfigError, match="needs hal.body = 'fake'"):
+        monkeypatch.delenv("BTF_HAL", raising=False)
+        load(tmp_path, "[segment]\nmethod = 'scene'\n")
+    example = config.load("examples/robot.toml")
+    assert example.hal.body == "fake"  # the example names its fake body
+
+
+def test_scene_labels_come_from_the_frame_the_camera_rendered(tmp_path, monkeypatch):
+    rt, tr = make(tmp_path, HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+    calls = []
+    real = fake_camera.render
+    monkeypatch.setattr(fake_camera, "render", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(hal.scene, "render", lambda *a, **k: pytest.fail("rendered a second time"))
+    rt.boot()
+    command(rt, tr, 1, pk.CommandName.CAPTURE)
+    assert len(calls) == 1
+    assert rt._last_labels is rt.hal.camera.last_mask
+    assert set(np.unique(rt._last_labels)) == {1, 2}
+
+
+def test_mask_is_sent_when_the_label_map_changes_and_on_request(tmp_path):
+    rt, tr = make(tmp_path, HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+    rt.boot()
+    C = pk.CommandName
+    masks = lambda: [p for p in decoded(tr) if isinstance(p, pk.MaskPacket)]
+    assert command(rt, tr, 1, C.SEND_MASK, seq=0).extras["next_capture"] is True
+    command(rt, tr, 2, C.CAPTURE)
+    command(rt, tr, 3, C.CAPTURE)  # same view, same map: not sent again
+    assert len(masks()) == 1
+    command(rt, tr, 4, C.SEND_MASK, seq=1)
+    assert len(masks()) == 2 and masks()[-1].seq == 1
+    command(rt, tr, 5, C.GOTO, elevation=30.0, azimuth=40.0)
+    command(rt, tr, 6, C.CAPTURE)  # another view of the mixed plate: another map
+    assert len(masks()) == 3
+
+
+def test_mask_png_labels_the_frames(tmp_path):
+    lab = np.zeros((60, 80), np.uint8)
+    lab[:, 40:] = 3
+    cv2.imwrite(str(tmp_path / "mask.png"), lab)
+    rt, tr = make(tmp_path, HAL.format(scene="black") + "[segment]\nmethod = 'mask'\nmask = 'mask.png'\nn_labels = 4\n"
+                  + NO_AUTO)
+    rt.boot()
+    command(rt, tr, 1, pk.CommandName.CAPTURE)
+    models = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
+    assert {lab.label for lab in models[0].labels} == {0, 3}
+    assert [p for p in decoded(tr) if isinstance(p, pk.MaskPacket)]
+    cv2.imwrite(str(tmp_path / "mask.png"), lab + 4)
+    with pytest.raises(ConfigError, match="above the 4 labels"):
+        Segmentation(rt.cfg, rt.hal)
+
+
+def test_isodata_palette_survives_a_restart(tmp_path):
+    text = HAL.format(scene="mixed") + "[segment]\nmethod = 'isodata'\nsplit_std = 12\nsubsample = 2000\n" + NO_AUTO
+    rt, tr = make(tmp_path, text)
+    rt.boot()
+    command(rt, tr, 1, pk.CommandName.CAPTURE)
+    saved = json.loads((rt.cfg.state_dir / "palette.json").read_text())
+    assert saved["entries"] == [list(e) for e in rt.pipeline.segmenter.segmenter.palette.entries]
+    first = rt._last_labels.copy()
+    rt.outbox.close()
+    rt2, tr2 = make(tmp_path, text)  # same state directory
+    assert rt2.pipeline.segmenter.segmenter.palette.to_record() == saved
+    rt2.boot()
+    command(rt2, tr2, 1, pk.CommandName.CAPTURE)
+    assert (rt2._last_labels == first).mean() > 0.99  # the same view keeps its labels
+    (rt.cfg.state_dir / "palette.json").write_text("{not json")
+    with pytest.raises(ConfigError, match="palette file"):
+        Segmentation(rt.cfg, rt.hal)
+
+
+def test_sweep_command_takes_start_stop_step_and_optional_azimuths(tmp_path):
+    rt, tr = make(tmp_path, HAL.format(scene="black") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+    rt.boot()
+    ack = command(rt, tr, 1, pk.CommandName.SWEEP, start=80.0, stop=60.0, step=10.0)
+    assert ack.extras["poses"] == 3
+    rt.run(lambda r: r.idle())
+    models = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
+    assert [p.commanded for p in models] == [(80.0, 0.0), (70.0, 0.0), (60.0, 0.0)]
+    assert command(rt, tr, 2, pk.CommandName.SWEEP, start=90, stop=70, step=10,
+                   azimuths=[0.0, 90.0]).extras["poses"] == 6
+    assert isinstance(command(rt, tr, 3, pk.CommandName.ABORT), pk.AckPacket)
+    assert rt.progress.active is False
+
+
+def test_sweep_command_schema_refuses_mixed_or_missing_forms():
+    C = pk.CommandName
+    for args in ({"start": 90.0, "stop": 30.0}, {"start": 90.0, "stop": 30.0, "step": 10.0, "elevations": [1.0]},
+                 {"azimuths": [0.0]}, {"start": 90.0, "stop": 30.0, "step": 0.0}):
+        raw = msgpack.packb([pk.SCHEMA_VERSION, int(pk.Kind.COMMAND), 1, int(C.SWEEP), args])
+        with pytest.raises(FrameError, match="SWEEP|sweep step"):
+            pk.decode(raw)
+    ok = pk.decode(pk.encode(pk.CommandPacket(1, C.SWEEP, {"start": 90, "stop": 30, "step": 10})))
+    assert ok.args == {"start": 90.0, "stop": 30.0, "step": 10.0}
+
+
+def test_pca_basis_goes_once_with_the_scene_and_survives_a_restart(tmp_path):
+    text = HAL.format(scene="mixed") + "[features]\nspace = 'pca'\n[segment]\nmethod = 'scene'\n" + NO_AUTO
+    rt, tr = make(tmp_path, text)
+    rt.boot()
+    for cid in (1, 2):
+        command(rt, tr, cid, pk.CommandName.CAPTURE)
+    models = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
+    basis = PcaBasis.from_extras(models[0].extras)
+    assert basis == rt.pipeline.pca and PcaBasis.from_extras(models[1].extras) is None
+    rt.outbox.close()
+    rt2, tr2 = make(tmp_path, text)
+    assert rt2.pipeline.pca == basis
+    rt2.boot()
+    command(rt2, tr2, 1, pk.CommandName.CAPTURE)
+    assert all(PcaBasis.from_extras(p.extras) is None for p in decoded(tr2) if isinstance(p, pk.ModelsPacket))
+
+
+def test_malformed_pca_extras_are_refused():
+    basis = PcaBasis.fit(np.random.default_rng(0).integers(0, 256, (20, 20, 3), dtype=np.uint8))
+    good = basis.to_extras()
+    assert PcaBasis.from_extras(good) == basis
+    for bad in ({**good, "pca_rotation": good["pca_rotation"][:-1]}, {"pca_mean": good["pca_mean"]},
+                {**good, "pca_scale": ["x", 1.0, 1.0]}, {**good, "pca_scale": [0.0, 1.0, 1.0]}):
+        with pytest.raises(ValueError, match="pca"):
+            PcaBasis.from_extras(bad)
+
+
+def test_sixteen_bit_multispectral_bands_through_the_runtime(tmp_path):
+    text = (HAL.format(scene="mixed") + "[features]\nspace = 'raw'\nbands = ['B0', 'B3']\nbins_16bit = 65536\n"
+            "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+    cfg = load(tmp_path, text)
+    hal_ = build_hal(cfg.hal)
+    cam = FakeCamera("mixed", hal_.camera.true_view, size=(60, 80), bands="multispectral")
+    cam.open(80, 60, "MSP6")
+    hal_ = dataclasses.replace(hal_, camera=cam)
+    rt, tr = make(tmp_path, text, hal_)
+    rt.boot()
+    assert isinstance(command(rt, tr, 1, pk.CommandName.CAPTURE), pk.AckPacket)
+    models = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
+    assert models[0].levels == 65536 and models[0].bands == ("B0", "B3")
+    frame = cam.capture()
+    for (label, band), model in models[0].models.items():
+        values = frame[..., (0, 3)[band]][cam.last_mask == label].astype(float)
+        lo, hi = np.percentile(values, [1, 99])
+        med = float(model.ppf(0.5))
+        assert np.isfinite(med) and lo - 32 <= med <= hi + 32  # within a bin of the data
+    rt_bad, tr_bad = make(tmp_path, text.replace("['B0', 'B3']", "['B9']"), hal_)
+    nack = command(rt_bad, tr_bad, 1, pk.CommandName.CAPTURE)
+    assert isinstance(nack, pk.NackPacket) and "unknown band" in nack.text
