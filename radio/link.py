@@ -70,8 +70,13 @@ class _Out:
     ends: list[int]  # messages this frame completes
     sent_at: float = -1.0
     tries: int = 0
+    xmit: int = 0  # transmission index: orders (re)transmissions for loss detection
     sacked: bool = False
     lost: bool = False
+
+
+DUPTHRESH = 3  # later frames that must arrive before a missing one counts as lost
+BACKOFF = 2.0  # RTO growth after a timeout, until a fresh RTT sample
 
 
 def _c6(counter: int) -> bytes:
@@ -118,6 +123,8 @@ class Link:
         self._packer = StreamPacker()
         self._inflight: dict[int, _Out] = {}
         self._tx_base = self._tx_next = 0
+        self._xmit = 0
+        self._news = 0.0  # last ACK that acknowledged something new
         self._dgrams: deque[bytes] = deque()
         self._queued_bytes = 0
         self._last_tx: float | None = None
@@ -244,20 +251,33 @@ class Link:
 
     # ------------------------------------------------------------- sending side
     def _send_data(self, now: float, emit, budget) -> None:
+        if self._inflight and now - max(self._news, self._oldest_unsacked()) >= self._rto:
+            # No news for a whole RTO: everything unacknowledged is presumed lost; back off.
+            for o in self._inflight.values():
+                o.lost = o.lost or not o.sacked
+            self._news = now
+            self._rto = min(self._max_rto, BACKOFF * self._rto)
         for s in range(self._tx_base, self._tx_next):
             o = self._inflight[s]
-            if not o.sacked and (o.lost or now - o.sent_at >= self._rto):
+            if o.lost and not o.sacked:
                 if not emit(Kind.DATA, o.data, s & 0xFF):
                     return
-                o.sent_at, o.tries, o.lost = now, o.tries + 1, False
+                o.sent_at, o.tries, o.lost, o.xmit = now, o.tries + 1, False, self._xmit
+                self._xmit += 1
                 self._n["retransmissions"] += 1
         while self._tx_next - self._tx_base < self.window and self.mtu <= budget():
             nxt = self._packer.next_payload(self._unsent, self._room)
             if nxt is None:
                 return
             emit(Kind.DATA, nxt[0], self._tx_next & 0xFF)
-            self._inflight[self._tx_next] = _Out(nxt[0], nxt[1], now, 1)
+            if not self._inflight:
+                self._news = now  # the timer runs from the first frame of a flight
+            self._inflight[self._tx_next] = _Out(nxt[0], nxt[1], now, 1, self._xmit)
+            self._xmit += 1
             self._tx_next += 1
+
+    def _oldest_unsacked(self) -> float:
+        return min((o.sent_at for o in self._inflight.values() if not o.sacked), default=float("inf"))
 
     def _restart_session(self) -> None:
         self._tx_open = False
@@ -276,30 +296,40 @@ class Link:
         d = (f.payload[0] - self._tx_base) & 0xFF
         if d > self._tx_next - self._tx_base:
             return
+        newest: float | None = None  # send time of the latest first-try frame this ACK covers
+        arrived: list[int] = []  # transmission indices known to have arrived
         for s in range(self._tx_base, self._tx_base + d):
             o = self._inflight.pop(s)
-            if o.tries == 1:
-                self._rtt_sample(now - o.sent_at)
+            if not o.sacked:
+                arrived.append(o.xmit)
+                if o.tries == 1:
+                    newest = o.sent_at if newest is None else max(newest, o.sent_at)
             for mid in o.ends:
                 self._queued_bytes -= len(self._msgs.pop(mid, b""))
                 self._n["acked"] += 1
                 self._events.append(Acked(mid))
         self._tx_base += d
         bits = int.from_bytes(f.payload[1:], "little")
-        newest_sacked = None
+        fresh = bool(d)
         for i in range(self.window):
-            s = self._tx_base + 1 + i
-            if (bits >> i) & 1 and s in self._inflight:
-                o = self._inflight[s]
-                o.sacked = True
-                if newest_sacked is None or o.sent_at > newest_sacked[1]:
-                    newest_sacked = (s, o.sent_at)
-        if newest_sacked is not None:
-            # Sent at least 3 frames before one that arrived: presumed lost, resend now.
-            hs, ht = newest_sacked
-            for s in range(self._tx_base, hs - 2):
-                o = self._inflight[s]
-                if not o.sacked and o.sent_at < ht:
+            o = self._inflight.get(self._tx_base + 1 + i)
+            if o is not None and (bits >> i) & 1 and not o.sacked:
+                o.sacked = fresh = True
+                if o.tries == 1:
+                    newest = o.sent_at if newest is None else max(newest, o.sent_at)
+        if not fresh:
+            return
+        self._news = now
+        # Karn: only frames sent once, timed when first acknowledged (a SACKed frame
+        # cumulatively acked later would count the hole's repair time as RTT).
+        if newest is not None:
+            self._rtt_sample(now - newest)
+        # A frame is lost once DUPTHRESH frames transmitted after it have arrived.
+        arrived += [o.xmit for o in self._inflight.values() if o.sacked]
+        if len(arrived) >= DUPTHRESH:
+            limit = sorted(arrived)[-DUPTHRESH]
+            for o in self._inflight.values():
+                if not o.sacked and o.xmit < limit:
                     o.lost = True
 
     def _rtt_sample(self, r: float) -> None:
