@@ -319,12 +319,34 @@ class Labeller:
 
 
 def assign(data: np.ndarray, centres: np.ndarray) -> np.ndarray:
-    """Nearest-centre label (uint8) for every pixel, in bounded chunks (see `Labeller`)."""
+    """Nearest-centre label (uint8) for every pixel, in bounded chunks.
+
+    For one frame: 8-bit colour pixels in cells off every decision boundary are looked
+    up, the rest go through the distance matmul (building the exact sub-tables of a
+    `Labeller` only pays off over several frames of a scene).
+    """
     x = _pixels(data)
     c = np.asarray(centres, dtype=np.float64)
     if c.ndim != 2 or c.shape[1] != x.shape[1] or not 1 <= len(c) <= MAX_LABELS:
         raise ValueError(f"isodata: centres shape {c.shape} does not fit data with {x.shape[1]} bands")
-    return Labeller(c).assign(data)
+    if x.dtype != np.uint8 or x.shape[1] != 3 or len(c) == 1:
+        return Labeller(c).assign(data)
+    m = _distance_matrix(c)
+    lut = _colour_lut(c)
+    out = np.empty(len(x), dtype=np.uint8)
+    for a in range(0, len(x), CHUNK_PIXELS):
+        chunk = x[a:a + CHUNK_PIXELS]
+        key = (chunk[:, 0] >> 3).astype(np.uint16) << 10  # 15-bit cell index fits uint16
+        key |= (chunk[:, 1] >> 3).astype(np.uint16) << 5
+        key |= chunk[:, 2] >> 3
+        lab = lut[key]
+        unsure = np.flatnonzero(lab == 255)
+        if len(unsure):
+            fix = np.empty(len(unsure), dtype=np.uint8)
+            _nearest_f32(chunk[unsure], m, fix)
+            lab[unsure] = fix
+        out[a:a + CHUNK_PIXELS] = lab
+    return out.reshape(np.shape(data)[:-1])
 
 
 def spread(sample: np.ndarray, centres: np.ndarray) -> float:
