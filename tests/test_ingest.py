@@ -124,21 +124,40 @@ def test_bad_masks_and_spaces_are_named(utia, tmp_path):
         ingest(utia, "utia", tmp_path / "x.db", mask=small, workers=0)
 
 
+# The first released schema, verbatim: what a version-1 database on disk holds.
+_SCHEMA_1 = """
+CREATE TABLE captures (id INTEGER PRIMARY KEY, robot TEXT NOT NULL, sequence INTEGER NOT NULL,
+    time REAL NOT NULL, cmd_elevation REAL, cmd_azimuth REAL, elevation REAL NOT NULL,
+    azimuth REAL NOT NULL, space TEXT NOT NULL, bands TEXT NOT NULL, scene TEXT NOT NULL DEFAULT '',
+    UNIQUE (robot, sequence));
+CREATE TABLE models (capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
+    label INTEGER NOT NULL, band INTEGER NOT NULL, family TEXT NOT NULL,
+    gamma REAL NOT NULL, delta REAL NOT NULL, xi REAL NOT NULL, lam REAL NOT NULL,
+    p0 REAL, p1 REAL, p2 REAL, p3 REAL, z REAL, count INTEGER NOT NULL, beta1 REAL, beta2 REAL,
+    censored_low INTEGER NOT NULL DEFAULT 0, censored_high INTEGER NOT NULL DEFAULT 0,
+    PRIMARY KEY (capture, label, band));
+CREATE INDEX models_by_region ON models (label, band);
+CREATE TABLE masks (id INTEGER PRIMARY KEY, robot TEXT NOT NULL DEFAULT '', key TEXT NOT NULL,
+    height INTEGER NOT NULL, width INTEGER NOT NULL, encoding TEXT NOT NULL, data BLOB NOT NULL,
+    UNIQUE (robot, key));
+"""
+
+
 def test_schema_1_database_is_upgraded_in_place(utia, tmp_path):
+    from tools.store import APPLICATION_ID
+
     db = tmp_path / "old.db"
-    Store.open(db).close()
     con = sqlite3.connect(db)
-    con.executescript(
-        "DROP INDEX captures_by_source; ALTER TABLE captures DROP COLUMN light_elevation;"
-        "ALTER TABLE captures DROP COLUMN light_azimuth; ALTER TABLE captures DROP COLUMN source;"
-        "INSERT INTO captures (robot, sequence, time, elevation, azimuth, space, bands)"
-        " VALUES ('rover', 0, 1.0, 45, 10, 'rgb', '[\"R\"]'); PRAGMA user_version = 1;")
+    con.executescript(_SCHEMA_1 + f"PRAGMA user_version = 1; PRAGMA application_id = {APPLICATION_ID};"
+                      "INSERT INTO captures (robot, sequence, time, elevation, azimuth, space, bands)"
+                      " VALUES ('rover', 0, 1.0, 45, 10, 'rgb', '[\"R\"]');")
     con.close()
     ingest(utia, "utia", db, workers=0)
     with Store.open(db) as store:
         old = store.captures(robot="rover")
         assert [(c.measured, c.illumination, c.source) for c in old] == [((45.0, 10.0), (None, None), None)]
         assert len(store.captures()) == 13
+        assert {c.illumination for c in store.captures(robot=dataset_robot(utia))} == {(40.0, 0.0), (70.0, 0.0)}
 
 
 def test_cli_ingest_and_its_errors(utia, tmp_path, capsys):
