@@ -201,29 +201,39 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
         where = place(z, low, high, count, Z_LADDER)
         if where == Placement(z) and max(low, high) < MIN_REPORTED:
             low = high = 0.0
-        if not where.fallback and where != Placement(z):
-            trial = _fit_placed(counts[i], cum[i], where, None, low, high, count, lo, bin_width, codec)[1]
-            if not reproduces(trial, low, high, lo + 0.5 * bin_width, lo + (bins - 1.5) * bin_width):
-                where = Placement(where.z, 0, fallback=True)
-        normal_probs = fallback_probs(low, high) if where.fallback else None
-        pct, model = _fit_placed(counts[i], cum[i], where, normal_probs, low, high, count, lo, bin_width, codec)
-        support = None
-        # Bounded supports must reach the centre of every occupied bin (so each has mass); only
-        # the side that falls short is recorded (it travels).
-        ends = codec.snap([lo + bin_width * f0] * 2 + [lo + bin_width * f1] * 2)
-        s_lo, s_hi = support_of(model)
-        widening = 0
-        if s_lo > ends[0] or s_hi < ends[3]:
-            support = (ends[0] if s_lo > ends[0] else None, ends[3] if s_hi < ends[3] else None)
-            # the candidate whose levels match the histogram best (its index travels)
-            cands = widenings(model, support, pct)
-            errs = [_level_l1(c, counts[i], lo, bin_width) if c is not None else math.inf for c in cands]
-            widening = errs.index(min(errs)) if min(errs) < math.inf else 0
-            model = model_from_percentiles(pct, where.z, count, shift=where.shift,
-                                           normal_probs=normal_probs, support=support, widening=widening)
-        out.append(FitResult(model, count, where.z, pct, float(beta1[i]), float(beta2[i]),
-                             where.shift, low, high, where.fallback, support, widening))
+        fit = _fit_one(counts[i], cum[i], where, low, high, count, f0, f1, lo, bin_width, codec)
+        if (low or high) and not where.fallback and not reproduces(
+                fit.model, low, high, lo + 0.5 * bin_width, lo + (bins - 1.5) * bin_width):
+            # the percentiles saw too little to extrapolate the pile-up: the fallback does not
+            fit = _fit_one(counts[i], cum[i], Placement(where.z, 0, True), low, high, count, f0, f1,
+                           lo, bin_width, codec)
+        out.append(FitResult(fit.model, count, fit.z, fit.percentiles, float(beta1[i]), float(beta2[i]),
+                             fit.shift, low, high, fit.fallback, fit.support, fit.widening))
     return out
+
+
+def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, high: float, count: int,
+             f0: int, f1: int, lo: float, bin_width: float, codec: PercentileCodec) -> FitResult:
+    """One histogram read at `where`, its support widened to the occupied bins f0..f1 if short
+    (betas left at zero: the caller has them)."""
+    normal_probs = fallback_probs(low, high) if where.fallback else None
+    pct, model = _fit_placed(counts, cum, where, normal_probs, low, high, count, lo, bin_width, codec)
+    support = None
+    # Bounded supports must reach the centre of every occupied bin (so each has mass); only
+    # the side that falls short is recorded (it travels).
+    ends = codec.snap([lo + bin_width * f0] * 2 + [lo + bin_width * f1] * 2)
+    s_lo, s_hi = support_of(model)
+    widening = 0
+    if s_lo > ends[0] or s_hi < ends[3]:
+        support = (ends[0] if s_lo > ends[0] else None, ends[3] if s_hi < ends[3] else None)
+        # the candidate whose levels match the histogram best (its index travels)
+        cands = widenings(model, support, pct)
+        errs = [_level_l1(c, counts, lo, bin_width) if c is not None else math.inf for c in cands]
+        widening = errs.index(min(errs)) if min(errs) < math.inf else 0
+        model = model_from_percentiles(pct, where.z, count, shift=where.shift,
+                                       normal_probs=normal_probs, support=support, widening=widening)
+    return FitResult(model, count, where.z, pct, 0.0, 0.0, where.shift, low, high, where.fallback,
+                     support, widening)
 
 
 def _level_l1(model: Johnson, counts: np.ndarray, lo: float, bin_width: float) -> float:
