@@ -172,7 +172,8 @@ def _plot(method: str, points, sizes, res, ctx: Context) -> str:
                 ax.set_ylabel(f"n={n}\nbeta2", fontsize=8)
             if r == len(sizes) - 1:
                 ax.set_xlabel("beta1", fontsize=8)
-    fig.colorbar(sc, ax=[a for row in axes for a in row], label="worst quantile error (gray)", shrink=0.6)
+    fig.subplots_adjust(left=0.07, right=0.9, top=0.95, bottom=0.05, hspace=0.25, wspace=0.12)
+    fig.colorbar(sc, cax=fig.add_axes([0.92, 0.2, 0.015, 0.6]), label="worst quantile error (gray)")
     fig.suptitle(f"{method} fit: worst quantile error (red x: failure; solid: beta2 = beta1 + 1, "
                  "dashed: lognormal line)", fontsize=9)
-    return save(fig, ctx, f"stability_{method}.png")
+    return save(fig, ctx, f"stability_{method}.png", tight=False)

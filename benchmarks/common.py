@@ -68,14 +68,15 @@ def figure(ncols: int = 1, nrows: int = 1, size: tuple[float, float] = (6.4, 4.2
     return plt.subplots(nrows, ncols, figsize=(size[0] * ncols, size[1] * nrows), squeeze=False, **kw)
 
 
-def save(fig, ctx: Context, name: str) -> str:
+def save(fig, ctx: Context, name: str, tight: bool = True) -> str:
     """Write the figure as `name` under ctx.out; the markdown image line for RESULTS.md."""
     import matplotlib.pyplot as plt
     import warnings
     ctx.out.mkdir(parents=True, exist_ok=True)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")  # colorbar axes do not take part in tight_layout
-        fig.tight_layout()
+    if tight:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            fig.tight_layout()
     fig.savefig(ctx.out / name, dpi=90)
     plt.close(fig)
     return f"![{name}]({name})"
