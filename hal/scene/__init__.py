@@ -1,7 +1,8 @@
 """A physically motivated renderer of sand, grass, soil and gravel plates.
 
 Grains are hemispheres on a height field with lognormal radii and per-grain albedo,
-lit by the sun (Lambert plus ambient) with cast shadows marched over the height field.
+lit from a light direction (Lambert plus ambient) with cast shadows marched over the
+height field; the default light is the sun from the south-west, 45 degrees up (`SUN`).
 A view is an orthographic camera at (elevation, azimuth): the ground is compressed by
 sin(elevation) along the view azimuth and nearer grains hide what lies behind them,
 so the pixel statistics change with the view.
@@ -27,10 +28,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from hal.interfaces import ViewAngles
+from hal.scene.light import SUN, LightAngles, check_light, shade
 from hal.scene.materials import BAND_NAMES, LABEL_NAMES, REFERENCE_SIZE, Label
 from hal.scene.surface import Surface, build_surface
 
-__all__ = ["BAND_NAMES", "BANDS", "LABEL_NAMES", "Label", "RenderedView", "SCENES", "render"]
+__all__ = ["BAND_NAMES", "BANDS", "LABEL_NAMES", "Label", "LightAngles", "RenderedView", "SCENES", "SUN",
+           "render"]
 
 SCENES: tuple[str, ...] = ("black", "white", "mixed", "field")
 BANDS: tuple[str, ...] = ("rgb", "multispectral")
@@ -48,6 +51,7 @@ class RenderedView:
     scene: str
     view: ViewAngles
     bands: str
+    light: LightAngles = SUN
 
 
 def _check(scene: str, view: ViewAngles, size: tuple[int, int], bands: str) -> tuple[int, int]:
@@ -98,31 +102,36 @@ def _visible(surface: Surface, view: ViewAngles, h: int, w: int) -> np.ndarray:
 
 
 def render(scene: str, view: ViewAngles, size: tuple[int, int] = (480, 640), seed: int = 0,
-           bands: str = "rgb") -> RenderedView:
-    """Render `scene` seen from `view` at `size` = (height, width); deterministic per seed."""
+           bands: str = "rgb", light: LightAngles | None = None) -> RenderedView:
+    """Render `scene` seen from `view` at `size` = (height, width), lit from `light` (None: `SUN`).
+
+    Deterministic per seed; the grain layout is shared by every view and light of a seed.
+    """
     h, w = _check(scene, view, size, bands)
+    light = check_light(light)
     long_side = max(h, w)
     scale = long_side / REFERENCE_SIZE
     ss = min(MAX_SUPERSAMPLE, max(1, math.ceil(MIN_GRAIN_PIXELS / (1.1 * scale))))
     surface = build_surface(scene, int(seed), long_side * ss, scale * ss)
+    shading = shade(surface, light)
     cells = _visible(surface, view, h * ss, w * ss)
     rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, round(view.elevation * 1000),
                                  round(view.azimuth % 360.0 * 1000), 1])
     center = cells[ss // 2::ss, ss // 2::ss]
     mask = surface.label[center]
     if bands == "rgb":
-        radiance = surface.radiance[cells][..., (2, 1, 0)]
+        radiance = shading.radiance[cells][..., (2, 1, 0)]
     else:
-        radiance = surface.radiance[cells]
+        radiance = shading.radiance[cells]
     if ss > 1:
         radiance = radiance.reshape(h, ss, w, ss, -1).mean(axis=(1, 3))
     dn = radiance * 255.0 + rng.normal(0.0, READ_NOISE_DN, radiance.shape)
     dn = np.clip(np.rint(dn), 0, 255)
     if bands == "rgb":
-        return RenderedView(dn.astype(np.uint8), mask, scene, view, bands)
-    kelvin = surface.kelvin[cells]
+        return RenderedView(dn.astype(np.uint8), mask, scene, view, bands, light)
+    kelvin = shading.kelvin[cells]
     if ss > 1:
         kelvin = kelvin.reshape(h, ss, w, ss).mean(axis=(1, 3))
     ck = np.clip(np.rint(kelvin * 100.0 + rng.normal(0.0, THERMAL_NOISE_CK, kelvin.shape)), 0, 65535)
     image = np.concatenate([dn, ck[..., None]], axis=2).astype(np.uint16)
-    return RenderedView(image, mask, scene, view, bands)
+    return RenderedView(image, mask, scene, view, bands, light)

@@ -1,7 +1,8 @@
-"""The sample's surface on a periodic ground grid: grains, shading, cast shadows, heat.
+"""The sample's surface on a periodic ground grid: grain layout, height, normals, albedo.
 
-Everything here is independent of the view (Lambertian reflection), so one surface per
-(scene, seed, size) is built once and cached; each view only projects it.
+Everything here is independent of the view and of the light, so one surface per
+(scene, seed, size) is built once and cached; `hal.scene.light` shades it per light
+direction and each view only projects it.
 """
 from __future__ import annotations
 
@@ -13,11 +14,6 @@ import numpy as np
 
 from hal.scene.materials import MATERIALS, Label, Material, Shape
 
-# Sun from the south-west quarter, 45 degrees above the horizon; x east, y north.
-LIGHT_AZIMUTH_DEG = 225.0
-LIGHT_ELEVATION_DEG = 45.0
-AMBIENT = 0.12  # share of sky light that reaches every facet
-AIR_KELVIN = 293.15
 BLADE_POINTS = 8  # spheres along one grass blade
 
 
@@ -36,13 +32,14 @@ class Spheres:
         return Spheres(*(a[keep] for a in (self.cx, self.cy, self.cz, self.r, self.flatten, self.albedo)))
 
 
-@dataclass(frozen=True, slots=True)
+@dataclass(frozen=True, slots=True, eq=False)  # hashed by identity: a key of the shading cache
 class Surface:
-    """View-independent state of the plate on a T x T periodic grid."""
+    """View- and light-independent state of the plate on a T x T periodic grid."""
 
     height: np.ndarray  # (T, T) float32, pixels
-    radiance: np.ndarray  # (T*T, 5) float32, reflected light per spectral band, 0..1
-    kelvin: np.ndarray  # (T*T,) float32, brightness temperature
+    height64: np.ndarray  # (T, T) float64, the same heights for the shadow march
+    normal: np.ndarray  # (T*T, 3) unit surface normals
+    albedo: np.ndarray  # (T*T, 5) per spectral band
     label: np.ndarray  # (T*T,) uint8
 
     @property
@@ -143,24 +140,6 @@ def _geometry(s: Spheres, owner: np.ndarray, cells: np.ndarray, size: int) -> tu
     return height, normal
 
 
-def light_vector() -> np.ndarray:
-    az, el = math.radians(LIGHT_AZIMUTH_DEG), math.radians(LIGHT_ELEVATION_DEG)
-    return np.array([math.cos(el) * math.sin(az), math.cos(el) * math.cos(az), math.sin(el)])
-
-
-def _lit(height: np.ndarray) -> np.ndarray:
-    """False where the terrain toward the sun rises above the sun's ray (cast shadow)."""
-    az, el = math.radians(LIGHT_AZIMUTH_DEG), math.radians(LIGHT_ELEVATION_DEG)
-    rise = math.tan(el)
-    steps = int(math.ceil(float(height.max() - height.min()) / rise)) + 1
-    lit = np.ones(height.shape, bool)
-    for k in range(1, steps + 1):
-        sx, sy = round(k * math.sin(az)), round(k * math.cos(az))
-        ahead = np.roll(height, (-sy, -sx), axis=(0, 1))  # the cell k steps toward the sun
-        lit &= ahead <= height + k * rise
-    return lit
-
-
 def scene_labels(scene: str, size: int, scale: float, rng: np.random.Generator) -> np.ndarray:
     """Which material covers each cell of the torus, (T, T) uint8."""
     if scene == "black":
@@ -214,13 +193,5 @@ def build_surface(scene: str, seed: int, size: int, scale: float) -> Surface:
         height[cells], normal[cells] = _geometry(spheres, owner, cells, size)
         o = owner[cells]
         albedo[cells] = np.where((o >= 0)[:, None], spheres.albedo[np.maximum(o, 0)], np.asarray(m.substrate))
-    lit = _lit(height.reshape(size, size)).ravel()
-    direct = np.clip(normal @ light_vector(), 0.0, None) * lit
-    irradiance = AMBIENT + (1.0 - AMBIENT) * direct
-    radiance = albedo * irradiance[:, None]
-    emissivity = np.array([MATERIALS[Label(int(v))].emissivity for v in range(1, 7)])[flat_labels - 1]
-    gain = np.array([MATERIALS[Label(int(v))].heat_gain for v in range(1, 7)])[flat_labels - 1]
-    absorbed = (1.0 - albedo.mean(axis=1)) * direct
-    kelvin = (AIR_KELVIN + gain * absorbed) * emissivity**0.25
-    return Surface(height.reshape(size, size).astype(np.float32), radiance.astype(np.float32),
-                   kelvin.astype(np.float32), flat_labels.copy())
+    height = height.reshape(size, size)
+    return Surface(height.astype(np.float32), height, normal, albedo, flat_labels.copy())
