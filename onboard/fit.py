@@ -14,7 +14,7 @@ import numpy as np
 from onboard.censor import (MIN_REPORTED, Placement, censored_counts, fallback_probs, place, quantize,
                             reproduces)
 from onboard.johnson import Johnson
-from onboard.percentile import model_from_percentiles, sl_band, support_of, widenings
+from onboard.percentile import model_from_percentiles, sl_band, support_of
 
 __all__ = [
     "Z_LADDER", "FitResult", "PercentileCodec", "fit_histogram", "fit_values",
@@ -61,7 +61,6 @@ class FitResult:
     fallback: bool = False  # the normal through the censor limits (onboard.censor)
     # Points the support was widened to reach, low and high (None: that side held the data).
     support: tuple[float | None, float | None] | None = None
-    widening: int = 0  # how it was widened: index in onboard.percentile.WIDENINGS
 
 
 class PercentileCodec:
@@ -208,7 +207,7 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
             fit = _fit_one(counts[i], cum[i], Placement(where.z, 0, True), low, high, count, f0, f1,
                            lo, bin_width, codec)
         out.append(FitResult(fit.model, count, fit.z, fit.percentiles, float(beta1[i]), float(beta2[i]),
-                             fit.shift, low, high, fit.fallback, fit.support, fit.widening))
+                             fit.shift, low, high, fit.fallback, fit.support))
     return out
 
 
@@ -223,24 +222,11 @@ def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, 
     # the side that falls short is recorded (it travels).
     ends = codec.snap([lo + bin_width * f0] * 2 + [lo + bin_width * f1] * 2)
     s_lo, s_hi = support_of(model)
-    widening = 0
     if s_lo > ends[0] or s_hi < ends[3]:
         support = (ends[0] if s_lo > ends[0] else None, ends[3] if s_hi < ends[3] else None)
-        # the candidate whose levels match the histogram best (its index travels)
-        cands = widenings(model, support, pct)
-        errs = [_level_l1(c, counts, lo, bin_width) if c is not None else math.inf for c in cands]
-        widening = errs.index(min(errs)) if min(errs) < math.inf else 0
         model = model_from_percentiles(pct, where.z, count, shift=where.shift,
-                                       normal_probs=normal_probs, support=support, widening=widening)
-    return FitResult(model, count, where.z, pct, 0.0, 0.0, where.shift, low, high, where.fallback,
-                     support, widening)
-
-
-def _level_l1(model: Johnson, counts: np.ndarray, lo: float, bin_width: float) -> float:
-    """L1 between the model's bin probabilities (tails folded into the end bins) and the histogram."""
-    edges = lo + bin_width * (np.arange(counts.size - 1) + 0.5)
-    p = np.diff(np.concatenate(([0.0], model.cdf(edges), [1.0])))
-    return float(np.abs(p - counts / counts.sum()).sum())
+                                       normal_probs=normal_probs, support=support)
+    return FitResult(model, count, where.z, pct, 0.0, 0.0, where.shift, low, high, where.fallback, support)
 
 
 def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_probs, low: float,
@@ -264,8 +250,7 @@ def rebuild(result: FitResult, percentiles=None) -> Johnson:
     normal_probs = fallback_probs(result.censored_low, result.censored_high) if result.fallback else None
     return model_from_percentiles(result.percentiles if percentiles is None else percentiles,
                                   result.z, result.count, shift=result.shift,
-                                  normal_probs=normal_probs, support=result.support,
-                                  widening=result.widening)
+                                  normal_probs=normal_probs, support=result.support)
 
 
 def _shifted_probs(z: float, shift: float) -> tuple[float, float, float, float]:

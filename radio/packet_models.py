@@ -20,8 +20,7 @@ as fitted" get a record, so an ordinary model stays at 8 bytes. A record is >H (
 = label position * bands + band, times 16, plus flags), then with flag CENSORED >BbHH (z index,
 shift code in 1/32, censored low and high), then with SUPPORT_LOW the lowest and with
 SUPPORT_HIGH the highest occupied level (B up to 256 levels, else H): the fitted support fell
-short of it and was widened (onboard.fit), by the method whose index (B) follows. A
-support-only record costs 4 bytes. Flag FALLBACK (with CENSORED) marks the normal fallback of onboard.censor.
+short of it and was widened (onboard.percentile.widen). A support-only record costs 3 bytes. Flag FALLBACK (with CENSORED) marks the normal fallback of onboard.censor.
 """
 from __future__ import annotations
 
@@ -37,7 +36,6 @@ import numpy as np
 from onboard.censor import CENSOR_SCALE, MAX_SHIFT_CODE, SHIFT_SCALE, fallback_probs
 from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percentiles
 from onboard.johnson import Johnson
-from onboard.percentile import WIDENINGS
 from radio import FrameError
 from radio.packet_base import (
     UINT32, Kind, angles_from_wire, angles_to_wire, want_bin, want_float, want_int, want_str,
@@ -70,7 +68,6 @@ class Tail:
     fallback: bool = False
     support_low: int | None = None  # lowest occupied level, when the support was widened to it
     support_high: int | None = None
-    widening: int = 0  # index in onboard.percentile.WIDENINGS
 
 
 @dataclass(frozen=True, slots=True)
@@ -275,7 +272,7 @@ def _tail_of(r: FitResult, label_z: float, override: tuple[float, float] | None,
         raise ValueError(f"shift {r.shift} is not a multiple of 1/{SHIFT_SCALE} within the int8 range")
     if r.fallback and (_censor_code(low) / CENSOR_SCALE, _censor_code(high) / CENSOR_SCALE) != (low, high):
         raise ValueError("a fallback model needs its censored fractions in 1/65535 fixed point")
-    return Tail(Z_LADDER.index(r.z), code, float(low), float(high), bool(r.fallback), *ends, r.widening)
+    return Tail(Z_LADDER.index(r.z), code, float(low), float(high), bool(r.fallback), *ends)
 
 
 def _level_of(point: float, codec: PercentileCodec) -> int:
@@ -297,8 +294,6 @@ def _tail_bytes(index: int, t: Tail, code: struct.Struct) -> bytes:
     if t.support_high is not None:
         flags |= TailFlag.SUPPORT_HIGH
         out += code.pack(t.support_high)
-    if t.support_low is not None or t.support_high is not None:
-        out += bytes([t.widening])
     return _TAIL_HEAD.pack(index << 4 | int(flags)) + out
 
 
@@ -339,17 +334,8 @@ def _tails(v: Any, n: int, n_bands: int, code: struct.Struct, levels: int) -> li
                 pos += code.size
                 if ends[side] >= levels:
                     raise FrameError(f"censored record: support level {ends[side]} outside 0..{levels - 1}")
-        widening = 0
-        if ends != [None, None]:
-            if pos >= len(blob):
-                raise FrameError("censored and support records end inside a record")
-            widening = blob[pos]
-            pos += 1
-            if widening >= len(WIDENINGS):
-                raise FrameError(f"censored record: widening method {widening} outside 0..{len(WIDENINGS) - 1}")
         out[index // n_bands][index % n_bands] = Tail(
-            z_index, shift, low / CENSOR_SCALE, high / CENSOR_SCALE, bool(flags & TailFlag.FALLBACK), *ends,
-            widening)
+            z_index, shift, low / CENSOR_SCALE, high / CENSOR_SCALE, bool(flags & TailFlag.FALLBACK), *ends)
     return [tuple(t) for t in out]
 
 
@@ -367,7 +353,6 @@ def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, 
                 if t.support_low is not None or t.support_high is not None:
                     kw["support"] = tuple(None if v is None else support_point(v, codec)
                                           for v in (t.support_low, t.support_high))
-                    kw["widening"] = t.widening
             try:
                 model = model_from_percentiles(codec.decode(codes), z, rec.count, **kw)
             except (ValueError, ArithmeticError) as exc:
