@@ -14,13 +14,15 @@ from tools.store import Store
 KEY = bytes(range(32))
 
 
-def models_body(seq, elevation=60.0, scene="mixed"):
+def models_body(seq, elevation=60.0, scene="mixed", extras=None, space="rgb"):
     view = render(scene, ViewAngles(elevation, 0.0), (40, 48), seed=0)
     f = FrameFitter(4, 3)
     f.add(view.image, view.mask)
     fits = f.fit()
+    bands = ("R", "G", "B") if space == "rgb" else ("P1", "P2", "P3")
     body = pk.encode_models(fits, robot_id=3, seq=seq, time=100.0 + seq, commanded=(elevation, 0.0),
-                            measured=(elevation + 0.2, 0.1), feature_space="rgb", bands=("R", "G", "B"))
+                            measured=(elevation + 0.2, 0.1), feature_space=space, bands=bands,
+                            extras=extras)
     return body, fits, view.mask
 
 
@@ -120,3 +122,84 @@ def test_over_the_link_captures_are_stored_before_acknowledgement_and_commands_a
     assert len(store.captures()) == 3
     assert got_cmd[0].name is pk.CommandName.STATUS
     assert host.answers[cid].text.startswith("ACK")
+
+
+def _dependence(seq, elevation=60.0):
+    """A MODELS body carrying the dependence measured on its own view, and that dependence."""
+    from onboard.dependence import measure
+    from radio.packet_dependence import dependence_extras
+
+    view = render("mixed", ViewAngles(elevation, 0.0), (40, 48), seed=0)
+    _, fits, _ = models_body(seq, elevation)
+    deps = measure(view.image, view.mask, {k: r.model for k, r in fits.items()})
+    labels = sorted({lab for lab, _ in fits})
+    return models_body(seq, elevation, extras=dependence_extras(deps, labels, 3))[0], deps
+
+
+def test_dependence_in_a_models_packet_is_stored_and_reused_by_unchanged_markers(store):
+    body, deps = _dependence(1)
+    assert deps
+    rx = Receiver(store)
+    assert "dependence" in rx.handle(body).text
+    rx.handle(pk.encode(pk.UnchangedPacket(3, 2, 200.0, (60.0, 0.0), (60.1, 0.0), 1)))
+    a, b = store.capture_by_seq("3", 1), store.capture_by_seq("3", 2)
+    got = store.dependence(a.id)
+    assert set(got) == set(deps)
+    for lab, d in deps.items():  # int8 on the wire: within one step of 1/127
+        assert np.allclose(got[lab].corr, d.corr, atol=1 / 127) and np.allclose(got[lab].dx, d.dx, atol=1 / 127)
+    assert store.dependence(b.id) == got
+    assert rx.rejected_extras == 0
+
+
+def test_malformed_dependence_is_counted_and_the_capture_stored_without_it(store):
+    from radio.packet_dependence import DEPENDENCE_KEY
+
+    rx = Receiver(store)
+    item = rx.handle(models_body(1, extras={DEPENDENCE_KEY: b"\x01\x02\x03"})[0])
+    assert item.stored and "dependence rejected" in item.text
+    assert rx.rejected_extras == 1
+    (cap,) = store.captures()
+    assert store.dependence(cap.id) == {} and len(store.models(cap.id)) == 6
+
+
+def test_pca_basis_arrives_once_per_scene_and_applies_to_later_captures(store):
+    from onboard.features import PcaBasis
+
+    view = render("mixed", ViewAngles(60.0, 0.0), (40, 48), seed=0)
+    basis = PcaBasis.fit(view.image)
+    rx = Receiver(store)
+    first = rx.handle(models_body(1, extras=basis.to_extras(), space="pca")[0])
+    rx.handle(models_body(2, 70.0, space="pca")[0])
+    rx.handle(pk.encode(pk.UnchangedPacket(3, 3, 300.0, (80.0, 0.0), (80.0, 0.0), 1)))
+    assert "PCA basis" in first.text
+    for seq in (1, 2, 3):
+        got = store.pca_basis(store.capture_by_seq("3", seq).id)
+        assert got is not None and np.allclose(got.rotation, basis.rotation) and np.allclose(got.mean, basis.mean)
+    bad = dict(basis.to_extras(), pca_rotation=[1.0, 2.0])
+    item = rx.handle(models_body(4, space="pca", extras=bad)[0])
+    assert item.stored and "PCA basis rejected" in item.text and rx.rejected_extras == 1
+
+
+def test_synth_from_the_database_turns_received_pca_captures_back_into_rgb(tmp_path):
+    from onboard.features import PcaBasis
+    from tools.cli import main
+    from tools.images import read_image, write_mask
+
+    view = render("mixed", ViewAngles(60.0, 0.0), (40, 48), seed=0)
+    basis = PcaBasis.fit(view.image)
+    f = FrameFitter(4, 3)
+    f.add(basis.apply(view.image), view.mask)
+    body = pk.encode_models(f.fit(), robot_id=3, seq=1, time=1.0, commanded=(60.0, 0.0), measured=(60.0, 0.0),
+                            feature_space="pca", bands=("P1", "P2", "P3"), extras=basis.to_extras())
+    db = tmp_path / "scene.db"
+    with Store.open(db) as s:
+        Receiver(s).handle(body)
+    write_mask(tmp_path / "mask.png", view.mask)
+    out = tmp_path / "syn.png"
+    assert main(["synth", "--db", str(db), "--mask", str(tmp_path / "mask.png"), "--angle", "60",
+                 "--out", str(out)]) == 0
+    syn = read_image(out)
+    assert syn.shape == view.image.shape
+    for lab in np.unique(view.mask):  # each region's mean colour comes back, not its components
+        sel = view.mask == lab
+        assert np.abs(syn[sel].mean(axis=0) - view.image[sel].mean(axis=0)).max() < 8, lab

@@ -96,3 +96,50 @@ def test_failed_insert_leaves_nothing_half_written(tmp_path):
             s.add_capture("bot", 5, 0.0, None, 10.0, "rgb", ("R",), {(0, 0): good, (1, 0): Bad()})
         assert s.captures() == []
         assert add(s, 5, 10.0) is True  # the sequence number is still free
+
+
+def test_batch_commits_many_writes_together_and_rolls_back_all_on_error(tmp_path):
+    with Store.open(tmp_path / "s.db") as s:
+        with s.batch():
+            assert add(s, 1, 30.0) is True
+            assert add(s, 1, 30.0) is False  # a duplicate inside a batch drops only itself
+            assert add(s, 2, 40.0) is True
+            s.add_mask("m", np.zeros((4, 5), np.uint8), "bot")
+        assert [c.sequence for c in s.captures()] == [1, 2]
+        with pytest.raises(RuntimeError):
+            with s.batch():
+                add(s, 3, 50.0)
+                s.add_mask("n", np.ones((4, 5), np.uint8), "bot")
+                raise RuntimeError("interrupted")
+        assert [c.sequence for c in s.captures()] == [1, 2]
+        assert s.mask("n", "bot") is None and s.mask("m", "bot") is not None
+    # another connection sees exactly the committed rows
+    con = sqlite3.connect(tmp_path / "s.db")
+    assert con.execute("SELECT COUNT(*) FROM captures").fetchone()[0] == 2
+    assert con.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    con.close()
+
+
+def test_capture_by_seq_finds_one_robot_capture(tmp_path):
+    with Store.open(tmp_path / "s.db") as s:
+        add(s, 4, 30.0)
+        s.add_capture("other", 4, 0.0, None, 70.0, "rgb", ("R", "G", "B"), results())
+        got = s.capture_by_seq("bot", 4)
+        assert (got.robot, got.sequence, got.elevation) == ("bot", 4, 30.2)
+        assert s.capture_by_seq("other", 4).elevation == 70.0
+        assert s.capture_by_seq("bot", 5) is None
+
+
+def test_pca_basis_is_stored_with_its_capture_and_inherited_by_later_ones(tmp_path):
+    from onboard.features import PcaBasis
+
+    rng = np.random.default_rng(0)
+    a = PcaBasis.fit(rng.integers(0, 255, (20, 30, 3), dtype=np.uint8))
+    b = PcaBasis.fit(rng.integers(50, 90, (20, 30, 3), dtype=np.uint8))
+    with Store.open(tmp_path / "s.db") as s:
+        add(s, 1, 30.0)
+        for seq, angle, basis in ((2, 40.0, a), (3, 50.0, None), (5, 60.0, b), (6, 70.0, None)):
+            s.add_capture("bot", seq, 0.0, None, angle, "pca", ("P1", "P2", "P3"), results(), pca=basis)
+        by_seq = {c.sequence: s.pca_basis(c.id) for c in s.captures()}
+        assert by_seq == {1: None, 2: a, 3: a, 5: b, 6: b}
+        assert s.pca_by_angle(space="pca") == {40.0: a, 50.0: a, 60.0: b, 70.0: b}

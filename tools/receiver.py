@@ -19,9 +19,12 @@ from typing import Any, Callable
 
 import numpy as np
 
+from onboard.dependence import Dependence
+from onboard.features import PcaBasis
 from onboard.fit import PercentileCodec, Z_LADDER
 from radio import FrameError
 from radio import packet as pk
+from radio.packet_dependence import packet_dependence
 from radio.link import Delivered, Link, LinkDown, LinkStats, LinkUp
 from radio.serial_port import Port
 from tools.store import Store
@@ -122,6 +125,8 @@ class Receiver:
         self.store, self.scene = store, scene
         self.counts: dict[str, int] = {k.value: 0 for k in ItemKind}
         self.duplicates = 0
+        # Malformed optional entries (dependence, PCA basis): the capture is stored without them.
+        self.rejected_extras = 0
 
     def handle(self, payload: bytes) -> Item:
         try:
@@ -169,19 +174,38 @@ class Receiver:
                 fits[(rec.label, band)] = _Fit(m, rec.count, Z_LADDER[rec.z_index], codec.decode(codes),
                                                0.0, 0.0, round(rec.censored_low * rec.count),
                                                round(rec.censored_high * rec.count))
+        notes = []
+        dependence: dict[int, Dependence] = {}
+        try:
+            dependence = packet_dependence(p)
+        except FrameError as exc:
+            self.rejected_extras += 1
+            notes.append(f"dependence rejected: {exc}")
+        pca = None
+        try:
+            pca = PcaBasis.from_extras(dict(p.extras))
+        except ValueError as exc:
+            self.rejected_extras += 1
+            notes.append(f"PCA basis rejected: {exc}")
         new = self.store.add_capture(str(p.robot_id), p.seq, p.time, p.commanded, p.measured,
-                                     p.feature_space, p.bands, fits, scene=self.scene)
+                                     p.feature_space, p.bands, fits, scene=self.scene,
+                                     dependence=dependence, pca=pca)
+        extra = "".join(f"; {n}" for n in notes)
         return Item(ItemKind.CAPTURE, p.robot_id, p.seq, new,
-                    f"capture at {p.measured[0]:.1f}° ({len(p.labels)} regions, {len(p.bands)} bands)", p)
+                    f"capture at {p.measured[0]:.1f}° ({len(p.labels)} regions, {len(p.bands)} bands"
+                    f"{', dependence' if dependence else ''}{', PCA basis' if pca else ''}){extra}", p)
 
     def _unchanged(self, p: pk.UnchangedPacket) -> Item:
-        ref = next((c for c in self.store.captures(robot=str(p.robot_id)) if c.sequence == p.ref_seq), None)
+        ref = self.store.capture_by_seq(str(p.robot_id), p.ref_seq)
         if ref is None:
             return Item(ItemKind.UNCHANGED, p.robot_id, p.seq, False,
                         f"unchanged marker refers to capture {p.ref_seq}, which is not stored", p)
         fits = {(m.label, m.band): m for m in self.store.models(ref.id)}
+        # The marker stands for the reference's whole model: its dependence and basis too.
+        basis = self.store.pca_basis(ref.id)
         new = self.store.add_capture(str(p.robot_id), p.seq, p.time, p.commanded, p.measured,
-                                     ref.space, ref.band_names, fits, scene=ref.scene)
+                                     ref.space, ref.band_names, fits, scene=ref.scene,
+                                     dependence=self.store.dependence(ref.id), pca=basis)
         return Item(ItemKind.UNCHANGED, p.robot_id, p.seq, new,
                     f"unchanged at {p.measured[0]:.1f}°: models of capture {p.ref_seq}", p)
 

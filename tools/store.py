@@ -1,25 +1,27 @@
 """The base station's SQLite database of captures, fitted models and masks.
 
 One capture is one view of one robot: (robot, sequence) is unique, so a packet
-received twice is stored once. Every write runs in a transaction. A file that is
-not a btfscout database (or is damaged) raises `CorruptDatabase` and is never
-rewritten.
+received twice is stored once. Every write runs in a transaction; `with store.batch():`
+groups many writes in one. A file that is not a btfscout database (or is damaged)
+raises `CorruptDatabase` and is never rewritten.
 """
 from __future__ import annotations
 
 import json
 import sqlite3
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
 from onboard.dependence import Dependence
+from onboard.features import PcaBasis
 from onboard.johnson import Family, Johnson
 from tools.images import decode_png, encode_png
 
-SCHEMA_VERSION = 3
+SCHEMA_VERSION = 4
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -31,6 +33,14 @@ CREATE TABLE dependence (
     label INTEGER NOT NULL,
     corr TEXT NOT NULL, dx TEXT NOT NULL, dy TEXT NOT NULL,
     PRIMARY KEY (capture, label)
+);
+"""
+# The PCA basis a robot sent with a capture (PcaBasis.to_record as JSON); later captures of
+# the same robot use it until a newer one arrives.
+_PCA = """
+CREATE TABLE pca_bases (
+    capture INTEGER PRIMARY KEY REFERENCES captures(id) ON DELETE CASCADE,
+    record TEXT NOT NULL
 );
 """
 _SCHEMA = """
@@ -70,7 +80,7 @@ CREATE TABLE masks (
     data BLOB NOT NULL,
     UNIQUE (robot, key)
 );
-""" + _DEPENDENCE
+""" + _DEPENDENCE + _PCA
 _TABLES = {"captures", "models", "masks"}
 # Upgrades from the keyed version to the next; each keeps every existing row.
 _MIGRATIONS: dict[int, str] = {
@@ -81,11 +91,17 @@ _MIGRATIONS: dict[int, str] = {
        "CREATE INDEX captures_by_source ON captures (robot, source);",
     # grain and band correlation per region (onboard.dependence)
     2: _DEPENDENCE,
+    # the PCA basis of a scene, to turn pca captures back into RGB
+    3: _PCA,
 }
 
 
 class CorruptDatabase(Exception):
     """The file is damaged or is not a btfscout database; it has not been touched."""
+
+
+class _Undo(Exception):
+    """Drops the current write (e.g. a capture that was already stored)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -189,6 +205,16 @@ class Store:
         except CorruptDatabase:
             conn.close()
             raise
+        # Only once the file is known to be ours. The host is not the durable side: the
+        # robot keeps every packet in its outbox until it is acknowledged, and a capture is
+        # acknowledged only after its commit, so a power cut that loses the last WAL
+        # commits makes the robot send them again. NORMAL skips an fsync per commit.
+        try:
+            conn.execute("PRAGMA journal_mode = WAL")
+            conn.execute("PRAGMA synchronous = NORMAL")
+        except sqlite3.DatabaseError as exc:
+            conn.close()
+            raise CorruptDatabase(f"database {p}: cannot open for writing ({exc}); left untouched") from None
         return cls(conn, p)
 
     def close(self) -> None:
@@ -201,6 +227,39 @@ class Store:
         self.close()
 
     # -- writing ---------------------------------------------------------
+    @contextmanager
+    def batch(self) -> Iterator["Store"]:
+        """One transaction around many writes: committed together at the end, all rolled
+        back if the block raises. Writes inside keep their own all-or-nothing meaning."""
+        if self._conn.in_transaction:  # nested: the outer batch commits
+            yield self
+            return
+        self._conn.execute("BEGIN IMMEDIATE")
+        try:
+            yield self
+        except BaseException:
+            self._conn.execute("ROLLBACK")
+            raise
+        self._conn.execute("COMMIT")
+
+    @contextmanager
+    def _write(self) -> Iterator[None]:
+        """One write's transaction, or a savepoint inside a batch; raise _Undo to drop it."""
+        outer = self._conn.in_transaction
+        self._conn.execute("SAVEPOINT write" if outer else "BEGIN IMMEDIATE")
+        try:
+            yield
+        except BaseException as exc:
+            if outer:
+                self._conn.execute("ROLLBACK TO write")
+                self._conn.execute("RELEASE write")
+            elif self._conn.in_transaction:
+                self._conn.execute("ROLLBACK")
+            if not isinstance(exc, _Undo):
+                raise
+            return
+        self._conn.execute("RELEASE write" if outer else "COMMIT")
+
     def add_capture(
         self,
         robot_id: str,
@@ -215,9 +274,11 @@ class Store:
         illumination: Any = None,
         source: str | None = None,
         dependence: Mapping[int, Dependence] | None = None,
+        pca: PcaBasis | None = None,
     ) -> bool:
         """Stores one capture with its models; False if (robot, sequence) was already there.
-        `illumination` is the light's (elevation, azimuth) when known; `source` the image file."""
+        `illumination` is the light's (elevation, azimuth) when known; `source` the image file;
+        `pca` the basis the capture arrived with (later captures of the robot inherit it)."""
         cmd = _angles(commanded)
         meas = _angles(measured)
         light = _angles(illumination)
@@ -233,8 +294,8 @@ class Store:
                 *pct, float(r.z), int(r.count), float(r.beta1), float(r.beta2),
                 int(getattr(r, "censored_low", 0)), int(getattr(r, "censored_high", 0)),
             ))
-        try:
-            self._conn.execute("BEGIN IMMEDIATE")
+        stored = False
+        with self._write():
             cur = self._conn.execute(
                 "INSERT OR IGNORE INTO captures (robot, sequence, time, cmd_elevation, cmd_azimuth,"
                 " elevation, azimuth, space, bands, scene, light_elevation, light_azimuth, source)"
@@ -244,8 +305,7 @@ class Store:
                  None if source is None else str(source)),
             )
             if cur.rowcount == 0:
-                self._conn.execute("ROLLBACK")
-                return False
+                raise _Undo
             cid = cur.lastrowid
             self._conn.executemany(
                 "INSERT INTO models (capture, label, band, family, gamma, delta, xi, lam,"
@@ -258,12 +318,11 @@ class Store:
                 [(cid, int(lab), json.dumps(list(d.corr)), json.dumps(list(d.dx)), json.dumps(list(d.dy)))
                  for lab, d in sorted((dependence or {}).items())],
             )
-            self._conn.execute("COMMIT")
-            return True
-        except BaseException:
-            if self._conn.in_transaction:
-                self._conn.execute("ROLLBACK")
-            raise
+            if pca is not None:
+                self._conn.execute("INSERT INTO pca_bases (capture, record) VALUES (?, ?)",
+                                   (cid, json.dumps(pca.to_record())))
+            stored = True
+        return stored
 
     def next_sequence(self, robot_id: str) -> int:
         row = self._conn.execute("SELECT MAX(sequence) FROM captures WHERE robot = ?", (robot_id,)).fetchone()
@@ -272,7 +331,7 @@ class Store:
     def add_mask(self, key: str, labels: np.ndarray, robot_id: str = "") -> bool:
         """Stores a mask under (robot, key) as PNG bytes; False if one was already there."""
         lab = np.asarray(labels)
-        # A single statement is its own transaction in autocommit mode.
+        # A single statement: its own transaction, or part of the caller's batch.
         cur = self._conn.execute(
             "INSERT OR IGNORE INTO masks (robot, key, height, width, encoding, data)"
             " VALUES (?,?,?,?,?,?)",
@@ -303,13 +362,41 @@ class Store:
     def captures(self, robot: str | None = None, space: str | None = None,
                  scene: str | None = None) -> list[Capture]:
         sql, args = self._capture_filter(robot, space, scene)
+        return self._select_captures(sql, args)
+
+    def _select_captures(self, where: str, args: list) -> list[Capture]:
         rows = self._conn.execute(
             "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
             " space, bands, scene, light_elevation, light_azimuth, source FROM captures"
-            + sql + " ORDER BY elevation, id", args
+            + where + " ORDER BY elevation, id", args
         ).fetchall()
         return [Capture(r[0], r[1], r[2], r[3], (r[4], r[5]), (r[6], r[7]), r[8],
                         tuple(json.loads(r[9])), r[10], (r[11], r[12]), r[13]) for r in rows]
+
+    def capture_by_seq(self, robot: str, sequence: int) -> Capture | None:
+        """The capture (robot, sequence), or None when it is not stored."""
+        sql, args = self._capture_filter(robot, None, None)
+        found = self._select_captures(sql + " AND sequence = ?", [*args, int(sequence)])
+        return found[0] if found else None
+
+    def pca_basis(self, capture: int) -> PcaBasis | None:
+        """The PCA basis in effect for a capture: the one it arrived with, else the newest one
+        its robot sent with an earlier sequence; None when there is none."""
+        row = self._conn.execute(
+            "SELECT b.record FROM pca_bases b JOIN captures c ON c.id = b.capture"
+            " JOIN captures me ON me.id = ? WHERE c.robot = me.robot AND c.sequence <= me.sequence"
+            " ORDER BY c.sequence DESC LIMIT 1", (capture,)).fetchone()
+        if row is None:
+            return None
+        try:
+            return PcaBasis.from_record(json.loads(row[0]))
+        except ValueError as exc:
+            raise CorruptDatabase(f"database {self.path}: bad PCA basis for capture {capture}: {exc}") from None
+
+    def pca_by_angle(self, robot: str | None = None, space: str | None = None,
+                     scene: str | None = None) -> dict[float, PcaBasis | None]:
+        """For every measured elevation, the PCA basis of the capture models_by_angle uses."""
+        return {a: self.pca_basis(c.id) for a, c in self._latest(robot, space, scene).items()}
 
     def sources(self, robot: str) -> set[str]:
         """Source file names already stored for `robot` (what a resumed ingest skips)."""
@@ -342,15 +429,18 @@ class Store:
                                    (r[8], r[9], r[10], r[11]), r[12], r[13], r[14], r[15], r[16], r[17]))
         return out
 
-    def models_by_angle(self, robot: str | None = None, space: str | None = None,
-                        scene: str | None = None) -> dict[float, dict[tuple[int, int], Johnson]]:
-        """For every measured elevation, the models of its latest capture."""
+    def _latest(self, robot: str | None, space: str | None, scene: str | None) -> dict[float, Capture]:
         latest: dict[float, Capture] = {}
         for c in self.captures(robot, space, scene):
             if c.elevation not in latest or c.id > latest[c.elevation].id:
                 latest[c.elevation] = c
+        return dict(sorted(latest.items()))
+
+    def models_by_angle(self, robot: str | None = None, space: str | None = None,
+                        scene: str | None = None) -> dict[float, dict[tuple[int, int], Johnson]]:
+        """For every measured elevation, the models of its latest capture."""
         return {a: {(m.label, m.band): m.model for m in self.models(c.id)}
-                for a, c in sorted(latest.items())}
+                for a, c in self._latest(robot, space, scene).items()}
 
     def dependence(self, capture: int) -> dict[int, Dependence]:
         """The per-region dependence stored with a capture ({} when it carried none)."""
@@ -366,11 +456,7 @@ class Store:
     def dependence_by_angle(self, robot: str | None = None, space: str | None = None,
                             scene: str | None = None) -> dict[float, dict[int, Dependence]]:
         """For every measured elevation, the dependence of the capture models_by_angle uses."""
-        latest: dict[float, Capture] = {}
-        for c in self.captures(robot, space, scene):
-            if c.elevation not in latest or c.id > latest[c.elevation].id:
-                latest[c.elevation] = c
-        return {a: self.dependence(c.id) for a, c in sorted(latest.items())}
+        return {a: self.dependence(c.id) for a, c in self._latest(robot, space, scene).items()}
 
     def models_at(self, angle: float, robot: str | None = None, space: str | None = None,
                   scene: str | None = None, tolerance: float = 0.5) -> dict[tuple[int, int], Johnson]:
