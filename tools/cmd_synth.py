@@ -79,6 +79,16 @@ def _from_db(path: str, space: str | None) -> tuple[dict, str]:
     return by_angle, space
 
 
+def _stored_basis(bases: dict, db: str) -> PcaBasis:
+    """The one PCA basis of the stored pca captures (components of different bases do not mix)."""
+    distinct = {b for b in bases.values()}
+    if None in distinct:
+        raise CliError(f"database {db}: pca captures without a stored PCA basis; cannot turn them into RGB")
+    if len(distinct) != 1:
+        raise CliError(f"database {db}: pca captures use {len(distinct)} different PCA bases (one per scene)")
+    return distinct.pop()
+
+
 def _run_direction(args: argparse.Namespace, direction) -> int:
     """Several angles: barycentric quantile blending over the stored directions (tools.interp)."""
     from tools.interp import models_by_direction, synthesize_at_direction
@@ -122,13 +132,13 @@ def run(args: argparse.Namespace) -> int:
     pca = None
     dependence: dict = {}
     if args.db:
-        if args.space == "pca":
-            raise CliError("synth --db: pca bases are not stored yet; use --model from `fit --json`")
         by_angle, space = _from_db(args.db, args.space)
         levels = 256
-        if not args.independent:
-            with Store.open(args.db, create=False) as store:
+        with Store.open(args.db, create=False) as store:
+            if not args.independent:
                 dependence = store.dependence_by_angle(space=space)
+            if space == "pca":
+                pca = _stored_basis(store.pca_by_angle(space=space), args.db)
     else:
         by_angle, space, levels, pca_rec = _from_json(args.model)
         pca = PcaBasis.from_record(pca_rec) if pca_rec else None
