@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from tools.datasets import (Angles, DatasetError, Layout, parse_utia_name, read_curet_table, scan,
@@ -105,10 +106,27 @@ def test_missing_directory_empty_directory_and_unknown_layout(tmp_path):
         scan(tmp_path, "bonn")
 
 
-def test_illumination_stand_in_darkens_a_low_sun(tmp_path):
+def test_rendered_views_are_lit_from_their_illumination_direction(tmp_path):
+    from hal.interfaces import ViewAngles
+    from hal.scene import LightAngles, render
     from tools.images import read_image
 
-    write_rendered(tmp_path, "folder", [Angles(60.0, 0.0, 80.0, 0.0), Angles(60.0, 0.0, 20.0, 0.0)],
-                   size=(32, 32), masks=False)
-    high, low = (read_image(tmp_path / f"view_00{k}.png").mean() for k in (0, 1))
-    assert low < 0.5 * high
+    views = [Angles(60.0, 0.0, 80.0, 0.0), Angles(60.0, 0.0, 20.0, 0.0), Angles(60.0, 0.0, 20.0, 180.0),
+             Angles(60.0, 0.0)]
+    paths = write_rendered(tmp_path, "folder", views, scene="white", size=(32, 32), seed=5, masks=False)
+    images = [read_image(p) for p in paths]
+    for a, image in zip(views, images):
+        light = LightAngles(a.light_elevation, a.light_azimuth) if a.has_light else None
+        assert np.array_equal(image, render("white", ViewAngles(a.elevation, a.azimuth), (32, 32), 5,
+                                            light=light).image)
+    high, low, low_behind, sun = (im.astype(float) for im in images)
+    assert low.mean() < 0.6 * high.mean()
+    assert np.abs(low - low_behind).mean() > 0.2 * low.mean()  # shadows fall on the other side of each grain
+    assert np.array_equal(sun, render("white", ViewAngles(60.0, 0.0), (32, 32), 5).image)
+
+
+@pytest.mark.parametrize("angles, problem", [(Angles(60.0, 0.0, 2.0, 0.0), "light elevation 2"),
+                                             (Angles(1.0, 0.0), "elevation 1.0 outside")])
+def test_views_the_renderer_cannot_draw_are_named(tmp_path, angles, problem):
+    with pytest.raises(DatasetError, match=f"rendered view 1 .*{problem}"):
+        write_rendered(tmp_path, "folder", [Angles(60.0, 0.0), angles], size=(16, 16), masks=False)

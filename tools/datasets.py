@@ -19,7 +19,7 @@ import csv
 import enum
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import astuple, dataclass
 from pathlib import Path
 
 IMAGE_EXTENSIONS = frozenset({".png", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff", ".ppm", ".pgm"})
@@ -191,7 +191,7 @@ def scan(root: str | Path, layout: str | Layout, table: str | Path | None = None
 
 
 # --- small datasets in every layout, rendered by the scene model (tests, benchmarks) ---------
-RENDER_SUN = Angles(45.0, 225.0)  # hal/scene's fixed sun (surface.LIGHT_ELEVATION/AZIMUTH_DEG)
+RENDER_SUN = Angles(45.0, 225.0)  # hal.scene.SUN, the renderer's default light
 
 
 def _num(v: float) -> str:
@@ -214,31 +214,31 @@ def write_rendered(root: str | Path, layout: str | Layout, views: list[Angles], 
                    size: tuple[int, int] = (48, 64), seed: int = 0, masks: bool = True) -> list[Path]:
     """Render `views` of `scene` into `root` in `layout` (with its angle table), masks in root/masks.
 
-    The renderer's sun is fixed, so an illumination elevation other than its own is stood in
-    for by the Lambert factor sin(light elevation) / sin(sun elevation) on the pixel values.
+    A view's illumination direction lights the scene (shading and cast shadows); a view
+    without one is lit by the renderer's sun, `RENDER_SUN`. All views share one grain layout.
     """
-    import numpy as np
-
     from hal.interfaces import ViewAngles
-    from hal.scene import render
+    from hal.scene import SUN, LightAngles, render
     from tools.images import write_image, write_mask
 
     layout, root = Layout(layout), Path(root)
     root.mkdir(parents=True, exist_ok=True)
     if masks:
         (root / "masks").mkdir(exist_ok=True)
-    paths, table = [], []
-    for k, a in enumerate(views):
-        view = render(scene, ViewAngles(a.elevation, a.azimuth), size, seed)
-        image = view.image.astype(np.float64)
-        if a.has_light:
-            image *= math.sin(math.radians(a.light_elevation)) / math.sin(math.radians(RENDER_SUN.elevation))
-        name = rendered_name(layout, k, a)
-        write_image(root / name, np.clip(np.rint(image), 0, 255).astype(np.uint8))
+    lights = [LightAngles(a.light_elevation, a.light_azimuth) if a.has_light else None for a in views]
+    names = [rendered_name(layout, k, a) for k, a in enumerate(views)]
+    # grouped by light: the renderer shades its surface once per light direction
+    for k in sorted(range(len(views)), key=lambda k: astuple(lights[k] or SUN)):
+        a = views[k]
+        try:
+            view = render(scene, ViewAngles(a.elevation, a.azimuth), size, seed, light=lights[k])
+        except ValueError as exc:
+            raise DatasetError(f"rendered view {k} ({names[k]}): {exc}") from None
+        write_image(root / names[k], view.image)
         if masks:
-            write_mask(root / "masks" / (Path(name).stem + ".png"), view.mask)
-        paths.append(root / name)
-        table.append((k + 1, name, a))
+            write_mask(root / "masks" / (Path(names[k]).stem + ".png"), view.mask)
+    paths = [root / name for name in names]
+    table = [(k + 1, name, a) for k, (name, a) in enumerate(zip(names, views))]
     if layout is Layout.CURET:
         lines = ["# number theta_v phi_v theta_i phi_i (radians)"]
         for number, _, a in table:
