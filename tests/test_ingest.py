@@ -182,3 +182,20 @@ def test_cli_ingest_and_its_errors(utia, tmp_path, capsys):
         assert main(argv + ["--db", str(tmp_path / "e.db"), "--quiet"]) == 2
         err = capsys.readouterr().err.strip()
         assert problem in err and len(err.splitlines()) == 1
+
+
+def test_results_are_written_in_batches_and_a_failure_keeps_the_batch_before_it():
+    from tools.ingest import _batches
+
+    assert [len(c) for c in _batches(iter(range(10)), 4, 1e9)] == [4, 4, 2]
+    assert [len(c) for c in _batches(iter(range(3)), 64, 0.0)] == [1, 1, 1]  # no wait past the deadline
+
+    def failing():
+        yield from range(5)
+        raise IngestError("image 5 is broken")
+
+    got = []
+    with pytest.raises(IngestError, match="broken"):
+        for chunk in _batches(failing(), 4, 1e9):
+            got.append(chunk)
+    assert got == [[0, 1, 2, 3], [4]]

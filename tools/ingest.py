@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import collections
 import os
+import time
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -23,6 +24,9 @@ from tools.datasets import Angles, DatasetImage, Layout, scan
 from tools.images import ImageError, feature_bands, read_image, read_mask
 from tools.store import Store
 
+# Images per database commit, and the longest a fitted image waits for its commit.
+BATCH_IMAGES = 64
+BATCH_SECONDS = 1.0
 # Feature spaces an ingest may store: pca needs a per-image basis the database does not hold.
 INGEST_SPACES = ("rgb", "hsv", "gray")
 NADIR = 90.0
@@ -154,17 +158,39 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
             try:
                 if on_total:
                     on_total(len(jobs))
-                for fitted in results:
-                    _store(store, robot, by_name[fitted.name], fitted, space, Path(root).name,
-                           default_elevation)
-                    stored += 1
+                for chunk in _batches(results, BATCH_IMAGES, BATCH_SECONDS):
+                    # One commit per batch: an interrupted run redoes at most one batch.
+                    with store.batch():
+                        for fitted in chunk:
+                            _store(store, robot, by_name[fitted.name], fitted, space, Path(root).name,
+                                   default_elevation)
+                    stored += len(chunk)
                     if on_image:
-                        on_image(fitted.name)
+                        for fitted in chunk:
+                            on_image(fitted.name)
             finally:
                 close()
         elif on_total:
             on_total(0)
     return IngestReport(robot, len(images), len(images) - len(todo), stored)
+
+
+def _batches(results: Iterator[Fitted], size: int, seconds: float) -> Iterator[list[Fitted]]:
+    """Consecutive results in lists of at most `size`, cut early once `seconds` have passed."""
+    chunk: list[Fitted] = []
+    t0 = time.monotonic()
+    try:
+        for r in results:
+            chunk.append(r)
+            if len(chunk) >= size or time.monotonic() - t0 >= seconds:
+                yield chunk
+                chunk, t0 = [], time.monotonic()
+    except Exception:
+        if chunk:  # keep what was fitted before the failure; a resumed run skips it
+            yield chunk
+        raise
+    if chunk:
+        yield chunk
 
 
 def _run(jobs: list[Job], workers: int | None,
