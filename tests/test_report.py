@@ -1,4 +1,6 @@
 """The HTML report: images, histograms and tables from a database; bad databases refused."""
+import numpy as np
+
 from tests.test_receiver import models_body
 from radio import packet as pk
 from tools.cli import main
@@ -41,3 +43,33 @@ def test_report_cli_refuses_missing_corrupt_and_empty_databases(tmp_path, capsys
     assert len(err) == 3 and "no such file" in err[0] and "not an SQLite" in err[1] and "no captures" in err[2]
     assert main(["report", "--db", str(filled(tmp_path / "ok.db")), "--out", str(tmp_path / "r")]) == 0
     assert (tmp_path / "r" / "index.html").is_file()
+
+
+def test_captures_with_dependence_show_independent_and_correlated_synthesis_beside_measured(tmp_path):
+    from tests.test_receiver import _dependence
+    from hal.interfaces import ViewAngles
+    from hal.scene import render
+
+    with Store.open(tmp_path / "scene.db") as s:
+        rx = Receiver(s, scene="mixed")
+        rx.handle(pk.encode_mask(models_body(1, 60.0)[2], robot_id=3, seq=1))
+        rx.handle(_dependence(1, 60.0)[0])
+        rx.handle(models_body(2, 70.0)[0])  # no dependence: independent synthesis only
+        page = write_report(s, tmp_path / "rep",
+                            measured=lambda scene, a: render(scene, ViewAngles(a, 0.0), (40, 48), seed=0).image)
+        html = page.read_text()
+    pngs = {p.name for p in (tmp_path / "rep").glob("*.png")}
+    assert {p for p in pngs if p.endswith("_correlated.png")} == {"mixed_060.2_1_correlated.png"}
+    assert {"mixed_060.2_1_measured.png", "mixed_060.2_1_synthetic.png"} <= pngs
+    first = html[html.index("seq 1)"):html.index("seq 2)")]
+    assert first.index("measured") < first.index("independent pixels") < first.index("grain and band correlation")
+    from tools.images import read_image
+
+    meas, ind, cor = (read_image(tmp_path / "rep" / f"mixed_060.2_1_{k}.png") for k in ("measured", "synthetic", "correlated"))
+
+    mask = models_body(1, 60.0)[2]
+    region = mask == np.bincount(mask.ravel()).argmax()
+
+    def rg(img):  # red-green correlation inside the largest region: bands drawn apart lose it
+        return np.corrcoef(img[region][:, 0].astype(float), img[region][:, 1].astype(float))[0, 1]
+    assert abs(rg(cor) - rg(meas)) < 0.1 < abs(rg(ind) - rg(meas))

@@ -20,7 +20,7 @@ from tools.synth import MissingModels, synthesize
 Measured = Callable[[str, float], np.ndarray | None]
 _CSS = ("body{font-family:sans-serif;max-width:1100px;margin:auto}table{border-collapse:collapse;"
         "font-size:90%}td,th{border:1px solid #bbb;padding:2px 6px;text-align:right}"
-        "img{image-rendering:pixelated;width:240px;margin:2px}.bad{color:#b00}.ok{color:#070}")
+        "img{image-rendering:pixelated;width:240px;margin:2px}figcaption{font-size:80%;text-align:center}.bad{color:#b00}.ok{color:#070}")
 
 
 def _table(head: list[str], rows: list[list[Any]]) -> str:
@@ -29,6 +29,11 @@ def _table(head: list[str], rows: list[list[Any]]) -> str:
     return ("<table><tr>" + "".join(f"<th>{html.escape(h)}</th>" for h in head) + "</tr>"
             + "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in r) + "</tr>" for r in rows)
             + "</table>")
+
+
+def _figure(src: str, caption: str) -> str:
+    return (f"<figure style='display:inline-block;margin:2px'><img src='{src}' title='{caption}'>"
+            f"<figcaption>{html.escape(caption)}</figcaption></figure>")
 
 
 def capture_mask(store: Store, cap: Capture) -> np.ndarray | None:
@@ -124,8 +129,11 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
         if mask is None or not models:
             continue
         name = f"{c.scene or 'robot' + c.robot}_{c.elevation:05.1f}_{c.sequence}"
+        deps = store.dependence(c.id)
         try:
             syn = synthesize(mask, models, rng)
+            # With stored grain and band correlation, the correlated synthesis goes beside it.
+            corr = synthesize(mask, models, rng, dependence=deps) if deps else None
         except MissingModels as exc:
             parts.append(f"<p>{html.escape(name)}: {html.escape(str(exc))}</p>")
             continue
@@ -133,14 +141,18 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
         imgs = []
         if real is not None and c.space == "rgb":
             write_image(out / f"{name}_measured.png", real)
-            imgs.append(f"<img src='{name}_measured.png' title='measured'>")
+            imgs.append(_figure(f"{name}_measured.png", "measured"))
         if c.space == "rgb" and syn.shape[2] == 3:
             write_image(out / f"{name}_synthetic.png", syn)
-            imgs.append(f"<img src='{name}_synthetic.png' title='synthetic'>")
+            imgs.append(_figure(f"{name}_synthetic.png", "independent pixels" if corr is not None else "synthetic"))
+            if corr is not None:
+                write_image(out / f"{name}_correlated.png", corr)
+                imgs.append(_figure(f"{name}_correlated.png", "grain and band correlation"))
         _hist_plot(out / f"{name}_hist.png", real if c.space == "rgb" else None, mask, models,
                    c.band_names, f"{c.scene} {c.elevation:.0f}°")
         imgs.append(f"<img src='{name}_hist.png' style='width:480px' title='histograms'>")
-        parts.append(f"<h3>{html.escape(c.scene)} at {c.elevation:.1f}° (seq {c.sequence})</h3>" + "".join(imgs))
+        parts.append(f"<h3>{html.escape(c.scene)} at {c.elevation:.1f}° (seq {c.sequence})</h3>"
+                     "<div>" + "".join(imgs) + "</div>")
     if demo is not None:
         parts += _demo_sections(demo)
     path = out / "index.html"
