@@ -54,7 +54,7 @@ U = np.array([0.0, 1e-300, 1e-12, 0.001, 0.25, 0.5, 0.75, 0.999, 1 - 1e-12, 1.0]
 
 def _check_model_finite(m: Johnson) -> None:
     x = m.ppf(U)
-    assert np.all(np.isfinite(x)) and np.all(np.diff(x) >= 0)
+    assert np.all(np.isfinite(x)) and np.all(x[1:] >= x[:-1])
     grid = np.concatenate([x, [-1e308, 0.0, 1e308]])
     for values in (m.cdf(grid), m.pdf(grid), m.z_of_x(grid)):
         assert np.all(np.isfinite(values))
@@ -131,6 +131,8 @@ def _check_fit(h: np.ndarray) -> None:
 @given(models())
 def test_exact_percentiles_of_any_model_refit_to_the_same_percentiles(m):
     z = 0.524
+    if max(abs(3 * z - m.gamma), abs(3 * z + m.gamma)) / m.delta >= 700.0:
+        return  # x_of_z clips there: the "exact" percentiles are not the model's own
     pct = tuple(float(v) for v in m.x_of_z(np.array([-3 * z, -z, z, 3 * z])))
     span = pct[3] - pct[0]
     if not (math.isfinite(span) and span > 1e-9 * max(1.0, abs(pct[0]))):
@@ -165,3 +167,12 @@ def test_every_level_of_a_field_region_keeps_some_probability():
     h = np.bincount(view.image[..., 1][view.mask == 3], minlength=256)
     p = fit_histogram(h).model.level_probabilities()
     assert np.all(p[h > 0] > 0.0)
+
+
+@pytest.mark.xfail(strict=True, raises=ValueError, reason="_normal averages the four percentiles as "
+                   "0.25 * (a + b + c + e), which overflows near the float limit (reported to the fitter's owner)")
+def test_finite_percentiles_near_the_float_limit_give_a_model():
+    # Found by make stress: the exact percentiles of SU(gamma=1, delta=2**-9, xi=0, lam=17725).
+    pct = (-8.988631585088977e+307, -8.988631585088977e+307, -6.170679950313242e+109, 1.370172971747651e+131)
+    m = model_from_percentiles(pct, 0.524, 1000)
+    assert np.all(np.isfinite(m.ppf(U)))
