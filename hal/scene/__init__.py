@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hal.interfaces import ViewAngles
-from hal.scene.light import SUN, LightAngles, check_light, shade
+from hal.scene.light import SUN, LightAngles, check_light, shade, thermal
 from hal.scene.materials import BAND_NAMES, LABEL_NAMES, REFERENCE_SIZE, Label
 from hal.scene.surface import Surface, build_surface
 
@@ -120,7 +120,7 @@ def render(scene: str, view: ViewAngles, size: tuple[int, int] = (480, 640), see
     center = cells[ss // 2::ss, ss // 2::ss]
     mask = surface.label[center]
     if bands == "rgb":
-        radiance = shading.radiance[cells][..., (2, 1, 0)]
+        radiance = shading.rgb[cells]
     else:
         radiance = shading.radiance[cells]
     if ss > 1:
@@ -129,7 +129,7 @@ def render(scene: str, view: ViewAngles, size: tuple[int, int] = (480, 640), see
     dn = np.clip(np.rint(dn), 0, 255)
     if bands == "rgb":
         return RenderedView(dn.astype(np.uint8), mask, scene, view, bands, light)
-    kelvin = shading.kelvin[cells]
+    kelvin = thermal(surface, light)[cells]
     if ss > 1:
         kelvin = kelvin.reshape(h, ss, w, ss).mean(axis=(1, 3))
     ck = np.clip(np.rint(kelvin * 100.0 + rng.normal(0.0, THERMAL_NOISE_CK, kelvin.shape)), 0, 65535)

@@ -35,7 +35,8 @@ class Shading:
     """Light-dependent state of a surface, per flat cell."""
 
     radiance: np.ndarray  # (T*T, 5) float32, reflected light per spectral band, 0..1
-    kelvin: np.ndarray  # (T*T,) float32, brightness temperature
+    rgb: np.ndarray  # (T*T, 3) float32, the red, green and blue bands of `radiance`, for gathering
+    direct: np.ndarray  # (T*T,) float64, direct light on each facet, 0 in shadow
 
 
 def check_light(light: LightAngles | None) -> LightAngles:
@@ -72,14 +73,20 @@ def lit(height: np.ndarray, light: LightAngles = SUN) -> np.ndarray:
 
 @lru_cache(maxsize=8)
 def shade(surface: Surface, light: LightAngles = SUN) -> Shading:
-    """Lambert plus ambient with cast shadows, and the temperature the absorbed light gives."""
+    """Lambert plus ambient with cast shadows."""
     shadowless = lit(surface.height64, light).ravel()
     direct = np.clip(surface.normal @ light_vector(light), 0.0, None) * shadowless
     irradiance = AMBIENT + (1.0 - AMBIENT) * direct
-    radiance = surface.albedo * irradiance[:, None]
-    labels = surface.label
-    emissivity = np.array([MATERIALS[Label(int(v))].emissivity for v in range(1, 7)])[labels - 1]
-    gain = np.array([MATERIALS[Label(int(v))].heat_gain for v in range(1, 7)])[labels - 1]
+    radiance = (surface.albedo * irradiance[:, None]).astype(np.float32)
+    return Shading(radiance, np.ascontiguousarray(radiance[:, (2, 1, 0)]), direct)
+
+
+@lru_cache(maxsize=4)
+def thermal(surface: Surface, light: LightAngles = SUN) -> np.ndarray:
+    """Brightness temperature per flat cell (float32 kelvin) from the light each facet absorbs."""
+    direct = shade(surface, light).direct
+    table = [MATERIALS[Label(int(v))] for v in range(1, 7)]
+    emissivity = np.array([m.emissivity for m in table])[surface.label - 1]
+    gain = np.array([m.heat_gain for m in table])[surface.label - 1]
     absorbed = (1.0 - surface.albedo.mean(axis=1)) * direct
-    kelvin = (AIR_KELVIN + gain * absorbed) * emissivity**0.25
-    return Shading(radiance.astype(np.float32), kelvin.astype(np.float32))
+    return ((AIR_KELVIN + gain * absorbed) * emissivity**0.25).astype(np.float32)
