@@ -138,6 +138,7 @@ class LinktestResult:
     sim_seconds: float
     payload_bytes: int
     retransmissions: int
+    repaired: int  # frames accepted after a single bit error was corrected, both ends
     forged_injected: int
     replays_injected: int
     rejected: dict[str, int]
@@ -239,4 +240,5 @@ def run_linktest(config: ChannelConfig, packets: int = 500, seed: int = 0, *,
         goodput=payload_bytes / max(span, 1e-9) / ((1.0 - config.loss) * config.bandwidth),
         sim_seconds=round(t, 6), payload_bytes=payload_bytes,
         retransmissions=robot.stats().retransmissions,
+        repaired=robot.stats().repaired + host.stats().repaired,
         forged_injected=forged, replays_injected=replays - len(replay_at), rejected=rejected)

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from radio import FrameError
 from radio.auth import CounterStore, ReplayWindow
 from radio.fragment import AUTO_BASE, Reassembler, StreamAssembler, StreamPacker, split_datagram
-from radio.frame import (DEFAULT_MTU, Deframer, Frame, Kind, Reason, decode, encode,
+from radio.frame import (DEFAULT_MTU, Deframer, Frame, Kind, Reason, decode_repaired, encode,
                          max_payload, reason_of, reject)
 
 
@@ -62,6 +62,7 @@ class LinkStats:
     acked: int
     sessions_opened: int
     rejected: dict[str, int] = field(default_factory=dict)
+    repaired: int = 0  # accepted frames whose single bit error the CRC corrected
 
 
 @dataclass
@@ -71,12 +72,16 @@ class _Out:
     sent_at: float = -1.0
     tries: int = 0
     xmit: int = 0  # transmission index: orders (re)transmissions for loss detection
+    copies: int = 1  # back-to-back copies at the next retransmission
     sacked: bool = False
     lost: bool = False
 
 
 DUPTHRESH = 3  # later frames that must arrive before a missing one counts as lost
 BACKOFF = 2.0  # RTO growth after a timeout, until a fresh RTT sample
+GRACE_TIMEOUTS = 2  # timeouts in a row before the RTO starts to grow
+ACK_REPEATS = 2  # copies of the ACK that ends a burst of data
+TAIL_COPIES, TAIL_FRAMES = 2, 4  # copies of each frame when at most TAIL_FRAMES time out
 
 
 def _c6(counter: int) -> bytes:
@@ -86,7 +91,7 @@ def _c6(counter: int) -> bytes:
 class Link:
     def __init__(self, node_id: int, peer_id: int, link_id: int, key: bytes,
                  counter_store: CounterStore, *, mtu: int = DEFAULT_MTU, window: int = 64,
-                 rto: float = 0.3, min_rto: float = 0.05, max_rto: float = 4.0,
+                 rto: float = 0.3, min_rto: float = 0.05, max_rto: float = 1.0,
                  heartbeat: float = 1.0, link_timeout: float = 3.0, dedup: int = 4096,
                  max_message: int = 64 * 1024, max_queue_bytes: int = 1 << 20,
                  reassembly_timeout: float = 5.0) -> None:
@@ -125,6 +130,7 @@ class Link:
         self._tx_base = self._tx_next = 0
         self._xmit = 0
         self._news = 0.0  # last ACK that acknowledged something new
+        self._timeouts = 0  # RTO expiries since then
         self._dgrams: deque[bytes] = deque()
         self._queued_bytes = 0
         self._last_tx: float | None = None
@@ -141,7 +147,9 @@ class Link:
         self._dedup: OrderedDict[int, None] = OrderedDict()
         self._dedup_size = dedup
         self._ack_pending = False
+        self._ack_repeats, self._ack_again = 0, 0.0
         self._synacks: list[int] = []
+        self._synack_again: tuple[int, int, float] | None = None  # (counter, repeats left, due)
         self._need_syn: int | None = None
         self._heard: float | None = None
         self.up = False
@@ -187,7 +195,7 @@ class Link:
         n = self._n
         return LinkStats(n["frames_sent"], n["bytes_sent"], n["accepted"], n["retransmissions"],
                          n["delivered"], n["duplicates"], n["acked"], n["sessions"],
-                         dict(self._rejected))
+                         dict(self._rejected), n["repaired"])
 
     def buffered_bytes(self) -> int:
         """Bytes held for reassembly and reordering (bounded by the configuration)."""
@@ -199,7 +207,9 @@ class Link:
         before = self._deframer.oversize
         for body in self._deframer.feed(data):
             try:
-                self._handle(decode(body, self._key), now)
+                frame, fixed = decode_repaired(body, self._key)
+                self._handle(frame, now)
+                self._n["repaired"] += fixed
             except FrameError as exc:
                 self._rejected[reason_of(exc).value] += 1
         if self._deframer.oversize > before:
@@ -233,11 +243,20 @@ class Link:
             return True
 
         while self._synacks and emit(Kind.SYNACK, _c6(self._synacks[0])):
-            self._synacks.pop(0)
+            self._synack_again = (self._synacks.pop(0), ACK_REPEATS, now + self._min_rto / 2)
+        if self._synack_again and self._synack_again[1] and now >= self._synack_again[2]:
+            c, left, _ = self._synack_again  # a lost SYNACK would cost the peer a whole RTO
+            if emit(Kind.SYNACK, _c6(c)):
+                self._synack_again = (c, left - 1, now + self._min_rto / 2)
         if self._need_syn is not None and emit(Kind.NEED_SYN, _c6(self._need_syn)):
             self._need_syn = None
         if self._ack_pending and emit(Kind.ACK, self._ack_payload()):
             self._ack_pending = False
+            self._ack_repeats, self._ack_again = ACK_REPEATS, now + self._min_rto / 2
+        elif self._ack_repeats and now >= self._ack_again and emit(Kind.ACK, self._ack_payload()):
+            # The last ACK of a burst has no successor to cover its loss: say it again.
+            self._ack_repeats -= 1
+            self._ack_again = now + self._min_rto / 2
         if not self._tx_open:
             if (self._syn_sent_at is None or now - self._syn_sent_at >= self._rto) and emit(Kind.SYN):
                 self._syn_sent_at = now
@@ -253,15 +272,22 @@ class Link:
     def _send_data(self, now: float, emit, budget) -> None:
         if self._inflight and now - max(self._news, self._oldest_unsacked()) >= self._rto:
             # No news for a whole RTO: everything unacknowledged is presumed lost; back off.
-            for o in self._inflight.values():
-                o.lost = o.lost or not o.sacked
+            missing = [o for o in self._inflight.values() if not o.sacked]
+            for o in missing:
+                o.lost = True
+                # A few frames stuck at the tail: extra copies cost idle air, and save RTOs.
+                o.copies = TAIL_COPIES if len(missing) <= TAIL_FRAMES else 1
             self._news = now
-            self._rto = min(self._max_rto, BACKOFF * self._rto)
+            self._timeouts += 1
+            if self._timeouts > GRACE_TIMEOUTS:  # a dead link is not flooded, a burst not waited out
+                self._rto = min(self._max_rto, BACKOFF * self._rto)
         for s in range(self._tx_base, self._tx_next):
             o = self._inflight[s]
             if o.lost and not o.sacked:
-                if not emit(Kind.DATA, o.data, s & 0xFF):
-                    return
+                for _ in range(o.copies):
+                    if not emit(Kind.DATA, o.data, s & 0xFF):
+                        return
+                o.copies = 1
                 o.sent_at, o.tries, o.lost, o.xmit = now, o.tries + 1, False, self._xmit
                 self._xmit += 1
                 self._n["retransmissions"] += 1
@@ -319,7 +345,7 @@ class Link:
                     newest = o.sent_at if newest is None else max(newest, o.sent_at)
         if not fresh:
             return
-        self._news = now
+        self._news, self._timeouts = now, 0
         # Karn: only frames sent once, timed when first acknowledged (a SACKed frame
         # cumulatively acked later would count the hole's repair time as RTT).
         if newest is not None:

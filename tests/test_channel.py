@@ -6,16 +6,18 @@ from radio.channel import Channel, ChannelConfig, run_linktest
 BAR = ChannelConfig(loss=0.2, bursty=True, ber=1e-4, dup=0.05, reorder=0.05)
 
 
-def test_bar_everything_once_in_order_nothing_forged_and_goodput():
-    r = run_linktest(BAR, packets=500, seed=0)
+@pytest.mark.parametrize("seed", range(5))
+def test_bar_everything_once_in_order_nothing_forged_and_goodput(seed):
+    r = run_linktest(BAR, packets=500, seed=seed)
     assert r.delivered == r.sent == 500
     assert r.delivered_twice == 0 and r.out_of_order == 0
     assert r.corrupted_accepted == 0 and r.forged_accepted == 0
     assert r.commands_delivered == r.commands_sent > 0
     assert r.rejected["tag"] >= r.forged_injected  # every forged frame counted
     assert r.rejected.get("replay", 0) + r.rejected.get("stale", 0) > 0
-    assert r.rejected.get("crc", 0) > 0  # bit errors were caught by the CRC
-    assert r.goodput >= 0.6
+    assert r.rejected.get("crc", 0) > 0  # multi-bit errors were caught by the CRC
+    assert r.repaired > 0  # single-bit errors were corrected
+    assert r.goodput >= 0.65  # the bar is 0.6; seeds 0-19 measure 0.67-0.74
 
 
 @pytest.mark.parametrize("bursty", [False, True])

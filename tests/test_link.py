@@ -187,3 +187,39 @@ def test_two_links_over_a_real_pty_pair():
         a.close()
         b.close()
     assert got == msgs and acked == set(range(1, 11))
+
+
+def test_a_dead_link_is_retried_with_backoff_not_flooded():
+    robot, host = pair()
+    for i in range(1, 41):
+        robot.send(os.urandom(150), 0.0, msg_id=i)
+    _, eh, t = pump(robot, host, 0.0, 0.03)  # session open, part of the window in flight
+    from radio.frame import Deframer
+    frames, end = 0, t + 20.0
+    while t < end:  # the host is gone: nothing comes back
+        frames += len(Deframer(200).feed(robot.poll(t)))
+        t += 0.01
+    # Backoff to max_rto (1 s) after two grace timeouts: about one window (64) a second,
+    # where a fixed RTO resends the window several times a second (over 4000 frames here).
+    assert 64 < frames < 25 * 64
+    got = delivered(eh)
+    assert len(got) < 40
+    _, eh, _ = pump(robot, host, t, 3.0)  # the host is back: everything arrives, once
+    assert [m for m, _ in got + delivered(eh)] == list(range(1, 41))
+
+
+def test_single_bit_errors_are_repaired_and_counted():
+    robot, host = pair()
+    robot.send(b"q" * 60, 0.0, msg_id=1)
+    t, got, flipped = 0.0, [], False
+    while not got and t < 1.0:
+        w = robot.poll(t)
+        if b"qqqq" in w and not flipped:  # one bit of the DATA frame's payload
+            bad = bytearray(w)
+            bad[w.index(b"qqqq") + 2] ^= 0x04
+            w, flipped = bytes(bad), True
+        got += delivered(host.receive(w, t))
+        robot.receive(host.poll(t), t)
+        t += 0.01
+    assert flipped and got == [(1, b"q" * 60)]
+    assert host.stats().repaired == 1 and robot.stats().retransmissions == 0
