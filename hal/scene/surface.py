@@ -47,12 +47,18 @@ class Surface:
         return self.height.shape[0]
 
 
+@lru_cache(maxsize=4)
+def _gaussian_filter(size: int, scale: float) -> np.ndarray:
+    """Transfer function of the blob filter on the rfft2 grid (shared by a scene's several fields)."""
+    f2 = np.fft.fftfreq(size)[:, None] ** 2 + np.fft.rfftfreq(size)[None, :] ** 2
+    return np.exp(-2.0 * (math.pi * scale) ** 2 * f2)
+
+
 def smooth_noise(rng: np.random.Generator, size: int, scale: float) -> np.ndarray:
     """Periodic Gaussian-filtered white noise, rescaled to 0..1; scale is the blob size in pixels."""
-    f2 = np.fft.fftfreq(size)[:, None] ** 2 + np.fft.rfftfreq(size)[None, :] ** 2
     white = rng.standard_normal((size, size), dtype=np.float32)
     # numpy's float64 transforms run several times faster than its float32 ones
-    spectrum = np.fft.rfft2(white.astype(np.float64)) * np.exp(-2.0 * (math.pi * scale) ** 2 * f2)
+    spectrum = np.fft.rfft2(white.astype(np.float64)) * _gaussian_filter(size, scale)
     field = np.fft.irfft2(spectrum, s=(size, size)).astype(np.float32)
     lo, hi = float(field.min()), float(field.max())
     return (field - lo) / max(hi - lo, 1e-12)
@@ -108,6 +114,9 @@ def _splat(s: Spheres, size: int) -> np.ndarray:
         sel = np.flatnonzero(reach == rad)
         off = np.arange(-rad, rad + 1)
         ox, oy = (a.ravel() for a in np.meshgrid(off, off))
+        # a cell's centre is within half a cell of its offset: corners beyond the radius never count
+        near = (np.maximum(np.abs(ox) - 0.5, 0.0) ** 2 + np.maximum(np.abs(oy) - 0.5, 0.0) ** 2) < rad * rad
+        ox, oy = ox[near], oy[near]
         bx, by = np.floor(s.cx[sel]), np.floor(s.cy[sel])
         # offsets from the grain centre in float32: sub-pixel accuracy is all a stamp needs
         fx = (bx + 0.5 - s.cx[sel]).astype(np.float32)[:, None] + ox.astype(np.float32)
