@@ -192,9 +192,11 @@ def _sl_through(xi: float, lam: float, p: float, q: float, zp: float, zq: float)
 
 
 def _normal(a: float, b: float, c: float, e: float, z: float) -> Johnson:
-    # The mean of the four and the full span: exact for normal quantiles.
-    sd = (e - a) / (6.0 * z)
-    return Johnson.normal(0.25 * (a + b + c + e), sd)
+    # The mean of the four and the full span: exact for normal quantiles. Halves and quarters
+    # first, so percentiles near the float limit cannot overflow the sums.
+    sd = max((0.5 * e - 0.5 * a) / (3.0 * z), _GAP_FLOOR * (abs(0.5 * a) + abs(0.5 * e)), 1e-300)
+    mean = 0.25 * a + 0.25 * b + 0.25 * c + 0.25 * e
+    return Johnson.normal(mean, min(sd, 1e300))
 
 
 def _su(m: float, n: float, p: float, mid: float, z: float) -> Johnson | None:
