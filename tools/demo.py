@@ -10,6 +10,7 @@ the fake camera's seed) to compare against: the same pixels the robot's camera s
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import time
@@ -110,66 +111,123 @@ def _robot_config(work: Path, scene: str, robot_id: int, size: tuple[int, int]) 
         f'robot_id = {robot_id}\nstate_dir = "state-{scene}"\n'
         f'[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [{size[0]}, {size[1]}]\n'
         f'[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
+        f'[features]\ndependence = true\n'
         f'[sweep]\nautostart = false\n[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\n')
     return path
+
+
+def _tail(path: Path, lines: int = 8) -> str:
+    """The last lines of a robot's stderr, for an error message."""
+    try:
+        text = path.read_text(errors="replace").strip().splitlines()
+    except OSError:
+        return "(no stderr)"
+    return " | ".join(text[-lines:]) or "(stderr empty)"
+
+
+class RobotRun:
+    """One robot process on the slave side of a pty, swept by remote command from a HostSession."""
+
+    def __init__(self, work: Path, scene: str, robot_id: int, store: Store, cfg: DemoConfig,
+                 elevations: Iterable[float]) -> None:
+        self.scene = scene
+        self.stderr = work / f"robot-{scene}.stderr"
+        key = load_key(work / "robot.key")
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.master)
+        tty.setraw(self.slave)
+        # stderr to a file, not a pipe: a pipe nobody drains fills up and stalls the robot.
+        with open(self.stderr, "wb") as err:
+            # The host decides when a sweep is late; the robot's own limit is only a backstop.
+            self.proc = subprocess.Popen(
+                [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())", "run",
+                 "--config", str(_robot_config(work, scene, robot_id, cfg.size)), "--hal", "fake",
+                 "--port", os.ttyname(self.slave), "--max-seconds", str(cfg.robot_timeout_s + 30)],
+                cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err)
+        self.radio = SimulatedRadio(FdPort(self.master, timeout=0.0), cfg.channel, cfg.seed * 101 + robot_id)
+        link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, key, MemoryCounterStore(), heartbeat=0.2,
+                    link_timeout=30)
+        self.session = HostSession(link, self.radio, Receiver(store, scene=scene))
+        self.cid = self.session.command(pk.CommandName.SWEEP,
+                                        {"elevations": [float(e) for e in elevations], "azimuths": [0.0]})
+        self.done_at: float | None = None
+        self.skipped: list[str] = []
+
+    def step(self, tick: Callable[[str], None]) -> bool:
+        """Pump the link once; True once the sweep is done and its last acknowledgements are out."""
+        for item in self.session.step():
+            if item.kind in (ItemKind.CAPTURE, ItemKind.UNCHANGED) and item.stored:
+                tick(self.scene)
+            if item.kind is ItemKind.STATUS and item.packet.text.startswith("skipped pose"):
+                self.skipped.append(item.packet.text)
+            if item.kind is ItemKind.STATUS and item.packet.text == "sweep done":
+                self.done_at = time.monotonic()
+        answer = self.session.answers.get(self.cid)
+        if answer is not None and answer.text.startswith("NACK"):
+            raise RuntimeError(f"robot {self.scene} refused the sweep: {answer.text}")
+        if self.done_at is not None and time.monotonic() - self.done_at > 0.3:
+            return True
+        if self.proc.poll() is not None:
+            raise RuntimeError(f"robot {self.scene} exited early (status {self.proc.returncode}): "
+                               f"{_tail(self.stderr)}")
+        return False
+
+    def close(self) -> None:
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        os.close(self.slave)
+        self.radio.close()
+
+    def stats(self) -> dict:
+        st = self.session.stats()
+        up, down = self.radio.up, self.radio.down
+        return {"rejected": sum(st.rejected.values()), "retransmissions": st.retransmissions,
+                "delivered": st.delivered, "duplicates": st.duplicates,
+                "lost": up.lost + down.lost, "corrupted": up.corrupted + down.corrupted,
+                "skipped": len(self.skipped)}
+
+
+def sweep_robots(work: Path, scenes: Iterable[str], store: Store, cfg: DemoConfig,
+                 elevations: Iterable[float], tick: Callable[[str], None] = lambda s: None) -> dict[str, dict]:
+    """One robot process per scene, all sweeping `elevations` at once; link statistics per scene."""
+    els = [float(e) for e in elevations]
+    robots: list[RobotRun] = []
+    try:
+        for robot_id, scene in enumerate(scenes, start=1):
+            robots.append(RobotRun(work, scene, robot_id, store, cfg, els))
+        pending = list(robots)
+        t0 = time.monotonic()
+        while pending:
+            if time.monotonic() - t0 > cfg.robot_timeout_s:
+                late = ", ".join(f"{r.scene} ({_tail(r.stderr, 3)})" for r in pending)
+                raise RuntimeError(f"sweep not done within {cfg.robot_timeout_s:g} s: {late}")
+            pending = [r for r in pending if not r.step(tick)]
+            time.sleep(0.002)  # the ports do not block; leave the cores to the robots
+    finally:
+        for r in robots:
+            r.close()
+    return {r.scene: r.stats() for r in robots}
 
 
 def sweep_over_pty(work: Path, scene: str, robot_id: int, store: Store, cfg: DemoConfig,
                    elevations: Iterable[float], tick: Callable[[str], None] = lambda s: None) -> dict:
     """One robot process sweeping `elevations` by remote command; returns link statistics."""
-    key = load_key(work / "robot.key")
-    master, slave = os.openpty()
-    tty.setraw(master)
-    tty.setraw(slave)
-    robot = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())", "run",
-         "--config", str(_robot_config(work, scene, robot_id, cfg.size)), "--hal", "fake",
-         "--port", os.ttyname(slave), "--max-seconds", str(cfg.robot_timeout_s)],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    radio = SimulatedRadio(FdPort(master, timeout=0.005), cfg.channel, cfg.seed * 101 + robot_id)
-    link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, key, MemoryCounterStore(), heartbeat=0.2,
-                link_timeout=30)
-    session = HostSession(link, radio, Receiver(store, scene=scene))
-    els = [float(e) for e in elevations]
-    cid = session.command(pk.CommandName.SWEEP, {"elevations": els, "azimuths": [0.0]})
-    done_at = None
-    skipped: list[str] = []
-    t0 = time.monotonic()
+    run = RobotRun(work, scene, robot_id, store, cfg, elevations)
     try:
-        while time.monotonic() - t0 < cfg.robot_timeout_s:
-            for item in session.step():
-                if item.kind in (ItemKind.CAPTURE, ItemKind.UNCHANGED):
-                    tick(scene)
-                if item.kind is ItemKind.STATUS and item.packet.text.startswith("skipped pose"):
-                    skipped.append(item.packet.text)
-                if item.kind is ItemKind.STATUS and item.packet.text == "sweep done":
-                    done_at = time.monotonic()
-            if cid in session.answers and session.answers[cid].text.startswith("NACK"):
-                raise RuntimeError(f"robot refused the sweep: {session.answers[cid].text}")
-            # Keep pumping briefly so the last acknowledgements reach the robot.
-            if done_at is not None and time.monotonic() - done_at > 0.3:
-                break
-            if robot.poll() is not None:
-                raise RuntimeError(f"robot {scene} exited early: {robot.stderr.read().decode()[-400:]}")
-        else:
-            raise RuntimeError(f"robot {scene}: sweep not done within {cfg.robot_timeout_s:g} s")
+        t0 = time.monotonic()
+        while not run.step(tick):
+            if time.monotonic() - t0 > cfg.robot_timeout_s:
+                raise RuntimeError(f"robot {scene}: sweep not done within {cfg.robot_timeout_s:g} s: "
+                                   f"{_tail(run.stderr)}")
+            time.sleep(0.002)
     finally:
-        if robot.poll() is None:
-            robot.terminate()
-            try:
-                robot.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                robot.kill()
-                robot.wait()
-        if robot.stderr:
-            robot.stderr.close()
-        os.close(slave)
-        radio.close()
-    st = session.stats()
-    return {"rejected": sum(st.rejected.values()), "retransmissions": st.retransmissions,
-            "delivered": st.delivered, "duplicates": st.duplicates,
-            "lost": radio.up.lost + radio.down.lost, "corrupted": radio.up.corrupted + radio.down.corrupted,
-            "skipped": len(skipped)}
+        run.close()
+    return run.stats()
 
 
 # --- the experiments ---------------------------------------------------------------------
@@ -271,28 +329,30 @@ def run_demo(out: Path, cfg: DemoConfig = DemoConfig(), progress: bool = True) -
     t0 = time.monotonic()
     out.mkdir(parents=True, exist_ok=True)
     work = out / "work"
-    work.mkdir(exist_ok=True)
-    if not (work / "robot.key").exists():
-        write_key(work / "robot.key")
+    # Robot state from an earlier run (outbox, replay counters, sequence numbers) would be
+    # replayed into the new database or make the robots refuse the new host's frames.
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir()
+    write_key(work / "robot.key")
     db = out / "scene.db"
-    if db.exists():
-        db.unlink()  # the demo's own output, rebuilt on every run
+    for old in (db, db.with_name(db.name + "-wal"), db.with_name(db.name + "-shm")):
+        old.unlink(missing_ok=True)  # the demo's own output, rebuilt on every run
     res = DemoResult(db)
     elevations = sorted({*cfg.elevations, UNSEEN}, reverse=True)
     rng = np.random.default_rng(cfg.seed)
     with Store.open(db) as store:
         bar = tqdm(total=len(PLATES) * len(elevations), desc="captures", unit="cap",
                    disable=not progress, leave=False)
-        for robot_id, scene in enumerate(PLATES, start=1):
-            bar.set_postfix_str(scene)
-            st = sweep_over_pty(work, scene, robot_id, store, cfg, elevations, lambda s: bar.update())
+        stats = sweep_robots(work, PLATES, store, cfg, elevations, lambda s: bar.update())
+        bar.close()
+        for scene, st in stats.items():
             for k, v in st.items():
                 res.link[k] = res.link.get(k, 0) + v
             res.captures[scene] = len(store.captures(scene=scene))
             if res.captures[scene] < len(elevations):
                 raise RuntimeError(f"{scene} plate: {res.captures[scene]} of {len(elevations)} poses "
-                                   f"captured ({st['skipped']} skipped by the robot)")
-        bar.close()
+                                   f"captured ({st['skipped']} skipped by the robot): "
+                                   f"{_tail(work / f'robot-{scene}.stderr')}")
         by_scene = {s: store.models_by_angle(scene=s) for s in PLATES}
         steps = tqdm(total=4, desc="experiments", disable=not progress, leave=False)
         measured = {s: {a: m for a, m in by_scene[s].items() if abs(a - UNSEEN) > 0.5} for s in PLATES}
