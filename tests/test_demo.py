@@ -40,3 +40,28 @@ def test_table1_covers_every_mask_method_in_both_spaces(result):
     assert {(r["method"], r["space"]) for r in result.table1} == {
         (m, s) for m in ("true", "isodata5", "isodata8", "kmeans", "felzenszwalb") for s in ("rgb", "hsv")}
     assert all(-1.0 <= v <= 1.0 for r in result.table1 for v in r["correlation"].values())
+
+
+def test_a_second_run_in_the_same_directory_starts_from_fresh_robot_state(result):
+    # Robot state left by the first run (replay counters, outbox) must not reach the second.
+    out = Path(result.db).parent
+    again = run_demo(out, DemoConfig(size=(48, 64), elevations=(30.0, 60.0)), progress=False)
+    assert again.captures == {"black": 3, "white": 3, "mixed": 3}
+    assert all(again.bars().values())
+
+
+def test_a_robot_that_dies_is_reported_with_the_last_lines_of_its_stderr(tmp_path, monkeypatch):
+    import tools.demo as demo
+    from radio.keys import write_key
+    from tools.store import Store
+
+    def broken(work, scene, robot_id, size):
+        path = work / f"robot-{scene}.toml"
+        path.write_text('robot_id = 1\nno_such_setting = 3\n[link]\nkey_file = "robot.key"\n')
+        return path
+
+    monkeypatch.setattr(demo, "_robot_config", broken)
+    write_key(tmp_path / "robot.key")
+    with Store.open(tmp_path / "s.db") as store, pytest.raises(RuntimeError) as err:
+        demo.sweep_robots(tmp_path, ["black"], store, DemoConfig(robot_timeout_s=20), [30.0])
+    assert "black exited early" in str(err.value) and "no_such_setting" in str(err.value)
