@@ -13,28 +13,71 @@ from benchmarks.johnson_moments import shape_moments, solve_shape
 from benchmarks.moments_johnson import MomentFitError, fit_moments
 from onboard.johnson import Family
 
-EXPECTED = {"core", "onboard", "peers", "runtime", "sampling", "scene", "stability", "subsample", "synth",
-            "wire", "link"}
+EXPECTED = {"core", "dependence", "ingest", "onboard", "peers", "runtime", "sampling", "scene", "stability",
+            "subsample", "synth", "wire", "link"}
 
 
 def test_every_expected_benchmark_is_discovered():
     assert EXPECTED <= set(discover())
 
 
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    """Each module's --quick run, once per test session: (markdown text, plot directory)."""
+    runs: dict[str, tuple[str, object]] = {}
+
+    def get(name: str) -> tuple[str, object]:
+        if name not in runs:
+            out = tmp_path_factory.mktemp(f"bench_{name}")
+            sections = run_one(name, Context(quick=True, out=out))
+            assert sections and all(isinstance(s, Section) and s.title for s in sections)
+            runs[name] = ("\n".join(line for s in sections for line in s.lines), out)
+        return runs[name]
+    return get
+
+
+def tables(text: str) -> list[list[str]]:
+    """Runs of consecutive markdown table rows."""
+    out: list[list[str]] = []
+    prev = False
+    for line in text.splitlines():
+        row = line.startswith("|")
+        if row and not prev:
+            out.append([])
+        if row:
+            out[-1].append(line)
+        prev = row
+    return out
+
+
 @pytest.mark.parametrize("name", sorted(EXPECTED))
-def test_quick_run_gives_titled_sections_with_tables_and_existing_plots(name, tmp_path):
-    sections = run_one(name, Context(quick=True, out=tmp_path))
-    assert sections and all(isinstance(s, Section) and s.title for s in sections)
-    text = "\n".join(line for s in sections for line in s.lines)
+def test_quick_run_gives_titled_sections_with_tables_and_existing_plots(name, quick):
+    text, out = quick(name)
     # Python prints a NaN or infinite figure as nan/inf; failures are named in words instead
     assert not re.search(r"\b-?(nan|inf)\b", text), text
-    for table_row in (l for l in text.splitlines() if l.startswith("|")):
-        assert table_row.endswith("|")
-    header = [l for l in text.splitlines() if l.startswith("|")][:2]
-    if header:
-        assert header[0].count("|") == header[1].count("|")
+    for table in tables(text):
+        assert len(table) >= 3 and set(table[1]) <= set("|-: ")
+        for row in table:
+            assert row.endswith("|") and row.count("|") == table[0].count("|"), row
     for image in re.findall(r"!\[[^]]*\]\(([^)]+)\)", text):
-        assert (tmp_path / image).stat().st_size > 1000
+        assert (out / image).stat().st_size > 1000
+
+
+def test_dependence_quick_run_reports_both_masks_and_the_anchor_rows(quick):
+    text, _ = quick("dependence")
+    assert "one region" in text and "four quadrants" in text
+    assert re.search(r"\*\*correlated / independent = \d+\.\d\dx\*\*", text)
+    assert re.search(r"^\| 4096 \| \d+\.\d ms \| \d\.\d{3} \| \d\.\d{3} \|$", text, re.M)
+
+
+def test_ingest_quick_run_times_every_executor_on_the_same_database(quick):
+    text, _ = quick("ingest")
+    rows = [r for r in tables(text)[0][2:]]
+    assert [r.split("|")[1].strip() for r in rows] == [
+        "in-process", "process pool, 1 worker", "process pool, 2 workers", "Dask LocalCluster, 2 worker processes"]
+    for r in rows:
+        assert float(r.split("|")[3]) > 0  # images/s
+    assert "1.00x" in rows[1]  # the pool of one is the unit
 
 
 def test_runner_writes_results_headed_by_the_machine(tmp_path, capsys):
