@@ -109,3 +109,91 @@ def test_cmd_arguments_become_the_commands_the_robot_checks():
     name, args = command_of(p.parse_args(["cmd", "--port", "x", "--key", "k", "set", "skip.min_pixels", "32"]))
     assert (name, args) == (pk.CommandName.SET, {"key": "skip.min_pixels", "value": 32})
     assert pk.decode(pk.encode(pk.CommandPacket(1, name, args))).args == args
+
+
+class _PtyBridge:
+    """Two pty pairs joined master to master: each slave path is one end of a serial cable."""
+
+    def __init__(self):
+        import threading
+
+        self.ends = [os.openpty() for _ in range(2)]
+        for m, s in self.ends:
+            tty.setraw(m)
+            tty.setraw(s)
+        self.paths = [os.ttyname(s) for _, s in self.ends]
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._pump, daemon=True)
+        self._thread.start()
+
+    def _pump(self):
+        import select
+
+        a, b = self.ends[0][0], self.ends[1][0]
+        peer = {a: b, b: a}
+        while not self._stop.is_set():
+            for fd in select.select([a, b], [], [], 0.05)[0]:
+                try:
+                    os.write(peer[fd], os.read(fd, 4096))
+                except OSError:
+                    pass
+
+    def close(self):
+        self._stop.set()
+        self._thread.join()
+        for m, s in self.ends:
+            os.close(m)
+            os.close(s)
+
+
+@pytest.fixture(scope="module")
+def robot_port(tmp_path_factory):
+    """A running `btf-robot run --hal fake` on one end of a serial cable; yields (other end, key)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    work = tmp_path_factory.mktemp("robot")
+    key = write_key(work / "robot.key")
+    (work / "robot.toml").write_text(
+        'robot_id = 4\nstate_dir = "state"\n[hal]\nbody = "fake"\nscene = "mixed"\nsize = [48, 64]\n'
+        '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
+        '[sweep]\nautostart = false\n[segment]\nmethod = "scene"\n')
+    bridge = _PtyBridge()
+    with open(work / "stderr", "wb") as err:
+        robot = subprocess.Popen(
+            [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())", "run",
+             "--config", str(work / "robot.toml"), "--hal", "fake", "--port", bridge.paths[0],
+             "--max-seconds", "120"], cwd=Path(__file__).resolve().parents[1],
+            stdout=subprocess.DEVNULL, stderr=err)
+    try:
+        yield bridge.paths[1], key
+    finally:
+        robot.terminate()
+        robot.wait(timeout=10)
+        bridge.close()
+
+
+def _cmd(port, key, capsys, *argv):
+    code = main(["cmd", "--port", port, "--key", str(key), "--timeout", "20", "--json", *argv])
+    out = capsys.readouterr().out.strip().splitlines()
+    return code, json.loads(out[-1]) if out else None
+
+
+def test_cmd_against_a_running_robot_gets_its_answers(robot_port, capsys):
+    port, key = robot_port
+    code, ans = _cmd(port, key, capsys, "status")
+    assert code == 0 and ans["type"] == "ACK" and ans["ok"] and ans["text"] == "STATUS"
+    assert ans["extras"]["mode"] == "idle" and ans["extras"]["faults"] == []
+    code, ans = _cmd(port, key, capsys, "goto", "--elevation", "50", "--azimuth", "0")
+    assert code == 0 and ans["type"] == "ACK"
+    assert abs(ans["extras"]["elevation"] - 50.0) < 2.0  # the measured angle, not the commanded one
+    code, ans = _cmd(port, key, capsys, "sweep", "--elevations", "60,40")
+    assert code == 0 and ans["type"] == "ACK" and ans["extras"]["poses"] == 2
+
+
+def test_cmd_against_a_running_robot_reports_a_refusal_with_its_reason(robot_port, capsys):
+    port, key = robot_port
+    code, ans = _cmd(port, key, capsys, "set", "link.no_such_key", "3")
+    assert code == 1 and ans["type"] == "NACK" and not ans["ok"]
+    assert ans["reason"] == "BAD_ARGUMENT" and "cannot be set at run time" in ans["text"]

@@ -25,7 +25,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 
 def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene: str = ""):
     """(HostSession, Store or None) for the CLI commands; CliError for any bad input."""
-    from radio.auth import FileCounterStore, MemoryCounterStore
+    from radio.auth import FileCounterStore
     from radio.keys import KeyFileError, load_key
     from radio.link import Link
     from radio.serial_port import open_url
@@ -43,9 +43,16 @@ def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene:
         except CorruptDatabase as exc:
             raise CliError(str(exc)) from None
     try:
-        # Counters beside the database survive restarts, so replays stay refused.
-        counters = (FileCounterStore(Path(db).with_name(Path(db).name + ".counters.json"))
-                    if db is not None else MemoryCounterStore())
+        # Counters survive restarts, so replays stay refused and a running robot accepts
+        # the next session: beside the database for listen, beside the key for cmd (a
+        # fresh in-memory counter would restart at 1 and look like a replayed session).
+        where = Path(db) if db is not None else Path(key_file)
+        counters = FileCounterStore(where.with_name(where.name + ".counters.json"))
+    except ValueError as exc:
+        if store is not None:
+            store.close()
+        raise CliError(str(exc)) from None
+    try:
         port = open_url(port_url, baud, timeout=0.01)
     except Exception as exc:
         if store is not None:
