@@ -64,6 +64,12 @@ def _expit(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.where(pos, big, small), np.where(pos, small, big)
 
 
+# Per sampling dtype: parameters below the first bound take the fast in-place path, whose
+# exponents stop at the second (exp of it is finite: float32 overflows near 88.72, float64
+# near 709.78). With |xi| < bound, xi + e^lim cannot overflow either.
+_SAFE = {np.dtype(np.float32): (1e36, 88.5), np.dtype(np.float64): (1e305, 709.0)}
+
+
 def _finite(x: np.ndarray, dtype=np.float64) -> np.ndarray:
     top = np.finfo(dtype).max
     return np.clip(x, -top, top)
@@ -196,9 +202,16 @@ class Johnson:
     def _x_of_z_inplace(self, z: np.ndarray) -> np.ndarray:
         g, d, xi, lam = self.gamma, self.delta, self.xi, self.lam
         dtype = z.dtype
-        info = np.finfo(dtype)
-        # exp overflows float32 near 88.7, float64 near 709.
-        wmax = 80.0 if dtype == np.float32 else 700.0
+        big, lim = _SAFE[dtype]
+        if not max(abs(g), 1.0 / d, abs(xi), abs(lam), 1.0 / abs(lam)) < big:
+            # Parameters beyond what the dtype carries: float64 formulas, clipped to the dtype.
+            x = _finite(self.x_of_z(z.astype(np.float64)), dtype)
+            z[...] = x
+            return z
+        # exp(lim) is finite in the dtype; for |lam| above 1 (2 for SU) the exponent stops
+        # lower, so that lam * e^w runs on to about e^lim, near the dtype's maximum.
+        scale = abs(lam) if self.family is Family.SL else 0.5 * abs(lam)
+        wmax = lim - max(math.log(scale), 0.0) if self.family in (Family.SU, Family.SL) else lim
         with np.errstate(all="ignore"):
             z -= dtype.type(g)
             z *= dtype.type(1.0 / d)
@@ -223,10 +236,6 @@ class Johnson:
             else:
                 z *= dtype.type(lam)
             z += dtype.type(xi)
-            if not (abs(xi) + abs(lam) * math.exp(wmax) < 0.5 * float(info.max)):
-                # Only extreme parameters can overflow; guard them once per call.
-                fill = min(max(xi, -float(info.max)), float(info.max))  # xi itself may not fit the dtype
-                np.nan_to_num(z, copy=False, nan=fill, posinf=info.max, neginf=-info.max)
         return z
 
     def thresholds(self, levels: int = 256) -> np.ndarray:

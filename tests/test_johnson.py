@@ -113,6 +113,23 @@ def test_extreme_parameters_never_overflow(family):
     assert px.dtype == np.uint8
 
 
+@pytest.mark.parametrize("model", [Johnson(Family.SU, 0.0, 0.01, 5.0, 20.0),
+                                   Johnson(Family.SL, 0.0, 0.01, 5.0, -20.0),
+                                   Johnson(Family.SU, 0.0, 0.01, 5.0, 0.5)])
+def test_float32_tails_run_on_towards_the_float32_maximum_without_overflow(model):
+    # |w| = |z| / delta reaches ~400: float32 exp overflows near 88.7 and once stopped at 80,
+    # saturating at 2.8e34 * lam; the tails now reach e^88.5 ~ 2.7e38 (or lam/2 of it below 2).
+    z = np.random.default_rng(8).standard_normal(2000).astype(np.float32)
+    x = model._x_of_z_inplace(z.copy())
+    assert np.all(np.isfinite(x))
+    reach = min(2.7e38, 0.5 * abs(model.lam) * math.exp(88.5))
+    assert np.max(np.abs(x)) >= 0.99 * reach
+    # below where the float32 path saturates, the two agree to float32 precision
+    x64 = model.x_of_z(z.astype(np.float64))
+    inside = np.abs(x64) < 0.99 * reach
+    np.testing.assert_allclose(x[inside], x64[inside], rtol=1e-4)
+
+
 def test_constant_model_is_a_point_mass():
     c = Johnson.constant(42.0)
     rng = np.random.default_rng(0)
