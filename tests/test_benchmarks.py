@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from benchmarks.__main__ import discover, main, run_one
-from benchmarks.common import Context, Section
+from benchmarks.common import Context, Saving, Section, paired_rounds
 from benchmarks.johnson_moments import shape_moments, solve_shape
 from benchmarks.moments_johnson import MomentFitError, fit_moments
 from onboard.johnson import Family
@@ -118,3 +118,26 @@ def test_solve_shape_hits_the_requested_betas():
     g, d = solve_shape(Family.SB, 0.7, 3.0)
     _, _, skew, b2 = shape_moments(Family.SB, g, d)
     assert skew == pytest.approx(0.7, abs=1e-6) and b2 == pytest.approx(3.0, abs=1e-5)
+
+
+def test_saving_is_the_median_of_paired_rounds_with_its_quartiles():
+    base = np.full(9, 10.0)
+    rule = np.array([5.0, 5.5, 6.0, 4.5, 5.0, 5.2, 4.8, 5.1, 4.9])
+    s = Saving.of(rule, base)
+    assert s.median == pytest.approx(0.5) and s.q25 < s.median < s.q75 and s.rounds == 9
+    assert s.measurable and s.text().startswith("50% (quartiles")
+
+
+def test_saving_whose_quartiles_straddle_zero_is_no_measurable_difference():
+    base = np.full(8, 10.0)
+    rule = np.array([8.0, 12.0, 9.5, 10.5, 11.0, 9.0, 10.2, 9.8])
+    s = Saving.of(rule, base)
+    assert not s.measurable
+    assert s.text().startswith("no measurable difference (median")
+
+
+def test_paired_rounds_time_every_function_every_round_in_alternating_order():
+    calls: list[str] = []
+    times = paired_rounds({"a": lambda: calls.append("a"), "b": lambda: calls.append("b")}, repeat=4)
+    assert calls == ["a", "b"] + ["a", "b", "b", "a"] * 2  # one warm-up each, then alternating rounds
+    assert all(t.shape == (4,) and np.all(t >= 0) for t in times.values())
