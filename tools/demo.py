@@ -9,6 +9,7 @@ the fake camera's seed) to compare against: the same pixels the robot's camera s
 """
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import subprocess
@@ -231,8 +232,11 @@ def sweep_over_pty(work: Path, scene: str, robot_id: int, store: Store, cfg: Dem
 
 
 # --- the experiments ---------------------------------------------------------------------
+@functools.lru_cache(maxsize=64)
 def capture(scene: str, elevation: float, size: tuple[int, int], seed: int = CAMERA_SEED):
-    return render(scene, ViewAngles(float(elevation), 0.0), size, seed=seed)
+    """The fake camera's view; cached, since the experiments and the report reuse each one
+    (callers only read it)."""
+    return render(scene, ViewAngles(float(elevation), 0.0), tuple(size), seed=seed)
 
 
 def _grid_hist(x: np.ndarray) -> np.ndarray:
