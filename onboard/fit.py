@@ -18,7 +18,7 @@ from onboard.percentile import model_from_percentiles, sl_band, support_of
 
 __all__ = [
     "Z_LADDER", "FitResult", "PercentileCodec", "fit_histogram", "fit_values",
-    "model_from_percentiles", "rebuild", "sl_band", "z_for_count",
+    "model_from_percentiles", "rebuild", "sl_band", "support_point", "z_for_count",
 ]
 
 # z values tried from the top; the packet sends the index of the one used.
@@ -218,15 +218,25 @@ def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, 
     normal_probs = fallback_probs(low, high) if where.fallback else None
     pct, model = _fit_placed(counts, cum, where, normal_probs, low, high, count, lo, bin_width, codec)
     support = None
-    # Bounded supports must reach the centre of every occupied bin (so each has mass); only
-    # the side that falls short is recorded (it travels).
-    ends = codec.snap([lo + bin_width * f0] * 2 + [lo + bin_width * f1] * 2)
+    # Bounded supports must reach the outer edge of every occupied bin, so each bin lies
+    # wholly inside and has mass; only the side that falls short is recorded (it travels).
+    ends = (support_point(f0, 0, codec, lo, bin_width), support_point(f1, 1, codec, lo, bin_width))
     s_lo, s_hi = support_of(model)
-    if s_lo > ends[0] or s_hi < ends[3]:
-        support = (ends[0] if s_lo > ends[0] else None, ends[3] if s_hi < ends[3] else None)
+    if s_lo > ends[0] or s_hi < ends[1]:
+        support = (ends[0] if s_lo > ends[0] else None, ends[1] if s_hi < ends[1] else None)
         model = model_from_percentiles(pct, where.z, count, shift=where.shift,
                                        normal_probs=normal_probs, support=support)
     return FitResult(model, count, where.z, pct, 0.0, 0.0, where.shift, low, high, where.fallback, support)
+
+
+def support_point(level: int, side: int, codec: PercentileCodec, lo: float = 0.0,
+                  bin_width: float = 1.0) -> float:
+    """The point a bounded support must reach when `level` is the lowest (side 0) or highest
+    (side 1) occupied bin: that bin's outer edge, snapped through the codec. The receiver
+    calls it on the transmitted level."""
+    if side not in (0, 1):
+        raise ValueError(f"side must be 0 (low) or 1 (high), got {side}")
+    return codec.snap([lo + bin_width * (level + side - 0.5)] * 4)[0]
 
 
 def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_probs, low: float,

@@ -262,8 +262,11 @@ class Johnson:
             p = np.zeros(levels)
             p[min(max(round(self.xi), 0), levels - 1)] = 1.0
             return p
-        c = normal_cdf(self.thresholds(levels))
-        return np.diff(np.concatenate(([0.0], c, [1.0])))
+        t = np.concatenate(([-np.inf], self.thresholds(levels), [np.inf]))
+        # Levels above the median as differences of the upper tail: 1 - Phi(z) rounds to 0
+        # beyond z ~ 8.3, Phi(-z) stays positive out to the clip.
+        below, above = np.diff(normal_cdf(t)), -np.diff(normal_cdf(-t))
+        return np.where(t[:-1] >= 0.0, above, below)
 
     def pixel_table(self, levels: int = 256) -> np.ndarray:
         """2**16-entry lookup table: a uniform random uint16 index gives a level whose

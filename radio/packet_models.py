@@ -34,7 +34,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from onboard.censor import CENSOR_SCALE, MAX_SHIFT_CODE, SHIFT_SCALE, fallback_probs
-from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percentiles
+from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percentiles, support_point
 from onboard.johnson import Johnson
 from radio import FrameError
 from radio.packet_base import (
@@ -266,7 +266,7 @@ def _tail_of(r: FitResult, label_z: float, override: tuple[float, float] | None,
     if not (r.z != label_z or r.shift or low or high or r.fallback or r.support):
         return None
     ends = (None, None) if r.support is None else tuple(
-        None if v is None else _level_of(v, codec) for v in r.support)
+        None if v is None else _level_of(v, side, codec) for side, v in enumerate(r.support))
     code = round(r.shift * SHIFT_SCALE)
     if code / SHIFT_SCALE != r.shift or abs(code) > MAX_SHIFT_CODE:
         raise ValueError(f"shift {r.shift} is not a multiple of 1/{SHIFT_SCALE} within the int8 range")
@@ -275,9 +275,9 @@ def _tail_of(r: FitResult, label_z: float, override: tuple[float, float] | None,
     return Tail(Z_LADDER.index(r.z), code, float(low), float(high), bool(r.fallback), *ends)
 
 
-def _level_of(point: float, codec: PercentileCodec) -> int:
-    level = round(point)
-    if support_point(level, codec) != point:
+def _level_of(point: float, side: int, codec: PercentileCodec) -> int:
+    level = round(point + 0.5 - side)
+    if support_point(level, side, codec) != point:
         raise ValueError(f"support point {point} is not a level")
     return level
 
@@ -351,19 +351,14 @@ def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, 
                 if t.fallback:
                     kw["normal_probs"] = fallback_probs(t.censored_low, t.censored_high)
                 if t.support_low is not None or t.support_high is not None:
-                    kw["support"] = tuple(None if v is None else support_point(v, codec)
-                                          for v in (t.support_low, t.support_high))
+                    kw["support"] = tuple(None if v is None else support_point(v, side, codec)
+                                          for side, v in enumerate((t.support_low, t.support_high)))
             try:
                 model = model_from_percentiles(codec.decode(codes), z, rec.count, **kw)
             except (ValueError, ArithmeticError) as exc:
                 raise FrameError(f"label {rec.label} band {band}: no model from codes {codes}: {exc}") from None
             out[(rec.label, band)] = model
     return out
-
-
-def support_point(level: int, codec: PercentileCodec) -> float:
-    """The fitter's support point for an occupied level (its snapped centre, onboard.fit)."""
-    return codec.snap([level] * 4)[0]
 
 
 def _placed(t: Tail) -> bool:

@@ -207,5 +207,9 @@ def test_the_support_of_every_fit_reaches_every_occupied_level(h):
     r = fit_histogram(h)
     lo, hi = support_of(r.model)
     occupied = np.flatnonzero(h)
-    # every occupied level's interval (k - 1/2, k + 1/2) meets the support
-    assert lo < occupied[0] + 0.5 and hi > occupied[-1] - 0.5, (r, occupied[[0, -1]])
+    if r.model.family is Family.CONST:
+        return
+    # every occupied level lies wholly inside the support: up to its outer edge (the top
+    # level's edge 255.5 is one 16-bit code short, 255.49609375)
+    assert lo <= occupied[0] - 0.5 and hi >= min(occupied[-1] + 0.5, 255.5 - 2.0**-8), (r, occupied[[0, -1]])
+

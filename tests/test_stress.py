@@ -156,8 +156,6 @@ def test_fitted_model_gives_every_occupied_level_some_probability():
     assert np.all(r.model.level_probabilities()[h > 0] > 0.0), r.model
 
 
-@pytest.mark.xfail(strict=True, reason="supports are widened only to the centre of the last occupied "
-                   "level, so that level's mass can round to exactly 0 (reported to the fitter's owner)")
 def test_every_level_of_a_field_region_keeps_some_probability():
     # Found by bench_peers: field scene, 480x640 at 60 degrees, green band of label 3 (top level 138).
     from hal.interfaces import ViewAngles
