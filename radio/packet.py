@@ -241,7 +241,7 @@ _CLASSES: dict[Kind, Any] = {
     cls.KIND: cls for cls in (ModelsPacket, UnchangedPacket, MaskPacket, StatusPacket,
                               CommandPacket, AckPacket, NackPacket, LogPacket)
 }
-_NFIELDS = {Kind.MODELS: 13, Kind.UNCHANGED: 8, Kind.MASK: 8, Kind.STATUS: 9, Kind.COMMAND: 3,
+_NFIELDS = {Kind.MODELS: 6, Kind.UNCHANGED: 8, Kind.MASK: 8, Kind.STATUS: 9, Kind.COMMAND: 3,
             Kind.ACK: 2, Kind.NACK: 3, Kind.LOG: 4}
 
 
