@@ -2,25 +2,30 @@
 
 A model travels as its four Slifker-Shapiro percentiles x(-3z), x(-z), x(z), x(3z) in the
 fitter's fixed point (`PercentileCodec.for_levels(levels)`: 16-bit codes for 8-bit sensors,
-32-bit for deeper ones), packed for the whole capture into one big-endian binary blob. The
-label's pixel count and z-ladder index are shared by its bands. The receiver recomputes each
-model with `model_from_percentiles`, exactly as the robot did, so the host's models equal the
-robot's bit for bit. Fixed point costs, for 8-bit sensors, a step of 2**-8 gray level: every
-percentile is within 2**-9 < 0.01 gray level of the fitter's float value.
+32-bit for deeper ones). The label's pixel count and z-ladder index are shared by its bands.
+The receiver recomputes each model with `model_from_percentiles`, exactly as the robot did, so
+the host's models equal the robot's bit for bit. Fixed point costs, for 8-bit sensors, a step
+of 2**-8 gray level: every percentile is within 2**-9 < 0.01 gray level of the fitter's value.
 
 Wire fields after [version, kind]:
-  MODELS    robot, seq, time, cmd_el, cmd_az, meas_el, meas_az, feature_space, [bands],
-            levels, labels_blob (>BBI per label: label, z index, count),
-            codes_blob (per label, per band, 4 codes), tails (nil | records) [, extras]
+  MODELS    robot, seq, time, feature_space, [bands], blob [, extras]
   UNCHANGED robot, seq, time, cmd_el, cmd_az, meas_el, meas_az, ref_seq [, extras]
 Angles are integer centidegrees (0.01 degree); censored fractions are 1/65535 fixed point.
 
-Tails: only the rare models that are not plain "label's z, no shift, nothing censored, support
-as fitted" get a record, so an ordinary model stays at 8 bytes. A record is >H (model index
-= label position * bands + band, times 16, plus flags), then with flag CENSORED >BbHH (z index,
-shift code in 1/32, censored low and high), then with SUPPORT_LOW the lowest and with
-SUPPORT_HIGH the highest occupied level (B up to 256 levels, else H): the fitted support fell
-short of it and was widened (onboard.percentile.widen). A support-only record costs 3 bytes. Flag FALLBACK (with CENSORED) marks the normal fallback of onboard.censor.
+The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
+  angles   >hHhH commanded and measured (elevation, azimuth)
+  levels   >H levels - 1
+  labels   one byte nb (0..32), an nb-byte bitmap of the label ids present (bit i of byte j:
+           label 8j + i; the last byte non-zero), then per label, in id order, the varint
+           (LEB128) of count * 16 + z index
+  codes    per label, per band, four codes (>H up to 256 levels, else >I)
+  records  absent when every model is plain; else 2 bits per model (model i at bits 2(i%4) of
+           byte i//4): 0 plain, 1 support widened high, 2 widened low, 3 a flagged record; then,
+           for each non-plain model in order, the occupied extreme level (B up to 256 levels,
+           else H) for 1 and 2, or for 3 a flag byte (TailFlag) and its fields in flag order:
+           z index B, shift b (1/32), censored low H, censored high H, support low, high.
+Only the rare models that are not plain (label's z, no shift, nothing censored, support as
+fitted) cost more than their 8 bytes: a model widened on one side 1 byte and 2 bits.
 """
 from __future__ import annotations
 
@@ -38,23 +43,36 @@ from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percent
 from onboard.johnson import Johnson
 from radio import FrameError
 from radio.packet_base import (
-    UINT32, Kind, angles_from_wire, angles_to_wire, want_bin, want_float, want_int, want_str,
+    UINT32, Kind, angles_from_wire, angles_to_wire, get_varint, put_varint, want_bin, want_float,
+    want_int, want_str,
 )
 
 MAX_LABELS = 256
 MAX_BANDS = 16
 MAX_NAME = 16
 MIN_LEVELS, MAX_LEVELS = 2, 65536  # PercentileCodec.for_levels' range
-_LABEL = struct.Struct(">BBI")
-_TAIL_HEAD = struct.Struct(">H")
-_CENSOR = struct.Struct(">BbHH")
+_HEAD = struct.Struct(">hHhHH")  # angles, levels - 1
+_U8, _I8, _U16 = struct.Struct(">B"), struct.Struct(">b"), struct.Struct(">H")
+_Z_BITS = 4  # z index in the low bits of a label's count varint
 
 
 class TailFlag(enum.IntFlag):
-    CENSORED = 1
-    FALLBACK = 2
-    SUPPORT_LOW = 4
-    SUPPORT_HIGH = 8
+    SUPPORT_LOW = 1
+    SUPPORT_HIGH = 2
+    CENSORED_LOW = 4
+    CENSORED_HIGH = 8
+    SHIFT = 16
+    FALLBACK = 32
+    Z = 64
+
+
+class TailCode(enum.IntEnum):
+    """A model's 2-bit entry in the records bitmap."""
+
+    PLAIN = 0
+    HIGH = 1
+    LOW = 2
+    FLAGGED = 3
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,6 +111,11 @@ class LabelModels:
     def tail(self, band: int) -> Tail | None:
         return self.tails[band] if band < len(self.tails) else None
 
+    def censored(self, band: int) -> tuple[float, float]:
+        """(low, high): the fractions of this band's pixels censored at each sensor limit."""
+        t = self.tail(band)
+        return (0.0, 0.0) if t is None else (t.censored_low, t.censored_high)
+
 
 @dataclass(frozen=True, slots=True)
 class ModelsPacket:
@@ -111,67 +134,85 @@ class ModelsPacket:
     models: Mapping[tuple[int, int], Johnson] = field(default_factory=dict, compare=False, repr=False)
 
     def _wire(self) -> list:
+        return [self.robot_id, self.seq, float(self.time), self.feature_space, list(self.bands),
+                self._blob()]
+
+    def _blob(self) -> bytes:
+        if not MIN_LEVELS <= self.levels <= MAX_LEVELS:
+            raise ValueError(f"levels {self.levels} outside [{MIN_LEVELS}, {MAX_LEVELS}]")
         codec = PercentileCodec.for_levels(self.levels)
+        out = bytearray(_HEAD.pack(*angles_to_wire(self.commanded, "commanded"),
+                                   *angles_to_wire(self.measured, "measured"), self.levels - 1))
+        ids = [x.label for x in self.labels]
+        if any(not 0 <= a < MAX_LABELS for a in ids) or any(a >= b for a, b in zip(ids, ids[1:])):
+            raise ValueError(f"label ids must be strictly increasing in [0, {MAX_LABELS - 1}], got {ids}")
+        bitmap = bytearray(ids[-1] // 8 + 1 if ids else 0)
+        for a in ids:
+            bitmap[a // 8] |= 1 << (a % 8)
+        out.append(len(bitmap))
+        out += bitmap
+        for x in self.labels:
+            if not (0 <= x.count <= UINT32 and 0 <= x.z_index < len(Z_LADDER)):
+                raise ValueError(f"label {x.label}: count {x.count} or z index {x.z_index} out of range")
+            put_varint(out, x.count << _Z_BITS | x.z_index)
         dtype = ">u2" if codec.bits <= 16 else ">u4"
         codes = np.array([c for lab in self.labels for c in lab.codes], dtype=np.int64).reshape(-1)
+        if codes.size != len(self.labels) * len(self.bands) * 4:
+            raise ValueError("every label needs four codes per band")
         if codes.size and (codes.min() < 0 or codes.max() > np.iinfo(dtype).max):
             raise ValueError(f"percentile codes do not fit {dtype}")
-        labels = b"".join(_LABEL.pack(x.label, x.z_index, x.count) for x in self.labels)
-        code = struct.Struct(">B" if self.levels <= 256 else ">H")
-        records = []
-        for i, lab in enumerate(self.labels):
-            for band, t in enumerate(lab.tails):
-                if t is not None:
-                    records.append(_tail_bytes(i * len(self.bands) + band, t, code))
-        censored = b"".join(records) if records else None
-        return [
-            self.robot_id, self.seq, float(self.time),
-            *angles_to_wire(self.commanded, "commanded"), *angles_to_wire(self.measured, "measured"),
-            self.feature_space, list(self.bands), self.levels,
-            labels, codes.astype(dtype).tobytes(), censored,
-        ]
+        out += codes.astype(dtype).tobytes()
+        level = _U8 if self.levels <= 256 else _U16
+        entries = [_tail_bytes(t, lab.z_index, level) for lab in self.labels
+                   for t in (lab.tails + (None,) * len(self.bands))[:len(self.bands)]]
+        if any(c for c, _ in entries):
+            marks = bytearray((len(entries) + 3) // 4)
+            for i, (c, _) in enumerate(entries):
+                marks[i // 4] |= c << (2 * (i % 4))
+            out += marks + b"".join(b for _, b in entries)
+        return bytes(out)
 
     @classmethod
     def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> ModelsPacket:
         robot, seq = want_int(f[0], "robot id", 0, 0xFFFF), want_int(f[1], "capture seq", 0, UINT32)
         t = want_float(f[2], "time", 0.0)
-        commanded = angles_from_wire(f[3], f[4], "commanded")
-        measured = angles_from_wire(f[5], f[6], "measured")
-        space = want_str(f[7], "feature space", MAX_NAME, allow_empty=False)
-        if type(f[8]) is not list or not 1 <= len(f[8]) <= MAX_BANDS:
+        space = want_str(f[3], "feature space", MAX_NAME, allow_empty=False)
+        if type(f[4]) is not list or not 1 <= len(f[4]) <= MAX_BANDS:
             raise FrameError(f"bands must be a list of 1..{MAX_BANDS} names")
-        bands = tuple(want_str(b, "band name", MAX_NAME, allow_empty=False) for b in f[8])
+        bands = tuple(want_str(b, "band name", MAX_NAME, allow_empty=False) for b in f[4])
         if len(set(bands)) != len(bands):
             raise FrameError("band names repeat")
-        levels = want_int(f[9], "levels", MIN_LEVELS, MAX_LEVELS)
+        blob = want_bin(f[5], "models blob")
+        if len(blob) < _HEAD.size + 1:
+            raise FrameError("models blob is shorter than its header")
+        cel, caz, mel, maz, levels = _HEAD.unpack_from(blob)
+        commanded = angles_from_wire(cel, caz, "commanded")
+        measured = angles_from_wire(mel, maz, "measured")
+        levels = want_int(levels + 1, "levels", MIN_LEVELS, MAX_LEVELS)
         codec = PercentileCodec.for_levels(levels)
-        width = 2 if codec.bits <= 16 else 4
-        label_blob, code_blob = want_bin(f[10], "labels"), want_bin(f[11], "codes")
-        if len(label_blob) % _LABEL.size or len(label_blob) // _LABEL.size > MAX_LABELS:
-            raise FrameError("labels blob length is not a whole number of label records")
-        n = len(label_blob) // _LABEL.size
-        if len(code_blob) != n * len(bands) * 4 * width:
-            raise FrameError(
-                f"codes blob has {len(code_blob)} bytes, expected {n * len(bands) * 4 * width}"
-            )
-        codes = np.frombuffer(code_blob, dtype=">u2" if width == 2 else ">u4").astype(np.int64)
-        codes = codes.reshape(n, len(bands), 4)
-        if np.any(np.diff(codes, axis=2) < 0):
-            raise FrameError("percentile codes decrease within a model")
-        if codes.size and codes.max() > (1 << codec.bits) - 1:
-            raise FrameError(f"percentile code exceeds {codec.bits}-bit range")
-        tails = _tails(f[12], n, len(bands), struct.Struct(">B" if levels <= 256 else ">H"), levels)
-        records, last = [], -1
-        for i, (label, z_index, count) in enumerate(_LABEL.iter_unpack(label_blob)):
-            if label <= last:
-                raise FrameError("label ids must be strictly increasing")
-            last = label
+        ids, pos = _label_ids(blob, _HEAD.size)
+        heads = []
+        for label in ids:
+            v, pos = get_varint(blob, pos, "label count", 6)
+            count, z_index = v >> _Z_BITS, v & ((1 << _Z_BITS) - 1)
+            want_int(count, f"label {label} count", 0, UINT32)
             if z_index >= len(Z_LADDER):
                 raise FrameError(f"z ladder index {z_index} outside 0..{len(Z_LADDER) - 1}")
-            records.append(LabelModels(
-                label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]), tails[i],
-            ))
-        packet = cls(robot, seq, t, commanded, measured, space, bands, levels, tuple(records), extras)
+            heads.append((label, count, z_index))
+        n, n_bands = len(ids), len(bands)
+        width = 2 if codec.bits <= 16 else 4
+        size = n * n_bands * 4 * width
+        if pos + size > len(blob):
+            raise FrameError(f"codes blob has {len(blob) - pos} bytes, expected {size}")
+        codes = np.frombuffer(blob, dtype=">u2" if width == 2 else ">u4", count=size // width,
+                              offset=pos).astype(np.int64).reshape(n, n_bands, 4)
+        if np.any(np.diff(codes, axis=2) < 0):
+            raise FrameError("percentile codes decrease within a model")
+        tails = _tails(blob, pos + size, [z for _, _, z in heads], n_bands, levels)
+        records = tuple(
+            LabelModels(label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]), tails[i])
+            for i, (label, count, z_index) in enumerate(heads))
+        packet = cls(robot, seq, t, commanded, measured, space, bands, levels, records, extras)
         if compute:
             object.__setattr__(packet, "models", _recompute(packet, codec))
         return packet
@@ -282,60 +323,93 @@ def _level_of(point: float, side: int, codec: PercentileCodec) -> int:
     return level
 
 
-def _tail_bytes(index: int, t: Tail, code: struct.Struct) -> bytes:
+def _tail_bytes(t: Tail | None, label_z: int, level: struct.Struct) -> tuple[int, bytes]:
+    """(TailCode, bytes) of one model's record (see module doc)."""
+    if t is None:
+        return TailCode.PLAIN, b""
+    low, high = _censor_code(t.censored_low), _censor_code(t.censored_high)
+    fields = [(TailFlag.Z, _U8, t.z_index if t.z_index != label_z else None),
+              (TailFlag.SHIFT, _I8, t.shift_code or None),
+              (TailFlag.CENSORED_LOW, _U16, low or None), (TailFlag.CENSORED_HIGH, _U16, high or None),
+              (TailFlag.SUPPORT_LOW, level, t.support_low), (TailFlag.SUPPORT_HIGH, level, t.support_high)]
     flags = TailFlag(0)
     out = b""
-    if t.z_index or t.shift_code or t.censored_low or t.censored_high or t.fallback:
-        flags |= TailFlag.CENSORED | (TailFlag.FALLBACK if t.fallback else 0)
-        out += _CENSOR.pack(t.z_index, t.shift_code, _censor_code(t.censored_low), _censor_code(t.censored_high))
-    if t.support_low is not None:
-        flags |= TailFlag.SUPPORT_LOW
-        out += code.pack(t.support_low)
-    if t.support_high is not None:
-        flags |= TailFlag.SUPPORT_HIGH
-        out += code.pack(t.support_high)
-    return _TAIL_HEAD.pack(index << 4 | int(flags)) + out
+    for flag, fmt, value in fields:
+        if value is not None:
+            flags |= flag
+            out += fmt.pack(value)
+    if t.fallback:
+        flags |= TailFlag.FALLBACK
+    if flags == TailFlag.SUPPORT_HIGH:
+        return TailCode.HIGH, out
+    if flags == TailFlag.SUPPORT_LOW:
+        return TailCode.LOW, out
+    if not flags:
+        return TailCode.PLAIN, b""
+    return TailCode.FLAGGED, bytes([flags]) + out
 
 
-def _tails(v: Any, n: int, n_bands: int, code: struct.Struct, levels: int) -> list[tuple[Tail | None, ...]]:
-    out: list[list[Tail | None]] = [[None] * n_bands for _ in range(n)]
-    if v is None:
+def _label_ids(blob: bytes, pos: int) -> tuple[list[int], int]:
+    nb = blob[pos]
+    pos += 1
+    if nb > MAX_LABELS // 8 or pos + nb > len(blob) or (nb and not blob[pos + nb - 1]):
+        raise FrameError(f"label bitmap of {nb} bytes: too long, cut short or not canonical")
+    ids = [8 * j + i for j in range(nb) for i in range(8) if blob[pos + j] >> i & 1]
+    return ids, pos + nb
+
+
+def _take(blob: bytes, pos: int, fmt: struct.Struct) -> tuple[int, int]:
+    if pos + fmt.size > len(blob):
+        raise FrameError("censored and support records end inside a record")
+    return fmt.unpack_from(blob, pos)[0], pos + fmt.size
+
+
+def _tails(blob: bytes, pos: int, label_z: list[int], n_bands: int,
+           levels: int) -> list[tuple[Tail | None, ...]]:
+    n = len(label_z) * n_bands
+    out: list[list[Tail | None]] = [[None] * n_bands for _ in label_z]
+    if pos == len(blob):
         return [tuple(t) for t in out]
-    blob = want_bin(v, "censored and support records")
-    pos, last = 0, -1
-    while pos < len(blob):
-        if pos + _TAIL_HEAD.size > len(blob):
-            raise FrameError("censored and support records end inside a record")
-        (head,) = _TAIL_HEAD.unpack_from(blob, pos)
-        index, flags = head >> 4, head & 0xF
-        pos += _TAIL_HEAD.size
-        if index <= last or index >= n * n_bands:
-            raise FrameError(f"censored record for model {index}: out of order or past {n * n_bands} models")
-        if not flags or (flags & TailFlag.FALLBACK and not flags & TailFlag.CENSORED):
-            raise FrameError(f"censored record for model {index} has bad flags {flags:#x}")
-        last = index
-        z_index, shift, low, high, ends = 0, 0, 0, 0, [None, None]
-        if flags & TailFlag.CENSORED:
-            if pos + _CENSOR.size > len(blob):
-                raise FrameError("censored and support records end inside a record")
-            z_index, shift, low, high = _CENSOR.unpack_from(blob, pos)
-            pos += _CENSOR.size
+    marks_end = pos + (n + 3) // 4
+    if marks_end > len(blob):
+        raise FrameError("censored and support records end inside their bitmap")
+    marks, pos = blob[pos:marks_end], marks_end
+    level = _U8 if levels <= 256 else _U16
+    for i in range(n):
+        code = marks[i // 4] >> (2 * (i % 4)) & 3
+        if code == TailCode.PLAIN:
+            continue
+        if code == TailCode.FLAGGED:
+            flags, pos = _take(blob, pos, _U8)
+            if not flags or flags & 0x80 or (flags & TailFlag.FALLBACK and not flags & (
+                    TailFlag.CENSORED_LOW | TailFlag.CENSORED_HIGH)):
+                raise FrameError(f"censored record for model {i} has bad flags {flags:#x}")
+        else:
+            flags = TailFlag.SUPPORT_HIGH if code == TailCode.HIGH else TailFlag.SUPPORT_LOW
+        z_index, shift, low, high, ends = label_z[i // n_bands], 0, 0, 0, [None, None]
+        if flags & TailFlag.Z:
+            z_index, pos = _take(blob, pos, _U8)
             if z_index >= len(Z_LADDER):
                 raise FrameError(f"censored record: z ladder index {z_index} outside 0..{len(Z_LADDER) - 1}")
+        if flags & TailFlag.SHIFT:
+            shift, pos = _take(blob, pos, _I8)
             if abs(shift) > MAX_SHIFT_CODE:
                 raise FrameError(f"censored record: shift code {shift} outside +-{MAX_SHIFT_CODE}")
-            if low + high > CENSOR_SCALE + 1:  # two halves may each round up
-                raise FrameError("censored fractions of a model add up to more than 1")
+        if flags & TailFlag.CENSORED_LOW:
+            low, pos = _take(blob, pos, _U16)
+        if flags & TailFlag.CENSORED_HIGH:
+            high, pos = _take(blob, pos, _U16)
+        if low + high > CENSOR_SCALE + 1:  # two halves may each round up
+            raise FrameError("censored fractions of a model add up to more than 1")
         for side, flag in enumerate((TailFlag.SUPPORT_LOW, TailFlag.SUPPORT_HIGH)):
             if flags & flag:
-                if pos + code.size > len(blob):
-                    raise FrameError("censored and support records end inside a record")
-                (ends[side],) = code.unpack_from(blob, pos)
-                pos += code.size
+                ends[side], pos = _take(blob, pos, level)
                 if ends[side] >= levels:
                     raise FrameError(f"censored record: support level {ends[side]} outside 0..{levels - 1}")
-        out[index // n_bands][index % n_bands] = Tail(
+        out[i // n_bands][i % n_bands] = Tail(
             z_index, shift, low / CENSOR_SCALE, high / CENSOR_SCALE, bool(flags & TailFlag.FALLBACK), *ends)
+    if pos != len(blob):
+        raise FrameError(f"models blob has {len(blob) - pos} bytes after its records")
     return [tuple(t) for t in out]
 
 
@@ -344,7 +418,7 @@ def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, 
     for rec in packet.labels:
         for band, codes in enumerate(rec.codes):
             t = rec.tail(band)
-            z = Z_LADDER[rec.z_index if t is None or not _placed(t) else t.z_index]
+            z = Z_LADDER[rec.z_index if t is None else t.z_index]
             kw: dict[str, Any] = {}
             if t is not None:
                 kw["shift"] = t.shift_code / SHIFT_SCALE
@@ -359,10 +433,6 @@ def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, 
                 raise FrameError(f"label {rec.label} band {band}: no model from codes {codes}: {exc}") from None
             out[(rec.label, band)] = model
     return out
-
-
-def _placed(t: Tail) -> bool:
-    return bool(t.z_index or t.shift_code or t.censored_low or t.censored_high or t.fallback)
 
 
 def _censor_code(fraction: float) -> int:

@@ -1,19 +1,22 @@
 """Packet bodies: exact model round trip, sizes, every kind, and strict rejection of bad fields."""
 from __future__ import annotations
 
+import dataclasses
 import math
+import struct
 
 import msgpack
 import numpy as np
 import pytest
 
-from onboard.fit import Z_LADDER, PercentileCodec, fit_histogram, fit_values
+from onboard.fit import Z_LADDER, FrameFitter, PercentileCodec, fit_histogram, fit_values
 from radio import FrameError
 from radio.packet import (
     MAX_BODY, SCHEMA_VERSION, AckPacket, CommandName, CommandPacket, Kind, LabelModels,
     LogLevel, LogPacket, MaskPacket, ModelsPacket, NackPacket, Reason, RobotState, StatusPacket,
     UnchangedPacket, decode, downsample_labels, encode, encode_mask, encode_models, models_packet,
 )
+from radio.packet_base import get_varint
 
 HEADER = dict(robot_id=3, seq=41, time=1_700_000_000.25, commanded=(45.0, 30.0),
               measured=(44.93, 29.87), feature_space="rgb")
@@ -62,8 +65,10 @@ def test_deeper_sensors_use_32_bit_codes_and_stay_exact():
     assert all(packet.models[k] == f.model for k, f in fits.items())
     assert packet.levels == 4096
     body8 = encode_models(_fits(3, 2, seed=7), bands=_bands(2), **HEADER)
+    deep, shallow = _sections(body), _sections(body8)
     # 2 extra bytes per code; the data differ, so do their few censored/support records
-    assert len(body) - len(body8) == 3 * 2 * 4 * 2 + _tail_bytes(body) - _tail_bytes(body8)
+    assert deep["codes"] - shallow["codes"] == 3 * 2 * 4 * 2
+    assert len(body) - len(body8) == 3 * 2 * 4 * 2 + deep["records"] - shallow["records"]
 
 
 def test_decoded_fields_match_what_was_sent():
@@ -87,26 +92,73 @@ def test_decoded_fields_match_what_was_sent():
     assert packet.extras == {"exposure_us": 1200, "gain": 1.5}
 
 
+MAX_HEADER = dict(HEADER, robot_id=65535, seq=2**32 - 1, commanded=(-89.99, 359.99),
+                  measured=(89.99, 359.99))
+
+
 def test_a_capture_of_8_labels_by_3_bands_fits_in_300_bytes_even_with_maximal_header():
     fits = _fits(8, 3)
-    header = dict(HEADER, robot_id=65535, seq=2**32 - 1, commanded=(-89.99, 359.99),
-                  measured=(89.99, 359.99))
-    body = encode_models(fits, bands=("R", "G", "B"), **header)
+    body = encode_models(fits, bands=("R", "G", "B"), **MAX_HEADER)
     assert len(body) <= 300, len(body)
+
+
+def test_a_gamma_tailed_frame_of_8_labels_by_3_bands_fits_in_300_bytes():
+    # The benchmark's clutter: a 1000x1000 RGB frame, 8 regions of 125,000 pixels each with
+    # gamma tails; most SB fits need a widened support, the brightest region saturates.
+    rng = np.random.default_rng(20240601)
+    side = 1000
+    labels = ((np.arange(side)[:, None] * 8 // side + np.arange(side)[None, :] * 2 // side) % 8).astype(np.uint8)
+    base = np.array([40, 70, 100, 130, 160, 190, 210, 90])[labels][..., None]
+    frame = np.clip(base + rng.gamma(2.0, 8.0, (side, side, 3)), 0, 255).astype(np.uint8)
+    fitter = FrameFitter(8, 3)
+    fitter.add(frame, labels)
+    fits = fitter.fit()
+    assert sum(1 for f in fits.values() if f.support) >= 12
+    assert any(f.censored_high for f in fits.values())
+    body = encode_models(fits, bands=("R", "G", "B"), **MAX_HEADER)
+    assert len(body) <= 300, len(body)
+    packet = decode(body)
+    assert all(packet.models[k] == f.model for k, f in fits.items())
 
 
 def test_each_model_costs_eight_bytes_of_codes():
     fits3, fits4 = _fits(4, 3), _fits(4, 4)
     small = encode_models(fits3, bands=("R", "G", "B"), **HEADER)
     large = encode_models(fits4, bands=("R", "G", "B", "H"), **HEADER)
-    # one more band: 4 models of 8 bytes, plus the band's name "H" (2 bytes), plus the
-    # records of the rare models whose support had to be widened or that were censored
-    assert len(large) - len(small) == 4 * 8 + 2 + _tail_bytes(large) - _tail_bytes(small)
-    assert len(msgpack.unpackb(small)[13]) == 4 * 3 * 8
+    a, b = _sections(small), _sections(large)
+    assert a["codes"] == 4 * 3 * 8 and b["codes"] == 4 * 4 * 8
+    # one more band: 4 models of 8 bytes, plus the band's name "H" (2 bytes), plus the records
+    # of the rare models whose support had to be widened or that were censored (and the label
+    # counts differ a little: the fixture draws more per label)
+    assert len(large) - len(small) == 4 * 8 + 2 + (b["labels"] - a["labels"]) + (b["records"] - a["records"])
 
 
-def _tail_bytes(body: bytes) -> int:
-    return len(msgpack.packb(msgpack.unpackb(body)[14], use_bin_type=True))
+def test_a_model_widened_on_one_side_costs_one_byte_and_two_bits():
+    fits = _fits(8, 3)
+    widened = [f for f in fits.values() if f.support]
+    # the fixture's records are all one-sided widenings, nothing censored or shifted
+    assert len(widened) == 3 and all(f.support.count(None) == 1 for f in widened)
+    assert not any(f.shift or f.censored_low or f.censored_high or f.fallback for f in fits.values())
+    body = encode_models(fits, bands=("R", "G", "B"), **HEADER)
+    assert _sections(body)["records"] == 24 // 4 + 3
+    plain = {k: f for k, f in fits.items() if not f.support}
+    for k in set(fits) - set(plain):  # the same models without their widening: no records at all
+        plain[k] = dataclasses.replace(fits[k], support=None)
+    assert _sections(encode_models(plain, bands=("R", "G", "B"), **HEADER))["records"] == 0
+
+
+def _sections(body: bytes) -> dict[str, int]:
+    """Byte counts of the MODELS blob's parts (radio.packet_models doc)."""
+    items = msgpack.unpackb(body)
+    blob, n_bands = items[7], len(items[6])
+    nb = blob[10]
+    ids = [8 * j + i for j in range(nb) for i in range(8) if blob[11 + j] >> i & 1]
+    pos = 11 + nb
+    for _ in ids:
+        _, pos = get_varint(blob, pos, "count", 6)
+    width = 2 if struct.unpack_from(">H", blob, 8)[0] < 256 else 4
+    codes = len(ids) * n_bands * 4 * width
+    return {"labels": pos - 10, "codes": codes, "records": len(blob) - pos - codes}
 
 
 def test_fixed_point_error_is_at_most_half_a_step_under_a_hundredth_of_a_gray_level():
@@ -207,9 +259,15 @@ def _raw(*items) -> bytes:
     return msgpack.packb(list(items), use_bin_type=True)
 
 
-def _models_fields() -> list:
-    body = encode_models(_fits(2, 3), bands=("R", "G", "B"), **HEADER)
-    return msgpack.unpackb(body)
+def _models_fields(records: bytes = b"") -> list:
+    """A plain MODELS body's fields: labels 1 and 4, 3 bands, counts 500 and 1000, so the
+    blob is: angles and levels (10 bytes), bitmap length and bitmap (2), two 2-byte varints,
+    48 bytes of codes from offset 16; `records` appended."""
+    recs = tuple(LabelModels(lab, count, 0, ((100, 200, 300, 400),) * 3) for lab, count in ((1, 500), (4, 1000)))
+    items = msgpack.unpackb(encode(ModelsPacket(3, 41, 1.0, (45.0, 30.0), (44.9, 30.1), "rgb", ("R", "G", "B"),
+                                                256, recs)))
+    items[7] += records
+    return items
 
 
 def _with(index: int, value) -> bytes:
@@ -218,10 +276,11 @@ def _with(index: int, value) -> bytes:
     return _raw(*items)
 
 
-def _codes(items: list, edit) -> bytes:
-    codes = bytearray(items[13])
-    edit(codes)
-    items[13] = bytes(codes)
+def _blob(edit, records: bytes = b"") -> bytes:
+    items = _models_fields(records)
+    blob = bytearray(items[7])
+    edit(blob)
+    items[7] = bytes(blob)
     return _raw(*items)
 
 
@@ -232,16 +291,22 @@ BAD = {
     "fields": _raw(SCHEMA_VERSION, int(Kind.ACK)),
     "integer": _raw(SCHEMA_VERSION, int(Kind.ACK), True, ""),  # a bool is not an id
     "finite": _with(4, float("nan")),
-    "elevation": _with(5, 9001),
-    "azimuth": _with(6, 36000),
-    "band names repeat": _with(10, ["R", "R", "B"]),
-    "levels": _with(11, 1),
-    "whole number": _with(12, b"\x01\x00\x00"),
-    "codes blob": _with(13, b"\x00" * 7),
-    "decrease": _codes(_models_fields(), lambda c: c.__setitem__(slice(0, 2), b"\xff\xff")),
-    "z ladder": _with(12, bytes([1, 200, 0, 0, 1, 0, 4, 0, 0, 0, 1, 0])),
-    "strictly increasing": _with(12, bytes([4, 0, 0, 0, 1, 0, 4, 0, 0, 0, 1, 0])),
-    "censored": _with(14, b"\x00"),
+    "elevation": _blob(lambda b: b.__setitem__(slice(0, 2), struct.pack(">h", 9001))),
+    "azimuth": _blob(lambda b: b.__setitem__(slice(6, 8), struct.pack(">H", 36000))),
+    "band names repeat": _with(6, ["R", "R", "B"]),
+    "levels": _blob(lambda b: b.__setitem__(slice(8, 10), b"\x00\x00")),
+    "header": _with(7, b"\x00" * 10),
+    "bitmap": _blob(lambda b: b.__setitem__(10, 33)),
+    "not canonical": _blob(lambda b: b.__setitem__(slice(10, 12), b"\x01\x00")),
+    "inside a varint": _blob(lambda b: b.__delitem__(slice(13, None))),
+    "codes blob": _blob(lambda b: b.__delitem__(slice(20, None))),
+    "decrease": _blob(lambda b: b.__setitem__(slice(16, 18), b"\xff\xff")),
+    "z ladder": _blob(lambda b: b.__setitem__(12, b[12] | 0x0F)),
+    "bad flags": _blob(lambda b: None, b"\x03\x00\x00"),
+    "inside their bitmap": _blob(lambda b: None, b"\x01"),
+    "end inside a record": _blob(lambda b: None, b"\x01\x00"),
+    "record: z ladder": _blob(lambda b: None, b"\x03\x00\x40\x40"),  # flag Z, then z index 64
+    "after its records": _blob(lambda b: None, b"\x01\x00\x07\x07"),
     "extras": _raw(*_models_fields(), [1, 2]),
     "unknown command": _raw(SCHEMA_VERSION, int(Kind.COMMAND), 1, 99, {}),
     "takes arguments": _raw(SCHEMA_VERSION, int(Kind.COMMAND), 1, int(CommandName.PING), {"x": 1}),
