@@ -55,8 +55,9 @@ def shape_moments(family: Family, gamma: float, delta: float) -> tuple[float, fl
         y = 0.5 * (1.0 + np.tanh(0.5 * w))
         m1 = float(_W @ y)
         d = y - m1
-        var = float(_W @ (d * d))
-        return m1, var, float(_W @ d ** 3) / var ** 1.5, float(_W @ d ** 4) / var ** 2
+        d2 = d * d  # products, not powers: this is the SB solver's inner loop
+        var = float(_W @ d2)
+        return m1, var, float(_W @ (d2 * d)) / var ** 1.5, float(_W @ (d2 * d2)) / var ** 2
     raise ValueError(f"no moments for family {family}")
 
 

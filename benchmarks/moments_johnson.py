@@ -27,12 +27,24 @@ class MomentFitError(ValueError):
 def sample_moments(values: np.ndarray) -> tuple[float, float, float, float]:
     """(mean, sd, signed sqrt(beta1), beta2) of the values."""
     x = np.asarray(values, dtype=np.float64).ravel()
-    mean = float(x.mean())
+    return _moments(x, np.full(x.size, 1.0 / max(x.size, 1)))
+
+
+def histogram_moments(counts: np.ndarray) -> tuple[float, float, float, float]:
+    """(mean, sd, signed sqrt(beta1), beta2) of pixels whose level counts these are (level k = k)."""
+    c = np.asarray(counts, dtype=np.float64).ravel()
+    if not c.sum() > 0:
+        raise MomentFitError("empty histogram: no curve to fit")
+    return _moments(np.arange(c.size, dtype=np.float64), c / c.sum())
+
+
+def _moments(x: np.ndarray, w: np.ndarray) -> tuple[float, float, float, float]:
+    mean = float(np.dot(w, x))
     d = x - mean
-    m2 = float(np.mean(d * d))
+    m2 = float(np.dot(w, d * d))
     if not m2 > 0.0:
         raise MomentFitError("zero variance: no curve to fit")
-    return mean, math.sqrt(m2), float(np.mean(d ** 3)) / m2 ** 1.5, float(np.mean(d ** 4)) / m2 ** 2
+    return mean, math.sqrt(m2), float(np.dot(w, d ** 3)) / m2 ** 1.5, float(np.dot(w, d ** 4)) / m2 ** 2
 
 
 def fit_moments(mean: float, sd: float, skew: float, beta2: float) -> Johnson:
@@ -54,6 +66,11 @@ def fit_moments(mean: float, sd: float, skew: float, beta2: float) -> Johnson:
 
 def fit(values: np.ndarray) -> Johnson:
     return fit_moments(*sample_moments(values))
+
+
+def fit_counts(counts: np.ndarray) -> Johnson:
+    """The moments fit of the pixels behind a level histogram (the same curve as `fit` on them)."""
+    return fit_moments(*histogram_moments(counts))
 
 
 def _sl(mean: float, sd: float, skew: float, w: float) -> Johnson:

@@ -11,7 +11,9 @@ from benchmarks.__main__ import discover, main, run_one
 from benchmarks.common import Context, Saving, Section, paired_rounds
 from benchmarks.johnson_moments import shape_moments, solve_shape
 from benchmarks.moments_johnson import MomentFitError, fit_moments
-from onboard.johnson import Family
+from benchmarks.stability_grid import SATURATIONS, Saturation, curve, grid
+from benchmarks.stability_score import METHODS, Size, Truth, evaluate, fit_and_score, score
+from onboard.johnson import Family, Johnson
 
 EXPECTED = {"core", "dependence", "ingest", "onboard", "peers", "runtime", "sampling", "scene", "stability",
             "subsample", "synth", "wire", "link"}
@@ -141,3 +143,62 @@ def test_paired_rounds_time_every_function_every_round_in_alternating_order():
     times = paired_rounds({"a": lambda: calls.append("a"), "b": lambda: calls.append("b")}, repeat=4)
     assert calls == ["a", "b"] + ["a", "b", "b", "a"] * 2  # one warm-up each, then alternating rounds
     assert all(t.shape == (4,) and np.all(t >= 0) for t in times.values())
+
+
+def test_saturation_moves_the_fraction_beyond_the_top_or_below_the_bottom_level():
+    c = curve(0.0, 3.0)
+    top, bottom = Saturation(0.25).apply(c), Saturation(0.25, top=False).apply(c)
+    assert 1.0 - float(top.cdf(254.5)) == pytest.approx(0.25, abs=1e-9)
+    assert float(bottom.cdf(0.5)) == pytest.approx(0.25, abs=1e-9)
+    assert Saturation().apply(c) is c and Saturation().label == "none"
+    assert (Saturation(0.1).label, Saturation(0.4, top=False).label) == ("10% at 255", "40% at 0")
+
+
+def test_grid_curves_span_the_8_bit_range_and_the_band_marks_only_points_near_the_boundary():
+    pts = grid((0.0, 1.0))
+    for p in pts:
+        assert np.allclose(p.curve.ppf([0.001, 0.999]), [20.0, 235.0], atol=1e-6)
+        assert p.near_boundary == (p.beta2 < p.beta1 + 1.2)
+    assert {p.where for p in pts if p.near_boundary} == {"near beta2 = beta1 + 1"}
+
+
+def test_score_of_the_true_curve_is_zero_and_a_shift_counts_only_inside_the_uncensored_levels():
+    truth_curve = Saturation(0.4).apply(curve(0.0, 3.0))
+    truth = Truth.of(truth_curve)
+    same = score(truth_curve, truth)
+    assert same.worst == pytest.approx(0.0, abs=1e-9) and same.w1 == pytest.approx(0.0, abs=1e-9)
+    assert same.l1 == pytest.approx(0.0, abs=1e-12)
+    moved = score(Johnson.normal(truth_curve.xi + 2.0, truth_curve.lam), truth)
+    assert moved.worst == pytest.approx(2.0, abs=1e-6)
+    # W1 of the clipped distributions: the 40% piled at 255 in both costs nothing
+    assert 1.0 < moved.w1 < 1.5 and moved.l1 > 0.01
+
+
+def test_fit_and_score_names_a_failed_moment_fit_and_the_percentile_fit_stays_finite():
+    counts = np.zeros(256, np.int64)
+    counts[[40, 200]] = 500  # a two-point sample: beta2 = beta1 + 1, no Johnson curve has its moments
+    truth = Truth.of(curve(0.0, 3.0))
+    assert fit_and_score("moments", counts, truth).failure == "no curve (sample at beta2 <= beta1 + 1)"
+    pct = fit_and_score("percentile", counts, truth)
+    assert not pct.failure and all(math.isfinite(v) for v in (pct.worst, pct.w1, pct.l1))
+
+
+def test_censoring_recovers_a_saturated_normal_that_the_uncensored_fit_misses():
+    p = next(q for q in grid((0.0,)) if q.where == "normal point")
+    sizes = [Size(1000), Size(100_000, expected=True)]
+    res = evaluate(p, sizes, np.random.default_rng(0))
+    assert len(res) == len(METHODS) * len(sizes) * len(SATURATIONS)
+    assert not any(s.failure for (m, _, _), s in res.items() if m != "moments")
+    for sat in SATURATIONS[1:]:
+        cen, unc = res[("percentile", sizes[1], sat)], res[("uncensored", sizes[1], sat)]
+        assert cen.worst < 0.5 and cen.l1 < 0.01 and not cen.fallback
+        assert unc.worst > 5.0 and unc.l1 > 0.1
+
+
+def test_quick_stability_map_has_the_saturation_axis_and_no_percentile_failure(quick):
+    text, out = quick("stability")
+    assert re.search(r"Failures \(NaN, exception, no curve\): percentile 0, uncensored 0, moments \d+\.", text)
+    header = tables(text)[0][0]
+    assert all(label in header for label in ("none", "10% at 255", "40% at 255", "10% at 0", "40% at 0"))
+    assert "**What censoring buys**" in text and "**Near the boundary**" in text
+    assert (out / "stability_percentile.png").stat().st_size > 1000
