@@ -5,6 +5,8 @@ import tty
 
 import pytest
 
+from onboard.cli import CliError
+
 from radio import packet as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import write_key
@@ -109,6 +111,21 @@ def test_cmd_arguments_become_the_commands_the_robot_checks():
     name, args = command_of(p.parse_args(["cmd", "--port", "x", "--key", "k", "set", "skip.min_pixels", "32"]))
     assert (name, args) == (pk.CommandName.SET, {"key": "skip.min_pixels", "value": 32})
     assert pk.decode(pk.encode(pk.CommandPacket(1, name, args))).args == args
+    name, args = command_of(p.parse_args(["cmd", "--port", "x", "--key", "k", "sweep",
+                                          "--start", "90", "--stop", "30", "--step", "10"]))
+    assert args == {"start": 90.0, "stop": 30.0, "step": 10.0, "azimuths": [0.0]}
+    decoded = pk.decode(pk.encode(pk.CommandPacket(2, name, args))).args
+    assert {k: list(v) if isinstance(v, tuple) else v for k, v in decoded.items()} == args
+
+
+@pytest.mark.parametrize("extra", [["--start", "90", "--elevations", "90,80"], ["--start", "90", "--stop", "30"]])
+def test_cmd_sweep_refuses_mixed_or_partial_ranges(extra):
+    from tools.cli import build_parser
+    from tools.cmd_cmd import command_of
+
+    args = build_parser().parse_args(["cmd", "--port", "x", "--key", "k", "sweep", *extra])
+    with pytest.raises(CliError, match="sweep"):
+        command_of(args)
 
 
 class _PtyBridge:

@@ -27,8 +27,11 @@ def add_parser(sub) -> argparse.ArgumentParser:
     g.add_argument("--elevation", type=float, required=True)
     g.add_argument("--azimuth", type=float, default=0.0)
     c.add_parser("capture", help="capture at the current pose")
-    s = c.add_parser("sweep", help="start a sweep over the given poses")
-    s.add_argument("--elevations", type=_floats, required=True, help="e.g. 90,80,70")
+    s = c.add_parser("sweep", help="start a sweep: --start/--stop/--step or --elevations")
+    s.add_argument("--start", type=float, help="first elevation, e.g. 90")
+    s.add_argument("--stop", type=float, help="last elevation, e.g. 30")
+    s.add_argument("--step", type=float, help="elevation step, e.g. 10")
+    s.add_argument("--elevations", type=_floats, help="explicit elevations, e.g. 90,80,70")
     s.add_argument("--azimuths", type=_floats, default=[0.0], help="e.g. 0,90")
     c.add_parser("abort", help="stop the sweep and hold the arm")
     st = c.add_parser("set", help="change a run-time setting")
@@ -49,9 +52,19 @@ def command_of(args: argparse.Namespace):
     if w == "goto":
         return C.GOTO, {"elevation": args.elevation, "azimuth": args.azimuth}
     if w == "sweep":
-        if not args.elevations or not args.azimuths:
-            raise CliError("sweep needs at least one elevation and one azimuth")
-        return C.SWEEP, {"elevations": args.elevations, "azimuths": args.azimuths}
+        ranged = (args.start, args.stop, args.step)
+        if args.elevations is not None and any(v is not None for v in ranged):
+            raise CliError("sweep takes either --start/--stop/--step or --elevations, not both")
+        if not args.azimuths:
+            raise CliError("sweep needs at least one azimuth")
+        if args.elevations is not None:
+            if not args.elevations:
+                raise CliError("sweep needs at least one elevation")
+            return C.SWEEP, {"elevations": args.elevations, "azimuths": args.azimuths}
+        if any(v is None for v in ranged):
+            raise CliError("sweep needs --start, --stop and --step (or --elevations)")
+        return C.SWEEP, {"start": args.start, "stop": args.stop, "step": args.step,
+                         "azimuths": args.azimuths}
     if w == "set":
         try:
             value = json.loads(args.value)

@@ -44,9 +44,9 @@ def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene:
             raise CliError(str(exc)) from None
     try:
         # Counters survive restarts, so replays stay refused and a running robot accepts
-        # the next session: beside the database for listen, beside the key for cmd (a
-        # fresh in-memory counter would restart at 1 and look like a replayed session).
-        where = Path(db) if db is not None else Path(key_file)
+        # the next session. They live beside the key: listen and cmd speak as the same
+        # host, one after the other on the same port, so they must share one counter.
+        where = Path(key_file)
         counters = FileCounterStore(where.with_name(where.name + ".counters.json"))
     except ValueError as exc:
         if store is not None:
