@@ -14,7 +14,7 @@ import numpy as np
 from onboard.censor import (MIN_REPORTED, Placement, censored_counts, fallback_probs, place, quantize,
                             reproduces)
 from onboard.johnson import Johnson
-from onboard.percentile import model_from_percentiles, sl_band, support_of
+from onboard.percentile import model_from_percentiles, sl_band, support_of, widen
 
 __all__ = [
     "Z_LADDER", "FitResult", "PercentileCodec", "fit_histogram", "fit_values",
@@ -102,6 +102,13 @@ class PercentileCodec:
 
     def snap(self, percentiles) -> tuple[float, float, float, float]:
         return self.decode(self.encode(percentiles))
+
+    def snap_one(self, x: float) -> float:
+        """One value through the fixed point (as `snap` does each of four)."""
+        x = float(x)
+        if not math.isfinite(x):
+            raise ValueError(f"cannot encode non-finite percentile {x}")
+        return self.lo + min(max(round((x - self.lo) / self.step), 0), self._top) * self.step
 
     def __repr__(self) -> str:
         return f"PercentileCodec(lo={self.lo}, hi={self.hi}, bits={self.bits})"
@@ -224,8 +231,7 @@ def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, 
     s_lo, s_hi = support_of(model)
     if s_lo > ends[0] or s_hi < ends[1]:
         support = (ends[0] if s_lo > ends[0] else None, ends[1] if s_hi < ends[1] else None)
-        model = model_from_percentiles(pct, where.z, count, shift=where.shift,
-                                       normal_probs=normal_probs, support=support)
+        model = widen(model, support, pct)  # what model_from_percentiles(..., support) gives
     return FitResult(model, count, where.z, pct, 0.0, 0.0, where.shift, low, high, where.fallback, support)
 
 
@@ -236,7 +242,7 @@ def support_point(level: int, side: int, codec: PercentileCodec, lo: float = 0.0
     calls it on the transmitted level."""
     if side not in (0, 1):
         raise ValueError(f"side must be 0 (low) or 1 (high), got {side}")
-    return codec.snap([lo + bin_width * (level + side - 0.5)] * 4)[0]
+    return codec.snap_one(lo + bin_width * (level + side - 0.5))
 
 
 def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_probs, low: float,
@@ -376,8 +382,8 @@ class FrameFitter:
         self._bases = (np.arange(n_labels, dtype=np.intp)[:, None] * n_bands
                        + np.arange(n_bands, dtype=np.intp)[None, :]) * bins
         self.empty_labels: tuple[int, ...] = ()
-        # 8-bit frames with few labels and bands: the whole index fits in 16 bits.
-        self._bases16 = self._bases.astype(np.uint16) if n_labels * n_bands * bins <= 65536 and bins == 256 else None
+        # 8-bit frames with few labels and bands: a pixel's label base fits in 16 bits.
+        self._fits16 = n_labels * n_bands * bins <= 65536 and bins == 256
 
     def reset(self) -> None:
         self.counts[...] = 0
@@ -392,26 +398,49 @@ class FrameFitter:
             return
         step = max(1, self.chunk_pixels // width)
         flat = self.counts.reshape(-1)
-        fast = self._bases16 is not None and self._unit_levels and frame.dtype == np.uint8
+        if self._fits16 and self._unit_levels and frame.dtype == np.uint8:
+            self._add_8bit(frame, labels, step)
+            return
         for r0 in range(0, height, step):
             lab, vals = labels[r0:r0 + step], frame[r0:r0 + step]
-            lmin, lmax = int(lab.min()), int(lab.max())
-            if lmin < 0 or lmax >= self.n_labels:
-                bad = lmin if lmin < 0 else lmax
-                raise ValueError(f"label {bad} outside [0, {self.n_labels - 1}]")
-            if fast:
-                # Every (label, band, level) index fits 16 bits: gather and OR in 2-byte integers.
-                idx = np.take(self._bases16, lab, axis=0)
-                np.bitwise_or(idx, vals, out=idx)
+            self._check_labels(lab)
+            # One gather of each pixel's (label, band) base offset, then add the bin index.
+            idx = np.take(self._bases, lab, axis=0)
+            if self._unit_levels and vals.dtype.kind in "ui":
+                self._check_range(vals)
+                np.add(idx, vals, out=idx, casting="unsafe")
             else:
-                # One gather of each pixel's (label, band) base offset, then add the bin index.
-                idx = np.take(self._bases, lab, axis=0)
-                if self._unit_levels and vals.dtype.kind in "ui":
-                    self._check_range(vals)
-                    np.add(idx, vals, out=idx, casting="unsafe")
-                else:
-                    idx += self._value_index(vals)
+                idx += self._value_index(vals)
             flat += np.bincount(idx.reshape(-1), minlength=flat.size)
+
+    def _add_8bit(self, frame: np.ndarray, labels: np.ndarray, step: int) -> None:
+        """8-bit frames whose (label, band, level) indices fit 16 bits: per chunk and band, the
+        index label * bands * 256 + band * 256 + value in two buffers reused across chunks, one
+        bincount each (no gather, no broadcast over the short band axis, no per-chunk copies)."""
+        flat = self.counts.reshape(-1)
+        height, width = labels.shape
+        cap = min(step, height) * width
+        base = np.empty(cap, dtype=np.uint16)
+        idx = np.empty(cap, dtype=np.intp)  # bincount's own type: it copies nothing
+        stride, level_step = np.uint16(self.n_bands * self.bins), np.uint16(self.bins)
+        for r0 in range(0, height, step):
+            lab, vals = labels[r0:r0 + step], frame[r0:r0 + step]
+            self._check_labels(lab)
+            n = lab.size
+            b = base[:n].reshape(lab.shape)
+            i = idx[:n].reshape(lab.shape)
+            np.multiply(lab, stride, out=b, casting="unsafe")
+            for band in range(self.n_bands):
+                if band:
+                    b += level_step
+                np.add(vals[..., band], b, out=i, casting="unsafe")
+                flat += np.bincount(idx[:n], minlength=flat.size)
+
+    def _check_labels(self, lab: np.ndarray) -> None:
+        lmin, lmax = int(lab.min()), int(lab.max())
+        if lmin < 0 or lmax >= self.n_labels:
+            bad = lmin if lmin < 0 else lmax
+            raise ValueError(f"label {bad} outside [0, {self.n_labels - 1}]")
 
     def fit(self, min_count: int = 1, censor: bool = True) -> dict[tuple[int, int], FitResult]:
         """Fit every (label, band) with at least `min_count` pixels; others go to empty_labels."""

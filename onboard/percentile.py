@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from onboard.johnson import Family, Johnson, normal_ppf
+from onboard.johnson import Z_CLIP, Family, Johnson, normal_ppf
 
 # ln d has a sampling sd of roughly 4 / sqrt(count); the SL band is one such sd wide on each
 # side, never narrower than the floor that keeps the SU/SB forms well conditioned.
@@ -141,7 +141,7 @@ def widen(model: Johnson, support: Support, pct: tuple[float, float, float, floa
     out = None
     for p, q in ((pct[1], pct[2]), (pct[0], pct[3])):
         try:
-            zp, zq = (float(v) for v in model.z_of_x(np.array([p, q])))
+            zp, zq = _z_at(model, p), _z_at(model, q)
             out = _pinned(model, new_lo, new_hi, p, q, zp, zq)
         except (OverflowError, ValueError, ZeroDivisionError):
             out = None
@@ -157,6 +157,21 @@ def widen(model: Johnson, support: Support, pct: tuple[float, float, float, floa
         centre, spread = float(model.x_of_z(0.0)), float(model.x_of_z(1.0) - model.x_of_z(-1.0))
         out = Johnson.normal(centre, max(0.5 * spread, _GAP_FLOOR * (abs(centre) + 1.0)))
     return out
+
+
+def _z_at(model: Johnson, x: float) -> float:
+    """model.z_of_x(x) for one point of a bounded (SB, SL) model, without array overhead."""
+    g, d, xi, lam = model.gamma, model.delta, model.xi, model.lam
+    if model.family is Family.SB:
+        lo, hi = x - xi, (xi + lam) - x
+        z = -math.inf if lo <= 0.0 else math.inf if hi <= 0.0 else g + d * (math.log(lo) - math.log(hi))
+    else:
+        u = (x - xi) / lam
+        if u <= 0.0:
+            z = -math.inf if lam > 0 else math.inf
+        else:
+            z = g + d * math.log(u) if lam > 0 else g - d * math.log(u)
+    return min(max(z, -Z_CLIP), Z_CLIP)
 
 
 def _stretched(model: Johnson, new_lo: float, new_hi: float, a: float, e: float) -> Johnson | None:
