@@ -224,6 +224,27 @@ def test_frame_fitter_matches_fitting_each_region_directly():
         assert np.array_equal(f.counts[label, band], np.bincount(frame[..., band][labels == label], minlength=256))
 
 
+@pytest.mark.parametrize("label_dtype", [np.uint8, np.int32, np.int64])
+def test_eight_bit_counting_agrees_with_the_general_path(label_dtype):
+    # uint8 frames take the per-band 16-bit path; the same values as uint16 the general one.
+    rng = np.random.default_rng(3)
+    frame = rng.integers(0, 256, (37, 53, 4), dtype=np.uint8)
+    labels = rng.integers(0, 5, (37, 53)).astype(label_dtype)
+    fast, general = FrameFitter(5, 4, chunk_rows=1), FrameFitter(5, 4, chunk_rows=1)
+    fast.add(frame, labels)
+    fast.add(frame[:, ::-1], labels[::-1])  # strided views too
+    general.add(frame.astype(np.uint16), labels)
+    general.add(frame[:, ::-1].astype(np.uint16), labels[::-1])
+    assert np.array_equal(fast.counts, general.counts)
+    for lab in range(5):
+        for band in range(4):
+            want = np.bincount(frame[..., band][labels == lab], minlength=256)
+            want += np.bincount(frame[:, ::-1, band][labels[::-1] == lab], minlength=256)
+            assert np.array_equal(fast.counts[lab, band], want)
+    with pytest.raises(ValueError, match="label 5"):
+        fast.add(frame, np.full((37, 53), 5, dtype=label_dtype))
+
+
 def test_frame_fitter_accumulates_frames_and_resets():
     frame, labels = two_region_frame()
     f = FrameFitter(3, 3)
