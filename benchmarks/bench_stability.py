@@ -112,7 +112,7 @@ def _censoring(points, sizes, res) -> list[str]:
     return out
 
 
-def _worst_cells(points, sizes, res, k: int = 6) -> list[str]:
+def _worst_cells(points, sizes, res, k: int = 10) -> list[str]:
     """Where the percentile fit is worst off the band, at the largest sampled n and noise-free."""
     rows = []
     for size in sizes[-2:]:
@@ -120,7 +120,10 @@ def _worst_cells(points, sizes, res, k: int = 6) -> list[str]:
             ok, _, _, _ = _cells("percentile", size, sat, points, res)
             rows += [(s.worst, s.w1, p, size, sat, s.fallback) for p, s in ok if not p.near_boundary]
     rows.sort(key=lambda r: -r[0])
-    out = [f"Worst {k} cells of the percentile fit off the band (largest sampled n and noise-free counts):", "",
+    seen: set[tuple[float, float]] = set()
+    rows = [r for r in rows if (r[2].beta1, r[2].beta2) not in seen and not seen.add((r[2].beta1, r[2].beta2))]
+    out = [f"The {k} grid points where the percentile fit is worst off the band, each at its worst cell "
+           "(largest sampled n and noise-free counts):", "",
            "| region | beta1 | beta2 | n | saturation | worst quantile error | W1 | fallback |",
            "|---|---:|---:|---|---|---:|---:|---|"]
     for worst, w1, p, size, sat, fb in rows[:k]:
