@@ -125,13 +125,28 @@ def histogram_percentiles(counts: np.ndarray, probs, lo: float = 0.0, bin_width:
                           cum: np.ndarray | None = None) -> np.ndarray:
     """Quantiles at `probs` of a histogram whose bin k is centred on lo + k * bin_width,
     each bin's mass spread uniformly across its width."""
+    counts = np.asarray(counts)
     if cum is None:
         cum = np.cumsum(counts, dtype=np.float64)
-    total = cum[-1]
-    targets = np.asarray(probs, dtype=np.float64) * total
-    k = np.minimum(np.searchsorted(cum, targets, side="left"), len(cum) - 1)
-    here = np.asarray(counts, dtype=np.float64)[k]
-    below = cum[k] - here
+    probs = np.asarray(probs, dtype=np.float64)
+    return _percentile_rows(counts[None], cum[None], probs[None], lo, bin_width)[0]
+
+
+def _percentile_rows(counts: np.ndarray, cum: np.ndarray, probs: np.ndarray, lo: float,
+                     bin_width: float) -> np.ndarray:
+    """histogram_percentiles of each row, the same operations on each element whether a row
+    comes alone or in a batch (so batched and single fits agree bit for bit)."""
+    rows, bins = cum.shape
+    targets = probs * cum[:, -1:]
+    if bins <= 1024:
+        # bins below each target: searchsorted(side="left") for every row at once
+        k = (cum[:, None, :] < targets[:, :, None]).sum(axis=2)
+    else:
+        k = np.stack([np.searchsorted(c, t, side="left") for c, t in zip(cum, targets)])
+    k = np.minimum(k, bins - 1)
+    r = np.arange(rows)[:, None]
+    here = counts[r, k].astype(np.float64)
+    below = cum[r, k] - here
     frac = np.clip((targets - below) / np.maximum(here, 1.0), 0.0, 1.0)
     return lo + bin_width * (k - 0.5 + frac)
 
@@ -193,21 +208,34 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
     beta1, beta2 = _betas(counts, lo, bin_width)
     if censor:
         low_n, high_n = censored_counts(counts)
-    out = []
+    plans: list[tuple[Placement, float, float] | None] = []
     for i in range(rows):
         count, z = totals[i], zs[i]
-        f0, f1 = int(first[i]), int(last[i])
-        if f0 == f1:
-            # One occupied bin: a constant region, sent as four equal percentiles.
-            pct = codec.snap([lo + bin_width * f0] * 4)
-            out.append(FitResult(Johnson.constant(pct[0]), count, z, pct, float(beta1[i]), float(beta2[i])))
+        if first[i] == last[i]:
+            plans.append(None)
             continue
         low = quantize(float(low_n[i]) / count) if censor else 0.0
         high = quantize(float(high_n[i]) / count) if censor else 0.0
         where = place(z, low, high, count, Z_LADDER)
         if where == Placement(z) and max(low, high) < MIN_REPORTED:
             low = high = 0.0
-        fit = _fit_one(counts[i], cum[i], where, low, high, count, f0, f1, lo, bin_width, codec)
+        plans.append((where, low, high))
+    # The four percentiles of every row read by the symmetric method, in one batch.
+    batch = [i for i, p in enumerate(plans) if p is not None and not p[0].fallback]
+    raw = dict(zip(batch, _percentile_rows(
+        counts[batch], cum[batch], np.array([_placed_probs(plans[i][0]) for i in batch]).reshape(-1, 4),
+        lo, bin_width)))
+    out = []
+    for i in range(rows):
+        count, z = totals[i], zs[i]
+        f0, f1 = int(first[i]), int(last[i])
+        if plans[i] is None:
+            # One occupied bin: a constant region, sent as four equal percentiles.
+            pct = codec.snap([lo + bin_width * f0] * 4)
+            out.append(FitResult(Johnson.constant(pct[0]), count, z, pct, float(beta1[i]), float(beta2[i])))
+            continue
+        where, low, high = plans[i]
+        fit = _fit_one(counts[i], cum[i], where, low, high, count, f0, f1, lo, bin_width, codec, raw.get(i))
         if (low or high) and not where.fallback and not reproduces(
                 fit.model, low, high, lo + 0.5 * bin_width, lo + (bins - 1.5) * bin_width):
             # the percentiles saw too little to extrapolate the pile-up: the fallback does not
@@ -219,11 +247,12 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
 
 
 def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, high: float, count: int,
-             f0: int, f1: int, lo: float, bin_width: float, codec: PercentileCodec) -> FitResult:
-    """One histogram read at `where`, its support widened to the occupied bins f0..f1 if short
-    (betas left at zero: the caller has them)."""
+             f0: int, f1: int, lo: float, bin_width: float, codec: PercentileCodec,
+             raw: np.ndarray | None = None) -> FitResult:
+    """One histogram read at `where` (`raw`: its percentiles, when already read), its support
+    widened to the occupied bins f0..f1 if short (betas left at zero: the caller has them)."""
     normal_probs = fallback_probs(low, high) if where.fallback else None
-    pct, model = _fit_placed(counts, cum, where, normal_probs, low, high, count, lo, bin_width, codec)
+    pct, model = _fit_placed(counts, cum, where, normal_probs, low, high, count, lo, bin_width, codec, raw)
     support = None
     # Bounded supports must reach the outer edge of every occupied bin, so each bin lies
     # wholly inside and has mass; only the side that falls short is recorded (it travels).
@@ -246,7 +275,8 @@ def support_point(level: int, side: int, codec: PercentileCodec, lo: float = 0.0
 
 
 def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_probs, low: float,
-                high: float, count: int, lo: float, bin_width: float, codec: PercentileCodec):
+                high: float, count: int, lo: float, bin_width: float, codec: PercentileCodec,
+                raw: np.ndarray | None = None):
     """(snapped percentiles, model) for one histogram read at `where`."""
     bins = counts.size
     if where.fallback:
@@ -255,8 +285,9 @@ def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_pr
         e = lo + bin_width * (bins - 1.5) if high > 0.0 else float(ends[1])
         pct = codec.snap([a, a, e, e])
     else:
-        probs = _probs(where.z) if where.shift_code == 0 else _shifted_probs(where.z, where.shift)
-        pct = codec.snap(histogram_percentiles(counts, probs, lo, bin_width, cum))
+        if raw is None:
+            raw = histogram_percentiles(counts, _placed_probs(where), lo, bin_width, cum)
+        pct = codec.snap(raw)
     return pct, model_from_percentiles(pct, where.z, count, shift=where.shift, normal_probs=normal_probs)
 
 
@@ -267,6 +298,10 @@ def rebuild(result: FitResult, percentiles=None) -> Johnson:
     return model_from_percentiles(result.percentiles if percentiles is None else percentiles,
                                   result.z, result.count, shift=result.shift,
                                   normal_probs=normal_probs, support=result.support)
+
+
+def _placed_probs(where: Placement) -> tuple[float, float, float, float]:
+    return _probs(where.z) if where.shift_code == 0 else _shifted_probs(where.z, where.shift)
 
 
 def _shifted_probs(z: float, shift: float) -> tuple[float, float, float, float]:

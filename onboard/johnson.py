@@ -50,10 +50,18 @@ def normal_ppf(u: np.ndarray | float) -> np.ndarray:
     u = np.asarray(u, dtype=np.float64)
     if not np.all((u >= 0.0) & (u <= 1.0)):  # also rejects NaN
         raise ValueError("probabilities must lie in [0, 1]")
-    lo, hi = float(normal_cdf(-Z_CLIP)), float(normal_cdf(Z_CLIP))
-    inner = np.clip(u, lo, min(hi, math.nextafter(1.0, 0.0)))
+    lo, hi = _PPF_LO, _PPF_HI
+    if u.ndim == 0:  # the same steps on a Python float: fitting asks one at a time
+        v = float(u)
+        z = -Z_CLIP if v <= lo else Z_CLIP if v >= 1.0 else _NORMAL.inv_cdf(min(max(v, lo), hi))
+        return np.asarray(min(max(z, -Z_CLIP), Z_CLIP))
+    inner = np.clip(u, lo, hi)
     z = np.asarray(_inv_cdf(inner), dtype=np.float64)
     return np.clip(np.where(u <= lo, -Z_CLIP, np.where(u >= 1.0, Z_CLIP, z)), -Z_CLIP, Z_CLIP)
+
+
+_PPF_LO = float(normal_cdf(-Z_CLIP))
+_PPF_HI = min(float(normal_cdf(Z_CLIP)), math.nextafter(1.0, 0.0))
 
 
 def _expit(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
