@@ -155,6 +155,13 @@ def test_frame_fitter_reports_per_band_saturation():
     fits = f.fit()
     assert fits[(0, 0)].censored_high == 0.0 and fits[(0, 1)].censored_high > 0.3
     assert fits[(0, 2)].censored_low > 0.3 and fits[(0, 1)].shift < 0 < fits[(0, 2)].shift
+    # each band's own fractions travel (the label-wide max is only a summary)
+    rec = decode(encode_models(fits, bands=("R", "G", "B"), **HEADER)).labels[0]
+    assert rec.censored(0) == (0.0, 0.0)
+    for band in (1, 2):
+        got, want = rec.censored(band), (fits[(0, band)].censored_low, fits[(0, band)].censored_high)
+        assert got == pytest.approx(want, abs=0.5 / CENSOR_SCALE)
+    assert rec.censored(1)[0] == 0.0 and rec.censored(2)[1] == 0.0
 
 
 # -- properties ----------------------------------------------------------------------------------
