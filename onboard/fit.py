@@ -138,6 +138,8 @@ def _percentile_rows(counts: np.ndarray, cum: np.ndarray, probs: np.ndarray, lo:
     comes alone or in a batch (so batched and single fits agree bit for bit)."""
     rows, bins = cum.shape
     targets = probs * cum[:, -1:]
+    if rows == 0:
+        return targets
     if bins <= 1024:
         # bins below each target: searchsorted(side="left") for every row at once
         k = (cum[:, None, :] < targets[:, :, None]).sum(axis=2)

@@ -245,6 +245,16 @@ def test_eight_bit_counting_agrees_with_the_general_path(label_dtype):
         fast.add(frame, np.full((37, 53), 5, dtype=label_dtype))
 
 
+def test_sixteen_bit_constant_and_sparse_regions_fit():
+    # found by make stress: a frame of only constant regions leaves the percentile batch empty
+    h = np.zeros(65536, np.int64)
+    h[0] = 1
+    assert fit_histogram(h).model.family is Family.CONST
+    h[[17, 40000]] = 5
+    r = fit_histogram(h)
+    assert all(-0.5 <= p <= 65535.5 for p in r.percentiles) and r.model.family is not Family.CONST
+
+
 def test_frame_fitter_accumulates_frames_and_resets():
     frame, labels = two_region_frame()
     f = FrameFitter(3, 3)
