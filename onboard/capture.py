@@ -7,7 +7,6 @@ per capture, so memory does not grow with the mission.
 """
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 from dataclasses import dataclass, field
@@ -184,6 +183,14 @@ class Pipeline:
         return Capture(commanded, measured, feats.band_names, feats.levels, results, dropped,
                        labels, changed, same, stride, pca, dep)
 
+    def rollback(self, cap: Capture) -> None:
+        """`cap` could not be queued: the next capture carries what it would have sent."""
+        if cap.pca is not None:
+            self.pca_pending = True
+        if cap.mask_changed:
+            getattr(self.segmenter, "force_send", lambda: None)()
+        self._previous.pop(skip.pose_key(cap.commanded), None)  # next one sends full MODELS
+
     def capture(self, commanded: ViewAngles, move: bool = True) -> Capture:
         if move:
             self.move(commanded)
@@ -196,24 +203,36 @@ class Pipeline:
 
 
 class SeqCounter:
-    """Capture sequence numbers that never repeat across restarts (persisted atomically)."""
+    """Capture sequence numbers that never repeat across restarts.
 
-    def __init__(self, path: Path) -> None:
-        self.path = Path(path)
+    The next number is a state entry of the outbox database, committed in the same
+    transaction as the packets that use it (`entry`), then `taken`: a kill before the
+    commit reuses the number for the same pose, a kill after it never reuses it.
+    """
+
+    KEY = "next_seq"
+
+    def __init__(self, db: Any, legacy: Path | None = None) -> None:
+        text = db.state(self.KEY)
         try:
-            self._next = int(self.path.read_text().strip()) if self.path.exists() else 1
+            if text is None and legacy is not None and legacy.exists():
+                text = legacy.read_text()  # the file this counter used to live in
+            self._next = max(1, int(text.strip())) if text is not None else 1
         except (OSError, ValueError):
             self._next = int(time.time())  # unreadable: jump ahead rather than reuse
-        self.last: int | None = None
+        self.last: int | None = self._next - 1 if self._next > 1 else None
 
-    def next(self) -> int:
-        seq = self._next
-        self._next += 1
-        tmp = self.path.with_suffix(".tmp")
-        tmp.write_text(str(self._next))
-        os.replace(tmp, self.path)
+    def peek(self) -> int:
+        """The number the next committed capture gets."""
+        return self._next
+
+    def entry(self, seq: int) -> dict[str, str]:
+        return {self.KEY: str(seq + 1)}
+
+    def taken(self, seq: int) -> None:
+        """`seq` was committed with its packets."""
+        self._next = max(self._next, seq + 1)
         self.last = seq
-        return seq
 
 
 def _pose(v: ViewAngles) -> tuple[float, float]:

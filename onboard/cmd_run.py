@@ -19,6 +19,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--exit-when-idle", action="store_true",
                    help="exit 0 once no sweep is running and every packet is acknowledged")
     p.add_argument("--max-seconds", type=float, default=0.0, help="stop after this long (0: never)")
+    p.add_argument("--new-sweep", action="store_true",
+                   help="start a new sweep of the config's plan even if its last sweep finished "
+                        "(by default an interrupted sweep resumes and a finished one is not repeated)")
     return p
 
 
@@ -54,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from hal.interfaces import HalError
     from radio.auth import FileCounterStore
     from radio.link import Link
+    from onboard.outbox import OutboxError
     from onboard.runtime import LinkTransport, Runtime, Segmentation
     from onboard.watchdog import Notifier
 
@@ -75,8 +79,9 @@ def run(args: argparse.Namespace) -> int:
         if hasattr(hal.camera, "open"):
             h, w = cfg.hal.size
             hal.camera.open(w, h)
-        rt = Runtime(cfg, hal, LinkTransport(link, port), segment, notifier=Notifier())
-    except (ConfigError, ValueError, HalError) as exc:
+        rt = Runtime(cfg, hal, LinkTransport(link, port), segment, notifier=Notifier(),
+                     new_sweep=args.new_sweep)
+    except (ConfigError, ValueError, HalError, OutboxError) as exc:
         hal.close()
         raise CliError(str(exc)) from None
     stopping = []

@@ -8,6 +8,10 @@ an id, even after the newest rows were acknowledged).
 
 At its quota the outbox refuses new rows with `OutboxFull`; the runtime pauses
 acquisition and says so. Nothing is ever dropped to make room.
+
+A small key-value `state` table lives in the same database, so the runtime can commit
+"these packets are queued" and "this pose is done" (sweep progress, the next capture
+sequence) as one transaction with `commit`: a kill leaves both or neither.
 """
 from __future__ import annotations
 
@@ -15,20 +19,22 @@ import sqlite3
 import threading
 import time
 from pathlib import Path
+from typing import Iterable, Mapping
 
 # Rough per-row cost of SQLite's record and index overhead, so many tiny rows count too.
 ROW_OVERHEAD = 64
 DEFAULT_QUOTA = 64 * 1024 * 1024
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2 added the state table; a version-1 file gains it on open
 
-_SCHEMA = """
-CREATE TABLE IF NOT EXISTS outbox (
+_SCHEMA = (
+    """CREATE TABLE IF NOT EXISTS outbox (
     id INTEGER PRIMARY KEY AUTOINCREMENT,
     kind INTEGER NOT NULL,
     created REAL NOT NULL,
     body BLOB NOT NULL
+)""",
+    "CREATE TABLE IF NOT EXISTS state (key TEXT PRIMARY KEY, value TEXT NOT NULL)",
 )
-"""
 
 
 class OutboxError(RuntimeError):
@@ -58,11 +64,12 @@ class Outbox:
                 raise OutboxError(f"outbox {self.path}: WAL journal not available (got {mode!r})")
             self._conn.execute("PRAGMA synchronous=FULL")
             version = self._conn.execute("PRAGMA user_version").fetchone()[0]
-            if version not in (0, SCHEMA_VERSION):
+            if version not in (0, 1, SCHEMA_VERSION):
                 raise OutboxError(
                     f"outbox {self.path}: schema version {version}, expected {SCHEMA_VERSION}"
                 )
-            self._conn.execute(_SCHEMA)
+            for statement in _SCHEMA:
+                self._conn.execute(statement)
             self._conn.execute(f"PRAGMA user_version={SCHEMA_VERSION}")
             count, payload = self._conn.execute(
                 "SELECT COUNT(*), COALESCE(SUM(LENGTH(body)), 0) FROM outbox"
@@ -76,32 +83,59 @@ class Outbox:
 
     def put(self, kind: int, body: bytes, created: float | None = None) -> int:
         """Store one packet body durably and return its message id."""
-        if not isinstance(kind, int) or isinstance(kind, bool) or not 0 <= kind < 256:
-            raise ValueError(f"outbox kind must be an int in 0..255, got {kind!r}")
-        if not isinstance(body, (bytes, bytearray, memoryview)):
-            raise TypeError(f"outbox body must be bytes, got {type(body).__name__}")
-        body = bytes(body)
-        if not body:
-            raise ValueError("outbox body must not be empty")
+        return self.commit([(kind, body)], created=created)[0]
+
+    def commit(
+        self,
+        packets: Iterable[tuple[int, bytes]] = (),
+        state: Mapping[str, str] | None = None,
+        created: float | None = None,
+    ) -> list[int]:
+        """Store packets and state entries in one durable transaction; their message ids.
+
+        All or nothing: at the quota (`OutboxFull`) or on a write error nothing is stored.
+        """
+        rows = [_checked(kind, body) for kind, body in packets]
+        entries = [(str(k), str(v)) for k, v in (state or {}).items()]
         stamp = time.time() if created is None else float(created)
+        size = sum(len(b) for _, b in rows)
         with self._lock:
-            need = self.bytes_used + len(body) + ROW_OVERHEAD
-            if need > self.quota_bytes:
+            need = self.bytes_used + size + ROW_OVERHEAD * len(rows)
+            if rows and need > self.quota_bytes:
                 raise OutboxFull(
                     f"outbox full: {self.bytes_used} of {self.quota_bytes} bytes used by "
                     f"{self._count} unacknowledged packets; acquisition paused until the host acknowledges"
                 )
+            ids: list[int] = []
             try:
-                cur = self._conn.execute(
-                    "INSERT INTO outbox (kind, created, body) VALUES (?, ?, ?)", (kind, stamp, body)
-                )
+                self._conn.execute("BEGIN IMMEDIATE")
+                try:
+                    for kind, body in rows:
+                        cur = self._conn.execute(
+                            "INSERT INTO outbox (kind, created, body) VALUES (?, ?, ?)", (kind, stamp, body)
+                        )
+                        ids.append(int(cur.lastrowid))
+                    self._conn.executemany(
+                        "INSERT INTO state (key, value) VALUES (?, ?) "
+                        "ON CONFLICT(key) DO UPDATE SET value = excluded.value", entries
+                    )
+                    self._conn.execute("COMMIT")
+                except BaseException:
+                    self._conn.execute("ROLLBACK")
+                    raise
             except sqlite3.OperationalError as exc:
                 if "full" in str(exc).lower():
                     raise OutboxFull(f"outbox full: disk full at {self.path}: {exc}") from exc
                 raise OutboxError(f"outbox {self.path}: write failed: {exc}") from exc
-            self._count += 1
-            self._payload += len(body)
-            return int(cur.lastrowid)
+            self._count += len(rows)
+            self._payload += size
+            return ids
+
+    def state(self, key: str) -> str | None:
+        """A state entry stored by `commit`, or None when there is none."""
+        with self._lock:
+            row = self._conn.execute("SELECT value FROM state WHERE key = ?", (key,)).fetchone()
+        return None if row is None else str(row[0])
 
     def pending(self, limit: int = 64, after: int = 0) -> list[tuple[int, bytes]]:
         """Up to `limit` unacknowledged (id, body) rows with id > `after`, oldest first."""
@@ -162,3 +196,14 @@ class Outbox:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _checked(kind: int, body: bytes) -> tuple[int, bytes]:
+    if not isinstance(kind, int) or isinstance(kind, bool) or not 0 <= kind < 256:
+        raise ValueError(f"outbox kind must be an int in 0..255, got {kind!r}")
+    if not isinstance(body, (bytes, bytearray, memoryview)):
+        raise TypeError(f"outbox body must be bytes, got {type(body).__name__}")
+    body = bytes(body)
+    if not body:
+        raise ValueError("outbox body must not be empty")
+    return kind, body

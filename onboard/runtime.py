@@ -9,9 +9,14 @@ Failsafe: once the link has been up, a LinkDown (no heartbeat from the base for
 `link.failsafe_s`) stops the arm where it is and pauses the sweep; when the link
 returns the robot sends a STATUS reporting the failsafe and resumes what it was doing.
 Before the base was ever heard, an autonomous sweep runs and its packets wait in the outbox.
+
+Exactly once: a pose's packets, the sweep progress that marks it done and the next
+capture sequence are one outbox transaction (`Outbox.commit`), so a kill at any instant
+leaves the pose queued and done, or neither; the host drops re-sent rows by (robot, seq).
 """
 from __future__ import annotations
 
+import copy
 import enum
 import json
 import os
@@ -29,7 +34,7 @@ from radio import FrameError
 from radio import packet as pk
 from onboard.config import Config, ConfigError
 from onboard.outbox import Outbox, OutboxFull
-from onboard.sweep import SweepPlan, SweepProgress, SweepStore
+from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore
 from onboard.watchdog import Notifier
 
 
@@ -90,6 +95,7 @@ class Mode(enum.StrEnum):
 
 
 MAX_SWEEP_POSES = 4096
+PCA_KEY = "pca"  # the scene's basis, in the outbox state with the packet that carries it
 SETTABLE = {
     "sweep": ("start", "stop", "step", "azimuths", "settle_timeout_s", "retries", "pose_tolerance_deg"),
     "skip": ("min_pixels", "percentile_precision", "unchanged_tolerance", "skip_measured_pose"),
@@ -108,6 +114,7 @@ class Runtime:
         wall: Callable[[], float] = time.time,
         sleep: Callable[[float], None] = time.sleep,
         notifier: Notifier | None = None,
+        new_sweep: bool = False,
     ) -> None:
         self.cfg = cfg
         self.hal = hal
@@ -115,9 +122,10 @@ class Runtime:
         self.clock, self.wall, self.sleep = clock, wall, sleep
         cfg.state_dir.mkdir(parents=True, exist_ok=True)
         self.outbox = outbox or Outbox(cfg.state_dir / "outbox.sqlite", cfg.outbox_quota_bytes)
-        self.sweeps = SweepStore(cfg.state_dir)
+        self.sweeps = SweepStore(self.outbox, legacy_dir=cfg.state_dir)
+        self.new_sweep = new_sweep
         self.pipeline = Pipeline(cfg, hal, segmenter, pump=self.service, sleep=sleep)
-        self.pipeline.pca = _read_pca(cfg.state_dir / "pca.json")
+        self.pipeline.pca = _read_pca(self.outbox.state(PCA_KEY), cfg.state_dir / "pca.json")
         self.notifier = notifier or Notifier(address="")
         self.mode = Mode.IDLE
         self.progress: SweepProgress | None = None
@@ -127,7 +135,8 @@ class Runtime:
         self._resume_mode = Mode.IDLE
         self._in_flight: set[int] = set()
         self._last_sent = 0
-        self._seq = wire.SeqCounter(cfg.state_dir / "seq")
+        self._seq = wire.SeqCounter(self.outbox, legacy=cfg.state_dir / "seq")
+        self._full_until_ack = False  # a commit hit the quota: measure again after an ACK
         self._last_labels = None
         self._last_models: dict[tuple[int, int], int] = {}  # pose -> seq of its last MODELS
         self.pose: ViewAngles | None = None
@@ -152,7 +161,8 @@ class Runtime:
         for event in self.transport.poll(now):
             if isinstance(event, Acked):
                 self._in_flight.discard(event.msg_id)
-                self.outbox.ack(event.msg_id)
+                if self.outbox.ack(event.msg_id):
+                    self._full_until_ack = False
             elif isinstance(event, LinkState):
                 self._link_changed(event.up)
             elif isinstance(event, Received):
@@ -219,10 +229,14 @@ class Runtime:
             return pk.RobotState.PAUSED
         return pk.RobotState.SWEEPING if self.mode is Mode.SWEEPING else pk.RobotState.IDLE
 
+    def status_packet(self, text: str, extras: dict | None = None,
+                      state: pk.RobotState | None = None) -> tuple[int, bytes]:
+        return wire.status_body(self.cfg.robot_id, self.wall(), state or self.state(), self.pose,
+                                len(self.outbox), self.outbox.bytes_used, self._seq.last, text, extras)
+
     def send_status(self, text: str, extras: dict | None = None) -> None:
-        self.queue(*wire.status_body(self.cfg.robot_id, self.wall(), self.state(), self.pose,
-                                     len(self.outbox), self.outbox.bytes_used, self._seq.last,
-                                     text, extras))
+        self.queue(*self.status_packet(text, extras))
+        self.notifier.status(text)
 
     # -- sweeps ----------------------------------------------------------------------
 
@@ -230,11 +244,19 @@ class Runtime:
         s = self.cfg.sweep
         return SweepPlan(s.start, s.stop, s.step, s.azimuths)
 
-    def start_sweep(self, resume: bool, plan: SweepPlan | None = None) -> SweepProgress:
-        plan = self.plan() if plan is None else plan
-        self.progress = self.sweeps.resume_or_start(plan) if resume else self.sweeps.start(plan)
+    def start_sweep(self, plan: SweepPlan | None = None) -> SweepProgress:
+        """A new sweep (of the config's plan unless one is given), saved before it begins."""
+        self.progress = self.sweeps.start(self.plan() if plan is None else plan)
         self.mode = Mode.SWEEPING
         return self.progress
+
+    def autostart(self) -> Boot:
+        """At boot: resume an interrupted sweep; never restart a finished one on its own."""
+        self.progress, boot = self.sweeps.autostart(self.plan(), new=self.new_sweep)
+        self.new_sweep = False
+        if boot in (Boot.STARTED, Boot.RESUMED):
+            self.mode = Mode.SWEEPING
+        return boot
 
     def stop_sweep(self) -> None:
         if self.progress is not None:
@@ -244,14 +266,19 @@ class Runtime:
             self.mode = Mode.IDLE
 
     def sweep_step(self) -> str:
-        """Measure the next pose of the sweep; returns what happened."""
+        """Measure the next pose of the sweep; returns what happened.
+
+        The pose's packets and the progress past it are committed together; when the
+        outbox cannot take them, nothing changes and the pose is measured again later."""
         p = self.progress
         if p is None or p.done:
             return "done"
-        if self.outbox.full:
+        if self.outbox.full or self._full_until_ack:
             self.paused_reason = "outbox full: acquisition paused until the host acknowledges"
             return "paused"
         commanded = p.current()
+        nxt = copy.deepcopy(p)
+        cap = None
         try:
             self.pipeline.move(commanded)
             measured = self.pipeline.measure_view()
@@ -261,41 +288,72 @@ class Runtime:
             frame = self.pipeline.frame()
             cap = self.pipeline.process(frame, commanded, measured)
         except PoseSkipped as exc:
-            skipped = p.record_skipped(exc.reason)
-            self.sweeps.save(p)
-            self.send_status(f"skipped pose: {skipped.reason}", {
+            skipped = nxt.record_skipped(exc.reason)
+            packets = [self.status_packet(f"skipped pose: {skipped.reason}", {
                 "sweep": p.sweep_id, "skipped_index": skipped.index,
                 "skipped_elevation": skipped.commanded.elevation,
-                "skipped_azimuth": skipped.commanded.azimuth})
+                "skipped_azimuth": skipped.commanded.azimuth})]
+            state: dict[str, str] = {}
             result = "skipped"
         else:
-            self.send_capture(cap)
-            p.record_measured(measured)
-            self.sweeps.save(p)
+            seq, packets, state = self.capture_packets(cap)
+            nxt.record_measured(measured)
             result = "measured"
-        if p.done:
-            p.active = False
-            self.sweeps.save(p)
+        if nxt.done:
+            nxt.active = False
+            packets.append(self.status_packet("sweep done", {
+                "sweep": p.sweep_id, "measured": len(nxt.measured), "skipped": len(nxt.skipped)},
+                pk.RobotState.IDLE))
+        try:
+            self.outbox.commit(packets, {**state, **self.sweeps.entry(nxt)})
+        except OutboxFull as exc:
+            if cap is not None:
+                self.pipeline.rollback(cap)
+            self.paused_reason, self._full_until_ack = str(exc), True
+            return "paused"
+        self.paused_reason = ""
+        self.progress = nxt
+        if cap is not None:
+            self.captured(cap, seq)
+        self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {nxt.next_index} of {len(nxt.poses)}")
+        if nxt.done:
             self.mode = Mode.IDLE
-            self.send_status("sweep done", {"sweep": p.sweep_id, "measured": len(p.measured),
-                                            "skipped": len(p.skipped)})
         return result
 
-    def send_capture(self, cap: Capture) -> int:
-        seq = self._seq.next()
+    def capture_packets(self, cap: Capture) -> tuple[int, list[tuple[int, bytes]], dict[str, str]]:
+        """The packets of one capture and the state entries to commit with them."""
+        seq = self._seq.peek()
+        state = self._seq.entry(seq)
         if cap.pca is not None:  # the scene's basis survives restarts with the packet carrying it
-            _write_json(self.cfg.state_dir / "pca.json", cap.pca.to_record())
+            state[PCA_KEY] = json.dumps(cap.pca.to_record())
+        packets = []
+        if cap.mask_changed:
+            packets.append(wire.mask_body(self.cfg.robot_id, seq, cap.labels))
+        ref = self._last_models.get(wire.skip.pose_key(cap.commanded))
+        if cap.unchanged and ref is not None:
+            packets.append(wire.unchanged_body(self.cfg.robot_id, seq, ref, self.wall(), cap))
+        else:
+            packets.append(wire.models_body(self.cfg.robot_id, seq, self.wall(), self.cfg.features.space, cap))
+        return seq, packets, state
+
+    def captured(self, cap: Capture, seq: int) -> None:
+        """`cap` was committed under `seq`."""
+        self._seq.taken(seq)
         self.pose = cap.measured
         self._last_labels = cap.labels
-        if cap.mask_changed:
-            self.queue(*wire.mask_body(self.cfg.robot_id, seq, cap.labels))
         key = wire.skip.pose_key(cap.commanded)
-        ref = self._last_models.get(key)
-        if cap.unchanged and ref is not None:
-            self.queue(*wire.unchanged_body(self.cfg.robot_id, seq, ref, self.wall(), cap))
-        else:
-            self.queue(*wire.models_body(self.cfg.robot_id, seq, self.wall(), self.cfg.features.space, cap))
+        if not (cap.unchanged and key in self._last_models):
             self._last_models[key] = seq
+
+    def send_capture(self, cap: Capture) -> int:
+        """Queue one capture outside a sweep (the CAPTURE command); its sequence number."""
+        seq, packets, state = self.capture_packets(cap)
+        try:
+            self.outbox.commit(packets, state)
+        except OutboxFull:
+            self.pipeline.rollback(cap)
+            raise
+        self.captured(cap, seq)
         return seq
 
     # -- commands --------------------------------------------------------------------
@@ -313,6 +371,8 @@ class Runtime:
             ok, result = self.handle(cmd.name.name, dict(cmd.args))
         except PoseSkipped as exc:
             ok, result, reason = False, exc.reason, pk.Reason.HARDWARE
+        except OutboxFull as exc:
+            ok, result, reason = False, str(exc), pk.Reason.OUTBOX_FULL
         except (ConfigError, KeyError, ValueError) as exc:
             ok, result, reason = False, f"{type(exc).__name__}: {exc}", pk.Reason.BAD_ARGUMENT
         except Exception as exc:  # a command that fails is answered, never fatal
@@ -355,7 +415,7 @@ class Runtime:
                 plan = SweepPlan(float(args["start"]), float(args["stop"]), float(args["step"]), azs)
             if len(plan.poses()) > MAX_SWEEP_POSES:
                 raise ValueError(f"sweep of {len(plan.poses())} poses exceeds {MAX_SWEEP_POSES}")
-            p = self.start_sweep(resume=False, plan=plan)
+            p = self.start_sweep(plan)
             return True, {"sweep": p.sweep_id, "poses": len(p.poses)}
         if name == "ABORT":
             self.stop_sweep()
@@ -404,9 +464,11 @@ class Runtime:
             self.pipeline._retry("torque on", self.hal.arm.enable)
         except PoseSkipped as exc:
             self.errors.append(exc.reason)
-        if self.cfg.sweep.autostart:
-            self.start_sweep(resume=True)
-        self.send_status("boot", {"mode": self.mode.value})
+        extras = {"mode": self.mode.value}
+        if self.cfg.sweep.autostart or self.new_sweep:
+            boot = self.autostart()
+            extras = {"mode": self.mode.value, "sweep": self.progress.sweep_id, "sweep_state": boot.value}
+        self.send_status("boot", extras)
         self.notifier.ready("btf-robot running")
 
     def step(self) -> None:
@@ -438,13 +500,15 @@ def _write_json(path: Path, record: dict) -> None:
     os.replace(tmp, path)
 
 
-def _read_pca(path: Path) -> Any:
+def _read_pca(text: str | None, legacy: Path) -> Any:
     """The scene's PCA basis saved before a restart (None if none or unreadable: refit)."""
     from onboard.features import PcaBasis
 
     try:
-        return PcaBasis.from_record(json.loads(path.read_text())) if path.exists() else None
-    except (OSError, ValueError, TypeError, AttributeError):
+        if text is None and legacy.exists():
+            text = legacy.read_text()  # where the basis lived before it moved into the outbox
+        return None if text is None else PcaBasis.from_record(json.loads(text))
+    except (OSError, ValueError, TypeError, AttributeError, KeyError):
         return None
 
 

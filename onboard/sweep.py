@@ -2,17 +2,24 @@
 
 A plan is the list of commanded poses (elevation start..stop by step, for each
 azimuth). Progress records, per sweep, which poses are done, the measured view each
-capture was filed under, and the poses skipped with their reason. The file is
-written to a temporary name, fsynced and renamed, so a kill at any instant leaves
-either the old or the new state, never a torn one.
+capture was filed under, and the poses skipped with their reason.
+
+Progress lives in the outbox database's state table, so the runtime commits a pose's
+packets and the progress that marks it done in one transaction: a kill at any instant
+leaves the pose either queued and done, or neither (then it is measured again).
+
+At boot an interrupted sweep resumes; a finished (or aborted) sweep of the plan the
+config names is not started again on its own. A new sweep comes from a SWEEP command,
+a changed plan in the config, or an explicit request (`btf-robot run --new-sweep`).
 """
 from __future__ import annotations
 
+import enum
 import json
 import math
-import os
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Iterable, Protocol
 
 from hal.interfaces import ViewAngles
 
@@ -41,6 +48,15 @@ class SweepPlan:
         n = int(math.floor(abs(self.stop - self.start) / self.step + 1e-9)) + 1
         elevations = [self.start + direction * i * self.step for i in range(n)]
         return [ViewAngles(e, float(a)) for a in self.azimuths for e in elevations]
+
+    def to_record(self) -> dict:
+        return {**asdict(self), "azimuths": list(self.azimuths), "elevations": list(self.elevations)}
+
+    @classmethod
+    def from_record(cls, plan: dict) -> "SweepPlan":
+        return cls(float(plan["start"]), float(plan["stop"]), float(plan["step"]),
+                   tuple(float(a) for a in plan["azimuths"]),
+                   tuple(float(e) for e in plan.get("elevations", ())))
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,8 +109,7 @@ class SweepProgress:
     def to_record(self) -> dict:
         return {
             "sweep_id": self.sweep_id,
-            "plan": {**asdict(self.plan), "azimuths": list(self.plan.azimuths),
-                     "elevations": list(self.plan.elevations)},
+            "plan": self.plan.to_record(),
             "next_index": self.next_index,
             "measured": [[i, v.elevation, v.azimuth] for i, v in self.measured],
             "skipped": [[s.index, s.commanded.elevation, s.commanded.azimuth, s.reason]
@@ -104,12 +119,9 @@ class SweepProgress:
 
     @classmethod
     def from_record(cls, rec: dict) -> "SweepProgress":
-        plan = rec["plan"]
         return cls(
             sweep_id=int(rec["sweep_id"]),
-            plan=SweepPlan(float(plan["start"]), float(plan["stop"]), float(plan["step"]),
-                           tuple(float(a) for a in plan["azimuths"]),
-                           tuple(float(e) for e in plan.get("elevations", ()))),
+            plan=SweepPlan.from_record(rec["plan"]),
             next_index=int(rec["next_index"]),
             measured=[(int(i), ViewAngles(float(e), float(a))) for i, e, a in rec["measured"]],
             skipped=[SkippedPose(int(i), ViewAngles(float(e), float(a)), str(r))
@@ -130,49 +142,81 @@ def angular_distance(a: ViewAngles, b: ViewAngles) -> float:
     return max(d_el, d_az)
 
 
-class SweepStore:
-    """The sweep progress file under the state directory."""
+class StateDb(Protocol):
+    """The outbox's side of the store: state entries committed together with packets."""
 
-    def __init__(self, state_dir: Path) -> None:
-        self.path = Path(state_dir) / "sweep.json"
+    def state(self, key: str) -> str | None: ...
+    def commit(self, packets: Iterable[tuple[int, bytes]] = (),
+               state: dict[str, str] | None = None) -> list[int]: ...
+
+
+class Boot(enum.StrEnum):
+    """What `SweepStore.autostart` decided."""
+
+    STARTED = "started"    # no sweep yet, a changed plan, or a new sweep asked for
+    RESUMED = "resumed"    # an interrupted sweep goes on
+    FINISHED = "finished"  # the plan's sweep is complete: nothing to do until asked
+    STOPPED = "stopped"    # the sweep was aborted: nothing to do until asked
+
+
+class SweepStore:
+    """Sweep progress in the outbox database (`sweep`), with the plan autostart last used."""
+
+    KEY = "sweep"
+    AUTOSTART_KEY = "autostart_plan"
+
+    def __init__(self, db: StateDb, legacy_dir: Path | None = None) -> None:
+        self.db = db
+        # Before progress moved into the outbox it was a file; read once, never written.
+        self.legacy = None if legacy_dir is None else Path(legacy_dir) / "sweep.json"
 
     def load(self) -> SweepProgress | None:
         """The saved progress, or None when there is none (or it is unreadable: start over)."""
-        try:
-            rec = json.loads(self.path.read_text(encoding="utf-8"))
-            return SweepProgress.from_record(rec)
-        except FileNotFoundError:
-            return None
-        except (OSError, ValueError, KeyError, TypeError):
-            return None
+        text = self.db.state(self.KEY)
+        if text is None and self.legacy is not None:
+            try:
+                text = self.legacy.read_text(encoding="utf-8")
+            except OSError:
+                return None
+        return _parse(text, SweepProgress.from_record)
 
-    def save(self, progress: SweepProgress) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_suffix(".tmp")
-        data = json.dumps(progress.to_record()).encode()
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        try:
-            os.write(fd, data)
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, self.path)
-        dir_fd = os.open(self.path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
+    def entry(self, progress: SweepProgress) -> dict[str, str]:
+        """The state entry to commit with the packets of the step that made `progress`."""
+        return {self.KEY: json.dumps(progress.to_record())}
 
-    def start(self, plan: SweepPlan) -> SweepProgress:
+    def save(self, progress: SweepProgress, packets: Iterable[tuple[int, bytes]] = ()) -> list[int]:
+        """Store progress, with the packets it accounts for, in one transaction."""
+        return self.db.commit(packets, self.entry(progress))
+
+    def start(self, plan: SweepPlan, autostart: bool = False) -> SweepProgress:
         """A new sweep (the id follows the saved one), saved before it begins."""
         old = self.load()
         progress = SweepProgress(sweep_id=(old.sweep_id + 1) if old else 1, plan=plan)
-        self.save(progress)
+        state = self.entry(progress)
+        if autostart:
+            state[self.AUTOSTART_KEY] = json.dumps(plan.to_record())
+        self.db.commit((), state)
         return progress
 
-    def resume_or_start(self, plan: SweepPlan) -> SweepProgress:
-        """Resume an unfinished sweep of the same plan; otherwise start a new one."""
+    def autostart(self, plan: SweepPlan, new: bool = False) -> tuple[SweepProgress, Boot]:
+        """At boot: resume an interrupted sweep, start one if needed, else leave it be.
+
+        The plan counts as changed when it differs from the one autostart last started
+        (or, with no record of that, from the saved sweep's plan)."""
         old = self.load()
-        if old is not None and old.active and not old.done and old.plan == plan:
-            return old
-        return self.start(plan)
+        seen = _parse(self.db.state(self.AUTOSTART_KEY), SweepPlan.from_record)
+        changed = seen != plan if seen is not None else old is not None and old.plan != plan
+        if new or old is None or changed:
+            return self.start(plan, autostart=True), Boot.STARTED
+        if old.active and not old.done:
+            return old, Boot.RESUMED
+        return old, Boot.FINISHED if old.done else Boot.STOPPED
+
+
+def _parse(text: str | None, build):
+    if text is None:
+        return None
+    try:
+        return build(json.loads(text))
+    except (ValueError, KeyError, TypeError, AttributeError):
+        return None

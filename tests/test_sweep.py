@@ -5,7 +5,8 @@ import pytest
 from hypothesis import given, strategies as st
 
 from hal.interfaces import ViewAngles
-from onboard.sweep import SweepPlan, SweepProgress, SweepStore, angular_distance
+from onboard.outbox import Outbox, OutboxFull
+from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore, angular_distance
 
 
 def test_plan_90_to_30_step_10_has_seven_poses_per_azimuth():
@@ -29,42 +30,103 @@ def test_plan_never_leaves_the_start_stop_interval(start, stop, step):
     assert all(lo - 1e-6 <= p.elevation <= hi + 1e-6 for p in poses)
 
 
+def store_at(path):
+    return SweepStore(Outbox(path / "outbox.sqlite"), legacy_dir=path)
+
+
 def test_interrupted_sweep_resumes_where_it_stopped(tmp_path):
     plan = SweepPlan(90, 30, 10)
-    store = SweepStore(tmp_path)
-    prog = store.resume_or_start(plan)
+    store = store_at(tmp_path)
+    prog, boot = store.autostart(plan)
+    assert boot is Boot.STARTED
     prog.record_measured(ViewAngles(89.6, 0.2))
     prog.record_skipped("servo timeout")
     store.save(prog)
+    store.db.close()
     # A new process: the same plan resumes at pose 2 with its history.
-    again = SweepStore(tmp_path).resume_or_start(plan)
+    again, boot = store_at(tmp_path).autostart(plan)
+    assert boot is Boot.RESUMED
     assert again.sweep_id == prog.sweep_id and again.next_index == 2
     assert again.current() == ViewAngles(70.0, 0.0)
     assert again.skipped[0].reason == "servo timeout"
     assert again.measured == [(0, ViewAngles(89.6, 0.2))]
 
 
-def test_finished_or_changed_plan_starts_a_new_sweep(tmp_path):
-    store = SweepStore(tmp_path)
+def test_progress_and_packets_are_one_commit(tmp_path):
+    store = store_at(tmp_path)
     prog = store.start(SweepPlan(90, 80, 10))
     prog.record_measured(ViewAngles(90, 0))
+    ids = store.save(prog, [(1, b"models of pose 0"), (2, b"its mask")])
+    assert store.db.pending(10) == [(ids[0], b"models of pose 0"), (ids[1], b"its mask")]
+    assert store.load().next_index == 1
+    full = SweepStore(Outbox(tmp_path / "small.sqlite", quota_bytes=200))
+    first = full.start(SweepPlan(90, 80, 10))
+    first.record_measured(ViewAngles(90, 0))
+    with pytest.raises(OutboxFull):
+        full.save(first, [(1, b"x" * 300)])
+    # Neither the packet nor the progress past the pose was stored.
+    assert len(full.db) == 0 and full.load().next_index == 0
+
+
+def test_finished_sweep_of_the_same_plan_is_not_started_again(tmp_path):
+    store = store_at(tmp_path)
+    prog = store.start(SweepPlan(90, 80, 10), autostart=True)
+    prog.record_measured(ViewAngles(90, 0))
     prog.record_measured(ViewAngles(80, 0))
+    prog.active = False
     store.save(prog)
     assert prog.done
-    fresh = store.resume_or_start(SweepPlan(90, 80, 10))
-    assert fresh.sweep_id == prog.sweep_id + 1 and fresh.next_index == 0
-    other = store.resume_or_start(SweepPlan(90, 30, 10))
-    assert other.sweep_id == fresh.sweep_id + 1
+    again, boot = store.autostart(SweepPlan(90, 80, 10))
+    assert boot is Boot.FINISHED and again.sweep_id == prog.sweep_id and again.done
+    # Asked for explicitly, or with a changed plan, a new sweep starts.
+    fresh, boot = store.autostart(SweepPlan(90, 80, 10), new=True)
+    assert boot is Boot.STARTED and fresh.sweep_id == prog.sweep_id + 1 and fresh.next_index == 0
+    other, boot = store.autostart(SweepPlan(90, 30, 10))
+    assert boot is Boot.STARTED and other.sweep_id == fresh.sweep_id + 1
+    assert store.autostart(SweepPlan(90, 30, 10))[1] is Boot.RESUMED
 
 
-def test_torn_or_garbage_progress_file_starts_over_instead_of_crashing(tmp_path):
-    store = SweepStore(tmp_path)
-    store.path.write_text('{"sweep_id": 3, "plan": ')
+def test_sweep_from_a_command_resumes_then_rests_without_reverting_to_the_config_plan(tmp_path):
+    config_plan, commanded = SweepPlan(90, 30, 10), SweepPlan(80, 60, 10)
+    store = store_at(tmp_path)
+    store.autostart(config_plan)
+    cmd = store.start(commanded)  # a SWEEP command replaces the autostarted sweep
+    cmd.record_measured(ViewAngles(80, 0))
+    store.save(cmd)
+    resumed, boot = store.autostart(config_plan)
+    assert boot is Boot.RESUMED and resumed.plan == commanded and resumed.next_index == 1
+    resumed.record_measured(ViewAngles(70, 0))
+    resumed.record_measured(ViewAngles(60, 0))
+    store.save(resumed)
+    assert store.autostart(config_plan)[1] is Boot.FINISHED
+
+
+def test_aborted_sweep_is_not_restarted_at_boot(tmp_path):
+    store = store_at(tmp_path)
+    prog, _ = store.autostart(SweepPlan(90, 30, 10))
+    prog.active = False
+    store.save(prog)
+    again, boot = store.autostart(SweepPlan(90, 30, 10))
+    assert boot is Boot.STOPPED and again.sweep_id == prog.sweep_id
+
+
+def test_garbage_progress_starts_over_instead_of_crashing(tmp_path):
+    store = store_at(tmp_path)
+    store.db.commit((), {SweepStore.KEY: '{"sweep_id": 3, "plan": ', SweepStore.AUTOSTART_KEY: "[1, 2"})
     assert store.load() is None
-    prog = store.resume_or_start(SweepPlan(90, 30, 10))
-    assert prog.next_index == 0
-    assert json.loads(store.path.read_text())["sweep_id"] == 1
-    assert not store.path.with_suffix(".tmp").exists()
+    prog, boot = store.autostart(SweepPlan(90, 30, 10))
+    assert boot is Boot.STARTED and prog.next_index == 0 and prog.sweep_id == 1
+    assert json.loads(store.db.state(SweepStore.KEY))["sweep_id"] == 1
+
+
+def test_progress_from_the_old_sweep_file_is_read_once(tmp_path):
+    old = SweepProgress(4, SweepPlan(90, 30, 10))
+    old.record_measured(ViewAngles(90, 0))
+    (tmp_path / "sweep.json").write_text(json.dumps(old.to_record()))
+    prog, boot = store_at(tmp_path).autostart(SweepPlan(90, 30, 10))
+    assert boot is Boot.RESUMED and prog.sweep_id == 4 and prog.next_index == 1
+    (tmp_path / "sweep.json").write_text("{torn")
+    assert SweepStore(Outbox(tmp_path / "other.sqlite"), legacy_dir=tmp_path).load() is None
 
 
 def test_already_measured_within_tolerance():
