@@ -48,6 +48,27 @@ def test_a_models_packet_is_stored_with_the_robots_models_and_only_once(store):
     assert rx.duplicates == 1
 
 
+def test_censored_fractions_are_stored_per_band_as_the_robot_measured_them(store):
+    rng = np.random.default_rng(4)
+    frame = np.empty((200, 200, 2), dtype=np.uint8)
+    frame[..., 0] = np.clip(np.rint(rng.normal(230, 30, (200, 200))), 0, 255)  # ~20% at 255
+    frame[..., 1] = np.clip(np.rint(rng.normal(120, 20, (200, 200))), 0, 255)  # nothing clipped
+    f = FrameFitter(1, 2)
+    f.add(frame, np.zeros((200, 200), np.uint8))
+    fits = f.fit()
+    body = pk.encode_models(fits, robot_id=3, seq=1, time=1.0, commanded=(90.0, 0.0),
+                            measured=(90.0, 0.0), feature_space="raw", bands=("A", "B"))
+    Receiver(store).handle(body)
+    (cap,) = store.captures()
+    stored = {m.band: m for m in store.models(cap.id)}
+    saturated = float(np.mean(frame[..., 0] == 255))
+    assert fits[(0, 0)].censored_high > 0.1
+    assert stored[0].censored_high == pytest.approx(fits[(0, 0)].censored_high, abs=2e-5)
+    assert stored[0].censored_high == pytest.approx(saturated, abs=0.02)
+    assert (stored[1].censored_low, stored[1].censored_high) == (0.0, 0.0)
+    assert stored[0].z == fits[(0, 0)].z
+
+
 def test_unchanged_marker_files_a_capture_with_the_reference_models(store):
     body, _, _ = models_body(1)
     rx = Receiver(store)

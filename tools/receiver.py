@@ -72,8 +72,8 @@ class _Fit:
     percentiles: tuple[float, float, float, float]
     beta1: float
     beta2: float
-    censored_low: int = 0
-    censored_high: int = 0
+    censored_low: float = 0.0  # fraction of the band's pixels at the sensor's lower limit
+    censored_high: float = 0.0
 
 
 def mask_key(seq: int) -> str:
@@ -171,9 +171,10 @@ class Receiver:
         for rec in p.labels:
             for band, codes in enumerate(rec.codes):
                 m = p.models[(rec.label, band)]
-                fits[(rec.label, band)] = _Fit(m, rec.count, Z_LADDER[rec.z_index], codec.decode(codes),
-                                               0.0, 0.0, round(rec.censored_low * rec.count),
-                                               round(rec.censored_high * rec.count))
+                tail = rec.tail(band)
+                z = Z_LADDER[rec.z_index if tail is None else tail.z_index]
+                fits[(rec.label, band)] = _Fit(m, rec.count, z, codec.decode(codes), 0.0, 0.0,
+                                               *rec.censored(band))
         notes = []
         dependence: dict[int, Dependence] = {}
         try:

@@ -67,7 +67,7 @@ CREATE TABLE models (
     p0 REAL, p1 REAL, p2 REAL, p3 REAL,
     z REAL, count INTEGER NOT NULL,
     beta1 REAL, beta2 REAL,
-    censored_low INTEGER NOT NULL DEFAULT 0, censored_high INTEGER NOT NULL DEFAULT 0,
+    censored_low REAL NOT NULL DEFAULT 0, censored_high REAL NOT NULL DEFAULT 0,
     PRIMARY KEY (capture, label, band)
 );
 CREATE INDEX models_by_region ON models (label, band);
@@ -134,8 +134,8 @@ class StoredModel:
     count: int
     beta1: float
     beta2: float
-    censored_low: int = 0
-    censored_high: int = 0
+    censored_low: float = 0.0  # fractions of the region's pixels piled at each sensor limit
+    censored_high: float = 0.0
 
 
 def _angles(value: Any) -> tuple[float | None, float | None]:
@@ -292,7 +292,7 @@ class Store:
                 int(label), int(band), _family_name(m.family),
                 float(m.gamma), float(m.delta), float(m.xi), float(m.lam),
                 *pct, float(r.z), int(r.count), float(r.beta1), float(r.beta2),
-                int(getattr(r, "censored_low", 0)), int(getattr(r, "censored_high", 0)),
+                float(getattr(r, "censored_low", 0.0)), float(getattr(r, "censored_high", 0.0)),
             ))
         stored = False
         with self._write():
