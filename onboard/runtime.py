@@ -121,12 +121,14 @@ class Runtime:
         self.transport = transport
         self.clock, self.wall, self.sleep = clock, wall, sleep
         cfg.state_dir.mkdir(parents=True, exist_ok=True)
-        self.outbox = outbox or Outbox(cfg.state_dir / "outbox.sqlite", cfg.outbox_quota_bytes)
+        # `is None`, not `or`: an empty outbox is falsy (it has a length).
+        self.outbox = outbox if outbox is not None else Outbox(cfg.state_dir / "outbox.sqlite",
+                                                               cfg.outbox_quota_bytes)
         self.sweeps = SweepStore(self.outbox, legacy_dir=cfg.state_dir)
         self.new_sweep = new_sweep
         self.pipeline = Pipeline(cfg, hal, segmenter, pump=self.service, sleep=sleep)
         self.pipeline.pca = _read_pca(self.outbox.state(PCA_KEY), cfg.state_dir / "pca.json")
-        self.notifier = notifier or Notifier(address="")
+        self.notifier = notifier if notifier is not None else Notifier(address="")
         self.mode = Mode.IDLE
         self.progress: SweepProgress | None = None
         self.link_up = False

@@ -12,7 +12,8 @@ from hal.factory import build_hal
 from hal.interfaces import ViewAngles
 from onboard import config
 from onboard.capture import Pipeline
-from onboard.runtime import LinkState, MemoryTransport, Mode, Received, Runtime, Segmentation
+from onboard.outbox import Outbox
+from onboard.runtime import Acked, LinkState, MemoryTransport, Mode, Received, Runtime, Segmentation
 from radio import packet as pk
 
 BASE = '[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\nfault_rate = {rate}\nfault_seed = 3\n' \
@@ -232,3 +233,118 @@ print(json.dumps({{"rss_kb": hwm, "bad": bad}}))
     info = json.loads(out.stdout.strip().splitlines()[-1])
     assert info["bad"] == []
     assert info["rss_kb"] < 150 * 1024
+
+
+# -- exactly once across restarts --------------------------------------------------------
+
+
+class Crash(BaseException):
+    """The process dies here (not an Exception: the loop's guard does not catch it)."""
+
+
+def host_view(*transports):
+    """What a host keeps: packets by (kind, seq), each stored once whatever was re-sent."""
+    kept = {}
+    for tr in transports:
+        for p in decoded(tr):
+            if isinstance(p, (pk.ModelsPacket, pk.UnchangedPacket, pk.MaskPacket)):
+                kept[(type(p).__name__, p.seq)] = p
+    return kept
+
+
+def poses_by_seq(kept):
+    return sorted((round(p.commanded[0]), p.seq) for (kind, _), p in kept.items() if kind == "ModelsPacket")
+
+
+PLAN3 = "[sweep]\nstart = 90\nstop = 70\nstep = 10\n"
+
+
+def counting_commits(rt, kill_at=None, after=False):
+    """Wrap the outbox's commit: count calls, and die at call `kill_at` (before or after it)."""
+    real, calls = rt.outbox.commit, []
+
+    def commit(*a, **kw):
+        calls.append(1)
+        if len(calls) == kill_at and not after:
+            raise Crash()
+        out = real(*a, **kw)
+        if len(calls) == kill_at:
+            raise Crash()
+        return out
+
+    rt.outbox.commit = commit
+    return calls
+
+
+@pytest.mark.parametrize("after", [False, True], ids=["kill-before-commit", "kill-after-commit"])
+def test_a_kill_at_any_commit_delivers_every_pose_exactly_once(tmp_path, after):
+    (tmp_path / "count").mkdir()
+    rt, _ = make(tmp_path / "count", "mixed", extra=PLAN3)
+    commits = counting_commits(rt)
+    sweep(rt)
+    assert len(commits) >= 4  # the sweep's start and its three poses at least
+    for k in range(1, len(commits) + 1):
+        state = tmp_path / f"kill{k}"
+        state.mkdir()
+        rt, tr = make(state, "mixed", extra=PLAN3)
+        counting_commits(rt, kill_at=k, after=after)
+        with pytest.raises(Crash):
+            sweep(rt)
+        rt.outbox.close()
+        rt2, tr2 = make(state, "mixed", extra=PLAN3)  # restarted on the same state
+        sweep(rt2)
+        kept = host_view(tr, tr2)
+        got = poses_by_seq(kept)
+        assert [e for e, _ in got] == [70, 80, 90], (k, got)  # every pose, once
+        assert len({s for _, s in got}) == 3
+        masks = {seq for kind, seq in kept if kind == "MaskPacket"}
+        assert masks and masks <= {s for _, s in got}  # no mask of a pose measured twice
+
+
+def test_a_full_outbox_pauses_the_pose_and_measures_it_once_after_the_ack(tmp_path):
+    path = tmp_path / "robot.toml"
+    path.write_text(BASE.format(scene="black", rate=0.0, extra=PLAN3))
+    cfg = config.load(path)
+    hal = build_hal(cfg.hal)
+    hal.camera.open(80, 60)
+    tr = MemoryTransport(auto_ack=False)
+    cfg.state_dir.mkdir()
+    box = Outbox(cfg.state_dir / "outbox.sqlite", quota_bytes=400)
+    rt = Runtime(cfg, hal, tr, Segmentation(cfg, hal), outbox=box)
+    rt.boot()
+    for _ in range(6):
+        rt.step()
+    assert "outbox full" in rt.paused_reason and rt.progress.next_index < 3
+    stuck = rt.progress.next_index
+    for _ in range(3):
+        rt.step()
+    assert rt.progress.next_index == stuck  # nothing measured while the outbox is full
+    while not rt.idle():
+        for msg_id, _ in list(tr.sent):
+            tr.deliver(Acked(msg_id))
+        rt.step()
+    got = poses_by_seq(host_view(tr))
+    assert [e for e, _ in got] == [70, 80, 90] and len({s for _, s in got}) == 3
+    assert not rt.progress.skipped and rt.paused_reason == ""
+    assert box.bytes_used <= 400
+
+
+def test_a_restart_after_a_finished_sweep_does_not_sweep_again(tmp_path):
+    rt, tr = make(tmp_path, "black", extra=PLAN3)
+    sweep(rt)
+    assert rt.progress.done and len(poses_by_seq(host_view(tr))) == 3
+    rt.outbox.close()
+    rt2, tr2 = make(tmp_path, "black", extra=PLAN3)
+    rt2.run(lambda r: r.idle())
+    assert rt2.mode is Mode.IDLE and not poses_by_seq(host_view(tr2))
+    boot = [p for p in decoded(tr2) if isinstance(p, pk.StatusPacket) and p.text == "boot"]
+    assert boot[0].extras["sweep_state"] == "finished"
+    rt2.outbox.close()
+    # Asked for explicitly (btf-robot run --new-sweep) a new sweep runs, with new sequences.
+    rt3, tr3 = make(tmp_path, "black", extra=PLAN3)
+    rt3.new_sweep = True
+    sweep(rt3)
+    again = poses_by_seq(host_view(tr3))
+    assert [e for e, _ in again] == [70, 80, 90]
+    assert min(s for _, s in again) > max(s for _, s in poses_by_seq(host_view(tr)))
+    assert rt3.progress.sweep_id == rt.progress.sweep_id + 1
