@@ -213,13 +213,14 @@ class DynamixelServoBus:
             data, result, error = self._ph.readRx(self._port, sid, size)
             if result != sdk.COMM_SUCCESS:
                 raise _comm_failure(self._ph, sid, result)
-            if error & ~ALERT:
+            if error & ALERT:
+                alerted = sid if alerted is None else alerted
+            elif error:
                 raise _packet_error(self._ph, sid, self.port_name, f"sync read {reg.name.lower()}", error)
-            if len(data) != size:
+            elif len(data) != size:
                 raise _Failed(f"servo {sid}: reply of {len(data)} bytes, expected {size}")
-            if error & ALERT and alerted is None:
-                alerted = sid
-            out[sid] = _unpack(data, size)
+            else:
+                out[sid] = _unpack(data, size)
         if alerted is not None:
             raise _Alert(alerted)
         return out
@@ -231,10 +232,11 @@ class DynamixelServoBus:
             *value, result, error = attempt()
             if result != sdk.COMM_SUCCESS:
                 raise _comm_failure(self._ph, sid, result)
-            if error & ~ALERT:
-                raise _packet_error(self._ph, sid, self.port_name, what, error)
+            # An alerted servo refuses some requests (torque on): recover first, then redo.
             if error & ALERT and alerts:
                 raise _Alert(sid)
+            if error & ~ALERT:
+                raise _packet_error(self._ph, sid, self.port_name, what, error)
             return value[0] if value else None
 
         with self._lock:

@@ -200,3 +200,14 @@ def test_empty_move_sends_nothing(bus, emu):
     bus.move({})
     assert bus.positions([1]) == {1: 0.0}
     assert not [c for c in emu.history if c.call == "SYNC_WRITE"]
+
+
+def test_alerted_servo_refusing_torque_is_recovered_not_reported_as_refused(bus, emu):
+    bus.set_torque([1, 2], True)
+    bus.move({2: 15.0})
+    settle(bus)
+    emu.raise_alert(2, 0x04)  # overheating: the servo refuses torque until rebooted
+    bus.set_torque([2], True)
+    assert bus.recoveries == [ServoRecovery(2, 0x04)]
+    assert emu.servos[2].table[Reg.TORQUE_ENABLE] == 1 and bus.hardware_error(2) == 0
+    assert bus.positions([2])[2] == pytest.approx(15.0, abs=TICK_DEG)
