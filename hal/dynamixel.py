@@ -8,6 +8,8 @@ hardware error status, reboot the servo, restore torque and goal, and redo the r
 """
 from __future__ import annotations
 
+import math
+import termios
 import threading
 import time
 from enum import IntEnum
@@ -33,6 +35,8 @@ class Reg(IntEnum):
 
 
 def deg_to_ticks(deg: float) -> int:
+    if not math.isfinite(deg):
+        raise LimitError(f"goal {deg}° is not a finite angle")
     ticks = round(CENTER_TICKS + deg * TICKS_PER_TURN / 360.0)
     if not 0 <= ticks < TICKS_PER_TURN:
         raise LimitError(f"goal {deg:.2f}° is outside the servo's range [-180°, 180°)")
@@ -108,11 +112,11 @@ class DynamixelServoBus:
         self._port = _Port(port, latency_ms)
         self._ph = sdk.PacketHandler(2.0)
         try:
-            opened = self._port.openPort() and self._port.setBaudRate(baudrate)
+            opened = self._port.setBaudRate(baudrate)  # opens the port at that rate
         except Exception as exc:  # pyserial raises SerialException/OSError/ValueError
             raise HalError(f"cannot open servo port {port}: {exc}") from exc
         if not opened:
-            raise HalError(f"cannot open servo port {port} at {baudrate} baud")
+            raise HalError(f"cannot open servo port {port} at {baudrate} baud (unsupported rate)")
 
     # -- ServoBus -------------------------------------------------------------------
     def ping(self, servo_id: int) -> bool:
@@ -249,14 +253,18 @@ class DynamixelServoBus:
 
     def _retry(self, sid: int, what: str, attempt):
         failure = _Failed("not attempted")
-        for _ in range(self.retries):
-            try:
-                return attempt()
-            except _Failed as exc:
-                failure = exc
-                # A late reply must not be taken for the next request's answer.
-                time.sleep(self._port.latency_ms / 1000.0)
-                self._port.clearPort()
+        try:
+            for _ in range(self.retries):
+                try:
+                    return attempt()
+                except _Failed as exc:
+                    failure = exc
+                    # A late reply must not be taken for the next request's answer.
+                    time.sleep(self._port.latency_ms / 1000.0)
+                    self._port.clearPort()
+        except (OSError, termios.error) as exc:  # the port itself failed: unplugged or closed
+            self._port.is_using = False  # the SDK leaves its busy flag set when a write raises
+            raise HalError(f"servo {sid} on {self.port_name}: {what}: port failed ({exc})") from exc
         error = DeviceTimeout if failure.timeout else HalError
         raise error(f"servo {sid} on {self.port_name}: {what} failed {self.retries} times (last: {failure})")
 

@@ -211,3 +211,24 @@ def test_alerted_servo_refusing_torque_is_recovered_not_reported_as_refused(bus,
     assert bus.recoveries == [ServoRecovery(2, 0x04)]
     assert emu.servos[2].table[Reg.TORQUE_ENABLE] == 1 and bus.hardware_error(2) == 0
     assert bus.positions([2])[2] == pytest.approx(15.0, abs=TICK_DEG)
+
+
+def test_unplugged_or_closed_port_is_a_clear_error_never_a_traceback(emu):
+    bus = DynamixelServoBus(emu.port, latency_ms=4.0)
+    bus.set_torque([1], True)
+    emu.close()  # the adapter is gone: the pty reports I/O errors
+    for call in (lambda: bus.positions([1]), lambda: bus.hardware_error(1), lambda: bus.move({1: 3.0})):
+        with pytest.raises(HalError, match=rf"on {emu.port}: .*port failed"):
+            call()
+    assert not bus.ping(1)
+    bus.close()
+    with pytest.raises(HalError, match="port failed.*not open"):
+        bus.positions([1])
+
+
+@pytest.mark.parametrize("goal", [float("nan"), float("inf"), -float("inf")])
+def test_non_finite_goal_is_a_limit_error_and_nothing_is_sent(bus, emu, goal):
+    with pytest.raises(LimitError, match="not a finite angle"):
+        bus.move({1: 10.0, 2: goal})
+    assert not [c for c in emu.history if c.call == "SYNC_WRITE"]
+
