@@ -232,3 +232,18 @@ def test_non_finite_goal_is_a_limit_error_and_nothing_is_sent(bus, emu, goal):
         bus.move({1: 10.0, 2: goal})
     assert not [c for c in emu.history if c.call == "SYNC_WRITE"]
 
+
+
+@pytest.mark.parametrize("garbage", [b"\xff\xff\xfd\x00\x01\x00\x00", b"\xff\xff\xfd\x00\x01\x02\x00\x01",
+                                     b"\xff\xff\xfd\x00\x01\xff\xff"])
+def test_emulator_survives_a_false_header_and_answers_the_next_packet(emu, garbage):
+    fd = os.open(emu.port, os.O_RDWR | os.O_NOCTTY)
+    try:
+        os.write(fd, garbage + instruction_packet(1, 0x01))
+        for _ in range(400):
+            if any(c.call == "PING" for c in emu.history):
+                break
+            time.sleep(0.005)
+    finally:
+        os.close(fd)
+    assert [c.call for c in emu.history] == ["PING"]

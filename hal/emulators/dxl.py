@@ -66,6 +66,7 @@ class Reg(IntEnum):
 TABLE_SIZE = 147
 READ_ONLY = {*range(0, 7), Reg.HARDWARE_ERROR_STATUS, Reg.MOVING, *range(124, TABLE_SIZE)}
 XL430_MODEL = 1060
+MIN_PACKET = 10  # header 4, id, length 2, instruction, CRC 2
 MAX_PACKET = 1024
 
 
@@ -267,7 +268,8 @@ class DxlEmulator:
             if len(buf) < 7:
                 return out
             total = 7 + int.from_bytes(buf[5:7], "little")
-            if total > MAX_PACKET:  # a false header in garbage: skip it
+            # A false header in garbage: skip it (shorter than instruction + CRC, or too long).
+            if not MIN_PACKET <= total <= MAX_PACKET:
                 del buf[:1]
                 continue
             if len(buf) < total:
