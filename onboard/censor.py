@@ -13,8 +13,14 @@ limit, or both limits leaving little between), the model is the normal through t
 the data still pin down exactly: P(X < a) = pa and P(X < e) = pe, where a and e are the censor
 limits (or, at an uncensored end, the middle of the uncensored mass). Its clipped samples put
 exactly the censored fractions at the limits and spread the rest between, which is all such a
-histogram says. Everything here is deterministic from the transmitted fractions, so the receiver
-repeats it.
+histogram says.
+
+Choice: a shifted fit extrapolates the pile-up from the uncensored part, and on U- and J-shaped
+histograms that can go badly wrong where the plain read would not. So for every censored model
+the fitter compares the shifted fit, the fallback and the plain symmetric read at the label's z
+by `histogram_l1` and keeps the nearest (the first of equals): censoring never fits a histogram
+worse than not censoring. Everything here is deterministic from the transmitted shift, z,
+fallback flag and fractions, so the receiver repeats it.
 """
 from __future__ import annotations
 
@@ -39,8 +45,6 @@ MIN_CENSORED_PIXELS = 8
 # Smaller censored fractions are not reported unless they moved the percentiles: they cannot
 # matter to the model and would cost packet bytes.
 MIN_REPORTED = 0.005
-# A shifted fit must put the censored fractions beyond the limits to within this share (+1%).
-TOLERANCE = 0.25
 
 
 @dataclass(frozen=True, slots=True)
@@ -109,15 +113,21 @@ def place(z_base: float, low: float, high: float, count: int, ladder: tuple[floa
     return Placement(ladder[-1], 0, fallback=True)
 
 
-def reproduces(model: Johnson, low: float, high: float, lo_limit: float, hi_limit: float) -> bool:
-    """Whether the model's mass beyond the censor limits matches the censored fractions. A
-    shifted fit extrapolates into the censored region; when the uncensored part says too
-    little (a few occupied levels), that extrapolation can miss the pile-up, and the fitter
-    takes the fallback instead."""
-    for fraction, mass in ((low, float(model.cdf(lo_limit))), (high, 1.0 - float(model.cdf(hi_limit)))):
-        if fraction > 0.0 and abs(mass - fraction) > TOLERANCE * fraction + 0.01:
-            return False
-    return True
+def histogram_l1(model: Johnson, counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0) -> float:
+    """Sum over bins of |P_model(bin) - count / total| (bin k centred on lo + k * bin_width, the
+    end bins holding the tails, as a clipping sensor does). Only the occupied bins and the empty
+    runs between them are evaluated: the same sum as over every bin, cheaper for deep sensors."""
+    c = np.asarray(counts)
+    bins = c.size
+    occ = np.flatnonzero(c)
+    # edge k separates bins k - 1 and k; the outer edges 0 and bins are the sensor's limits
+    k = np.union1d(occ, occ + 1)
+    k = k[(k > 0) & (k < bins)]
+    p = model.interval_probabilities(lo + (k - 0.5) * bin_width)
+    # each interval starts at bin 0 or an edge; an occupied bin is an interval of its own
+    starts = np.concatenate(([0], k))
+    h = c[starts].astype(np.float64) / float(c.sum())
+    return float(np.abs(p - h).sum())
 
 
 def _ppf(u: float) -> float:

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.censor import (MIN_REPORTED, Placement, censored_counts, fallback_probs, place, quantize,
-                            reproduces)
+from onboard.censor import (MIN_REPORTED, SHIFT_SCALE, Placement, censored_counts, fallback_probs,
+                            histogram_l1, place, quantize)
 from onboard.johnson import Johnson
 from onboard.percentile import model_from_percentiles, sl_band, support_of, widen
 
@@ -238,11 +238,8 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
             continue
         where, low, high = plans[i]
         fit = _fit_one(counts[i], cum[i], where, low, high, count, f0, f1, lo, bin_width, codec, raw.get(i))
-        if (low or high) and not where.fallback and not reproduces(
-                fit.model, low, high, lo + 0.5 * bin_width, lo + (bins - 1.5) * bin_width):
-            # the percentiles saw too little to extrapolate the pile-up: the fallback does not
-            fit = _fit_one(counts[i], cum[i], Placement(where.z, 0, True), low, high, count, f0, f1,
-                           lo, bin_width, codec)
+        if low or high:
+            fit = _best_censored(counts[i], cum[i], fit, z, count, f0, f1, lo, bin_width, codec)
         out.append(FitResult(fit.model, count, fit.z, fit.percentiles, float(beta1[i]), float(beta2[i]),
                              fit.shift, low, high, fit.fallback, fit.support))
     return out
@@ -264,6 +261,24 @@ def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, 
         support = (ends[0] if s_lo > ends[0] else None, ends[1] if s_hi < ends[1] else None)
         model = widen(model, support, pct)  # what model_from_percentiles(..., support) gives
     return FitResult(model, count, where.z, pct, 0.0, 0.0, where.shift, low, high, where.fallback, support)
+
+
+def _best_censored(counts: np.ndarray, cum: np.ndarray, placed: FitResult, z: float, count: int,
+                   f0: int, f1: int, lo: float, bin_width: float, codec: PercentileCodec) -> FitResult:
+    """Of the censored placement, the normal fallback and the plain symmetric read at the label's
+    z (censored fractions still recorded), the model whose bin probabilities are nearest the
+    histogram (L1; the first of equals). A shifted fit extrapolates the pile-up from what the
+    uncensored part shows, and a U- or J-shaped histogram can mislead it where the plain read
+    would not; the comparison keeps censoring from ever fitting the histogram worse. Only
+    censored models pay for it. The choice travels as shift, z and fallback flag."""
+    low, high = placed.censored_low, placed.censored_high
+    cands = [placed]
+    done = Placement(placed.z, round(placed.shift * SHIFT_SCALE), placed.fallback)
+    for where in (Placement(placed.z, 0, True), Placement(z)):
+        if where != done:
+            cands.append(_fit_one(counts, cum, where, low, high, count, f0, f1, lo, bin_width, codec))
+    errors = [histogram_l1(c.model, counts, lo, bin_width) for c in cands]
+    return cands[errors.index(min(errors))]
 
 
 def support_point(level: int, side: int, codec: PercentileCodec, lo: float = 0.0,

@@ -270,8 +270,24 @@ class Johnson:
             p = np.zeros(levels)
             p[min(max(round(self.xi), 0), levels - 1)] = 1.0
             return p
-        t = np.concatenate(([-np.inf], self.thresholds(levels), [np.inf]))
-        # Levels above the median as differences of the upper tail: 1 - Phi(z) rounds to 0
+        return self._between(self.thresholds(levels))
+
+    def interval_probabilities(self, edges: np.ndarray) -> np.ndarray:
+        """Probabilities of (-inf, e0], (e0, e1], ..., (e_last, inf) for increasing finite
+        edges: len(edges) + 1 values summing to 1 (level_probabilities on any bin edges)."""
+        e = np.asarray(edges, dtype=np.float64)
+        if e.ndim != 1 or not np.all(np.isfinite(e)) or np.any(np.diff(e) < 0):
+            raise ValueError("edges must be a 1-D array of finite, non-decreasing values")
+        if self.family is Family.CONST:
+            p = np.zeros(e.size + 1)
+            p[np.searchsorted(e, self.xi, side="left")] = 1.0
+            return p
+        return self._between(self.z_of_x(e))
+
+    @staticmethod
+    def _between(z: np.ndarray) -> np.ndarray:
+        t = np.concatenate(([-np.inf], z, [np.inf]))
+        # Intervals above the median as differences of the upper tail: 1 - Phi(z) rounds to 0
         # beyond z ~ 8.3, Phi(-z) stays positive out to the clip.
         below, above = np.diff(normal_cdf(t)), -np.diff(normal_cdf(-t))
         return np.where(t[:-1] >= 0.0, above, below)
