@@ -200,8 +200,17 @@ def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
 
 
 def _real_camera(device: str) -> Camera:
+    """`camera = "picamera2"`, a V4L2 index or path; unset: picamera2 when importable, else device 0."""
     from hal.camera import OpenCVCamera, PiCamera2Camera
 
-    if device == "picamera2":
+    if device == "picamera2" or (not device and _picamera2_importable()):
         return PiCamera2Camera()
     return OpenCVCamera(int(device) if device.isdigit() else (device or 0))
+
+
+def _picamera2_importable() -> bool:
+    try:
+        import picamera2  # noqa: F401 - only the Raspberry Pi camera stack has it
+    except ImportError:
+        return False
+    return True

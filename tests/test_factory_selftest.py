@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import sys
 import threading
 
 import numpy as np
@@ -121,3 +122,25 @@ def test_selftest_bad_config_file_is_a_usage_error(tmp_path, capsys, monkeypatch
     cfg.write_text("[hal]\nbody = 3\n")
     code, lines, err = run_cli(["selftest", "--config", str(cfg)], capsys, monkeypatch)
     assert code == 2 and lines == [] and "robot.toml" in err
+
+
+class StandInPicamera2Module:
+    """Stands for the picamera2 package: the adapter only needs its Picamera2 class."""
+
+    class Picamera2:
+        pass
+
+
+def test_real_camera_is_picamera2_when_importable_and_opencv_otherwise(monkeypatch):
+    from hal.camera import OpenCVCamera, PiCamera2Camera
+    from hal.factory import _real_camera
+
+    monkeypatch.setitem(sys.modules, "picamera2", StandInPicamera2Module)
+    assert isinstance(_real_camera(""), PiCamera2Camera)
+    assert isinstance(_real_camera("picamera2"), PiCamera2Camera)
+    named = _real_camera("/dev/video2")
+    assert isinstance(named, OpenCVCamera) and named.device == "/dev/video2"
+    monkeypatch.setitem(sys.modules, "picamera2", None)  # not installed: import fails
+    default = _real_camera("")
+    assert isinstance(default, OpenCVCamera) and default.device == 0
+    assert _real_camera("1").device == 1
