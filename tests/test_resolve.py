@@ -38,3 +38,16 @@ def test_bad_numbers_are_refused(kw):
     args = dict(grain_mm=0.02, wavelength_nm=700) | kw
     with pytest.raises(ValueError):
         bounds(**args)
+
+
+@pytest.mark.parametrize("grain, wavelength, pixel", [(1e308, 1e-308, None), (0.02, 700, 1e300),
+                                                       (1e-300, 1e300, 1e300), (1e300, 1e-300, 1e-300)])
+def test_sizes_beyond_floating_point_are_refused_not_inf(grain, wavelength, pixel):
+    with pytest.raises(ValueError, match="too far apart"):
+        bounds(grain, wavelength, pixel)
+
+
+def test_large_but_representable_grains_give_finite_bounds():
+    b = bounds(1e301, 700.0, 1e302)  # D h overflows float64; sqrt(h) sqrt(D - h) does not
+    assert math.isfinite(b.max_flat_facet_nm) and b.max_flat_facet_nm > 0
+    assert b.grains_per_pixel == pytest.approx(100.0)

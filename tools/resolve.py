@@ -72,12 +72,13 @@ def bounds(grain_mm: float, wavelength_nm: float, pixel_mm: float | None = None,
     h_f = wavelength_nm / (32.0 * cos_t)
     d_min = wavelength_nm / (2.0 * numerical_aperture)
     # Widest chord of a sphere of diameter D whose sagitta stays below h_R.
-    w = 2.0 * math.sqrt(max(d_nm * h_r - h_r * h_r, 0.0)) if h_r < d_nm / 2 else d_nm
+    # sqrt(h) sqrt(D - h) rather than sqrt(D h - h^2): no overflow for extreme sizes.
+    w = 2.0 * math.sqrt(h_r) * math.sqrt(d_nm - h_r) if h_r < d_nm / 2 else d_nm
     nyquist = grain_mm / 2.0
     stat = grain_mm * math.sqrt(MIN_GRAINS_PER_PIXEL)
     verdict = grains = None
     if pixel_mm is not None:
-        grains = (pixel_mm / grain_mm) ** 2
+        grains = (pixel_mm / grain_mm) * (pixel_mm / grain_mm)
         if d_nm < d_min or w < d_min:
             # Grains or their facets lie below the diffraction limit: no sensor sees facets.
             verdict = Verdict.STATISTICAL if pixel_mm >= stat else Verdict.UNRESOLVABLE
@@ -87,5 +88,10 @@ def bounds(grain_mm: float, wavelength_nm: float, pixel_mm: float | None = None,
             verdict = Verdict.STATISTICAL
         else:
             verdict = Verdict.MIXED
-    return Bounds(grain_mm, wavelength_nm, incidence_deg, numerical_aperture, d_min, h_r, h_f,
-                  w, d_nm / w, nyquist, stat, pixel_mm, grains, verdict)
+    b = Bounds(grain_mm, wavelength_nm, incidence_deg, numerical_aperture, d_min, h_r, h_f,
+               w, d_nm / w, nyquist, stat, pixel_mm, grains, verdict)
+    if not all(math.isfinite(v) and (v > 0 or k == "incidence_deg") for k, v in asdict(b).items()
+               if isinstance(v, float)):
+        raise ValueError("grain size, wavelength and pixel footprint are too far apart for "
+                         "floating point; give them in sensible units")
+    return b
