@@ -121,13 +121,26 @@ def test_resolve_json(host):
     (("pdfs", "{d}/a.png", "--mask", "{d}/nope.png"), "no such file"),
     (("synth", "--model", "{d}/junk.png", "--mask", "{d}/m.png", "--angle", "1", "--out", "{d}/o.png"), "JSON"),
     (("synth", "--db", "{d}/none.db", "--mask", "{d}/m.png", "--angle", "1", "--out", "{d}/o.png"), "no such"),
+    (("synth", "--db", "{d}", "--mask", "{d}/m.png", "--angle", "1", "--out", "{d}/o.png"), "not a regular file"),
+    (("fit", "{d}/a.png", "--angle", "5", "--db", "{d}"), "not a regular file"),
+    (("synth", "--model", "{d}/m.json", "--mask", "{d}/m.png", "--angle", "nan", "--out", "{d}/o.png"), "finite"),
+    (("synth", "--model", "{d}/m.json", "--mask", "{d}/m.png", "--angle=inf", "--out", "{d}/o.png"), "finite"),
+    (("synth", "--model", "{d}/angle.json", "--mask", "{d}/m.png", "--angle", "1", "--out", "{d}/o.png"), "angle"),
+    (("synth", "--model", "{d}/levels.json", "--mask", "{d}/m.png", "--angle", "1", "--out", "{d}/o.png"), "levels"),
     (("resolve", "--grain-mm", "-1", "--wavelength-nm", "700"), "positive"),
+    (("resolve", "--grain-mm", "1e308", "--wavelength-nm", "1e-308"), "too far apart"),
     (("mask", "{d}/a.png", "--method", "slic", "--out", "{d}/o.jpg"), ".png"),
 ])
 def test_bad_input_is_one_line_and_exit_2(host, files, argv, words):
     (files / "junk.png").write_bytes(b"definitely not a png")
     write_mask(files / "small.png", np.zeros((5, 5), np.uint8))
     write_image(files / "small.png", np.zeros((5, 5, 3), np.uint8))
+    doc = {"angle": None, "space": "rgb", "levels": 256, "models": [
+        {"label": 0, "band": b, "family": "SN", "gamma": 0.0, "delta": 1.0, "xi": 9.0, "lam": 2.0}
+        for b in range(3)]}
+    (files / "m.json").write_text(json.dumps(doc))
+    (files / "angle.json").write_text(json.dumps(doc | {"angle": [1]}))
+    (files / "levels.json").write_text(json.dumps(doc | {"levels": "many"}))
     before = (files / "junk.png").read_bytes()
     code, out, err = host(*[a.format(d=files) for a in argv])
     assert code == 2

@@ -143,3 +143,10 @@ def test_pca_basis_is_stored_with_its_capture_and_inherited_by_later_ones(tmp_pa
         by_seq = {c.sequence: s.pca_basis(c.id) for c in s.captures()}
         assert by_seq == {1: None, 2: a, 3: a, 5: b, 6: b}
         assert s.pca_by_angle(space="pca") == {40.0: a, 50.0: a, 60.0: b, 70.0: b}
+
+
+def test_a_directory_is_refused_as_a_database(tmp_path):
+    (tmp_path / "d.db").mkdir()
+    with pytest.raises(CorruptDatabase, match="not a regular file"):
+        Store.open(tmp_path / "d.db")
+    assert list((tmp_path / "d.db").iterdir()) == []

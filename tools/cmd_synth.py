@@ -58,9 +58,12 @@ def _from_json(path: str) -> tuple[dict, str, int, dict | None]:
             raise CliError(f"models {path}: with several documents each needs its angle")
         by_angle[0.0 if angle is None else angle] = models
     first = parsed[0][2]
+    levels = first.get("levels") or 256
+    if type(levels) is not int or not 2 <= levels <= 65536:
+        raise CliError(f"models {path}: levels {levels!r} is not an integer in 2..65536")
     if parsed[0][0] is None:  # one document without an angle serves every angle
         by_angle = {float("-inf"): parsed[0][1]}
-    return by_angle, str(first.get("space") or "rgb"), int(first.get("levels") or 256), first.get("pca")
+    return by_angle, str(first.get("space") or "rgb"), levels, first.get("pca")
 
 
 def _from_db(path: str, space: str | None) -> tuple[dict, str]:
@@ -154,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             bands = synthesize_at(by_angle, mask, angle, np.random.default_rng(args.seed), levels,
                                   dependence=dependence, independent=args.independent)
-        except MissingModels as exc:
+        except (MissingModels, ValueError) as exc:
             raise CliError(str(exc)) from None
     for w in caught:
         print(f"btf-host: warning: {w.message}", file=sys.stderr)

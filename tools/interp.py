@@ -231,9 +231,11 @@ def requested_direction(angle: str, azimuth: float | None = None, light_elevatio
     extra = (azimuth, light_elevation, light_azimuth)
     if "," not in angle and all(v is None for v in extra):
         try:
-            float(angle)
+            value = float(angle)
         except ValueError:
             raise ValueError(f"angle {angle!r}: expected EL[,AZ[,LIGHT_EL,LIGHT_AZ]] in degrees") from None
+        if not math.isfinite(value):
+            raise ValueError(f"angle {angle!r} is not a finite number of degrees")
         return None
     d = parse_direction(angle)
     if "," in angle and any(v is not None for v in extra):

@@ -165,11 +165,17 @@ class Store:
     @classmethod
     def open(cls, path: str | Path, create: bool = True) -> "Store":
         p = Path(path)
+        if p.exists() and not p.is_file():
+            raise CorruptDatabase(f"database {p}: not a regular file")
         fresh = not p.exists() or p.stat().st_size == 0
         if not fresh:
-            with open(p, "rb") as fh:
-                if fh.read(16) != _SQLITE_MAGIC:
-                    raise CorruptDatabase(f"database {p}: not an SQLite file; left untouched")
+            try:
+                with open(p, "rb") as fh:
+                    magic = fh.read(16)
+            except OSError as exc:
+                raise CorruptDatabase(f"database {p}: cannot read ({exc.strerror})") from None
+            if magic != _SQLITE_MAGIC:
+                raise CorruptDatabase(f"database {p}: not an SQLite file; left untouched")
         elif not create:
             raise CorruptDatabase(f"database {p}: no such database")
         if not p.parent.exists():

@@ -119,6 +119,8 @@ def neighbours(angles: list[float], angle: float) -> tuple[float, float, float]:
     """(lower angle, upper angle, weight of the upper); clamped to the ends with a warning."""
     if not angles:
         raise MissingModels("no measured angles to synthesize from")
+    if not np.isfinite(angle):
+        raise ValueError(f"angle {angle} is not a finite number of degrees")
     a = sorted(angles)
     if angle <= a[0] or angle >= a[-1]:
         near = a[0] if angle <= a[0] else a[-1]
@@ -185,4 +187,6 @@ def models_from_document(doc: object) -> tuple[float | None, dict[tuple[int, int
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"model {k}: {exc}") from None
     angle = doc.get("angle")
+    if angle is not None and (type(angle) not in (int, float) or not np.isfinite(angle)):
+        raise ValueError(f"angle {angle!r} is not a finite number of degrees")
     return (None if angle is None else float(angle)), out, doc
