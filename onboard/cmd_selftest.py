@@ -88,8 +88,8 @@ def _servo_bus(hal: Any) -> str:
         raise RuntimeError(f"servos {missing} do not answer a ping")
     bus.set_torque(ids, True)
     start = bus.positions(ids)
-    # Nudge toward the centre so the move stays inside the servo's travel.
-    goals = {i: start[i] - math.copysign(SERVO_NUDGE_DEG, start[i]) if start[i] else SERVO_NUDGE_DEG for i in ids}
+    joints = {j.servo_id: j for j in (hal.arm.joints.yaw, hal.arm.joints.tilt)}
+    goals = {i: _nudge(joints[i], start[i]) for i in ids}
     bus.move(goals)
     hal.arm.wait_until_stopped(SETTLE_TIMEOUT_S)
     reached = bus.positions(ids)
@@ -103,6 +103,13 @@ def _servo_bus(hal: Any) -> str:
         raise RuntimeError(f"hardware error status {errors}")
     recovered = len(getattr(bus, "recoveries", ()))
     return f"servos {ids} ping, torque, move {SERVO_NUDGE_DEG} deg, settle, no hardware error; {recovered} recoveries"
+
+
+def _nudge(joint: Any, servo_deg: float) -> float:
+    """A servo angle one nudge away, toward the middle of the joint's limits (never into a stop)."""
+    here = joint.joint_deg(servo_deg)
+    toward = 1.0 if here < (joint.min_deg + joint.max_deg) / 2.0 else -1.0
+    return joint.servo_deg(here + toward * SERVO_NUDGE_DEG)
 
 
 def _arm(hal: Any) -> str:
@@ -122,9 +129,10 @@ def _tracker(hal: Any) -> str:
     values = (o.heading, o.roll, o.pitch)
     if not all(math.isfinite(v) for v in values):
         raise RuntimeError(f"non-finite orientation {o}")
-    seen = view_from_orientation(o)  # the arm check left the camera at the last pose
-    if abs(seen.elevation - POSES[-1].elevation) > TRACKER_TOLERANCE_DEG:
-        raise RuntimeError(f"tracker sees elevation {seen.elevation:.1f} deg, the arm is at {POSES[-1].elevation}")
+    seen = view_from_orientation(o)
+    arm = hal.arm.view_for(hal.servo_bus.positions(hal.arm.joints.servo_ids))  # where the servos say it looks
+    if abs(seen.elevation - arm.elevation) > TRACKER_TOLERANCE_DEG:
+        raise RuntimeError(f"tracker sees elevation {seen.elevation:.1f} deg, the arm is at {arm.elevation:.1f}")
     cal = hal.tracker.calibration()
     return f"heading {o.heading:.1f} deg roll {o.roll:.1f} deg pitch {o.pitch:.1f} deg; calibration {cal}"
 

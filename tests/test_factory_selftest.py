@@ -144,3 +144,34 @@ def test_real_camera_is_picamera2_when_importable_and_opencv_otherwise(monkeypat
     default = _real_camera("")
     assert isinstance(default, OpenCVCamera) and default.device == 0
     assert _real_camera("1").device == 1
+
+
+def test_selftest_servo_nudge_stays_inside_the_joint_limits():
+    from onboard.cmd_selftest import _servo_bus
+
+    # A tilt servo mounted reversed and parked at its lower limit: a blind +5 degree nudge
+    # of the servo would drive the joint to -5 degrees, into the stop.
+    arm = {"yaw": {"servo_id": 1, "min_deg": -180.0, "max_deg": 179.9},
+           "tilt": {"servo_id": 2, "min_deg": 0.0, "max_deg": 80.0, "sign": -1.0}}
+    hal = build_hal({"body": "fake", "size": (16, 16), "arm": arm}, env={})
+    try:
+        _servo_bus(hal)
+        moves = [c.args[0] for c in hal.servo_bus.history if c.call == "move"]
+        assert moves
+        for goals in moves:
+            for joint in (hal.arm.joints.yaw, hal.arm.joints.tilt):
+                assert joint.min_deg <= joint.joint_deg(goals[joint.servo_id]) <= joint.max_deg
+    finally:
+        hal.close()
+
+
+def test_selftest_tracker_check_compares_with_where_the_servos_are():
+    from onboard.cmd_selftest import _tracker
+
+    hal = build_hal({"body": "fake", "size": (16, 16)}, env={})
+    try:
+        hal.arm.enable()
+        hal.arm.move_to(ViewAngles(40.0, 0.0), timeout_s=5.0)  # not the selftest's last pose
+        assert "calibration" in _tracker(hal)
+    finally:
+        hal.close()
