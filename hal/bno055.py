@@ -23,6 +23,7 @@ class Reg(IntEnum):
     EULER_H_LSB = 0x1A  # heading, roll, pitch: 6 bytes
     CALIB_STAT = 0x35
     SYS_STATUS = 0x39
+    UNIT_SEL = 0x3B
     OPR_MODE = 0x3D
     PWR_MODE = 0x3E
     SYS_TRIGGER = 0x3F
@@ -37,6 +38,7 @@ class Mode(IntEnum):
 # Datasheet table 3-6: 19 ms from any mode into CONFIG, 7 ms from CONFIG into a fusion mode.
 TO_CONFIG_S = 0.019
 FROM_CONFIG_S = 0.007
+EULER_RADIANS = 0x04  # UNIT_SEL bit 2: Euler in 1/900 rad instead of 1/16 degree
 RETRYABLE = frozenset({errno.EREMOTEIO, errno.EIO, errno.EBUSY})  # 121 NACK, 5, 16
 
 
@@ -70,6 +72,7 @@ class BNO055Tracker:
                            "wrong device or address")
         self._set_mode(Mode.CONFIG)
         self._io(bus.write_byte_data, address, Reg.PAGE_ID, 0)
+        self._use_degrees()
         self._set_mode(Mode.NDOF)
 
     @classmethod
@@ -102,6 +105,14 @@ class BNO055Tracker:
                 self.retried += 1
                 self._sleep(0.001 * (attempt + 1))
         raise AssertionError("unreachable")
+
+    def _use_degrees(self) -> None:
+        """Euler registers in 1/16 degree: an earlier program may have left the chip in radians."""
+        units = self._io(self._bus.read_byte_data, self.address, Reg.UNIT_SEL)
+        if units & EULER_RADIANS:
+            self._io(self._bus.write_byte_data, self.address, Reg.UNIT_SEL, units & ~EULER_RADIANS)
+            if self._io(self._bus.read_byte_data, self.address, Reg.UNIT_SEL) & EULER_RADIANS:
+                raise HalError(f"{self._where()}: Euler unit stays radians (UNIT_SEL 0x{units:02X})")
 
     def _set_mode(self, mode: Mode) -> None:
         self._io(self._bus.write_byte_data, self.address, Reg.OPR_MODE, int(mode))

@@ -149,3 +149,26 @@ def test_driver_refuses_a_chip_that_does_not_enter_ndof():
 def test_negative_retries_rejected():
     with pytest.raises(ValueError, match="retries"):
         BNO055Tracker(EmulatedSMBus(), retries=-1)
+
+
+def test_a_chip_left_in_radians_is_put_back_into_degrees():
+    pose = Orientation(heading=100.0, roll=3.0, pitch=-60.0)
+    bus = EmulatedSMBus(orientation_source=lambda: pose)
+    bus.regs[Reg.UNIT_SEL] = 0x84  # an earlier program chose radians (and kept the orientation bit)
+    t, _ = tracker(bus)
+    assert bus.regs[Reg.UNIT_SEL] == 0x80
+    assert t.orientation() == pose
+
+
+def test_a_chip_that_keeps_radians_is_refused():
+    bus = EmulatedSMBus()
+    bus.regs[Reg.UNIT_SEL] = 0x04
+    real = bus.write_byte_data
+
+    def stuck(addr, reg, value):
+        if reg != Reg.UNIT_SEL:
+            real(addr, reg, value)
+
+    bus.write_byte_data = stuck
+    with pytest.raises(HalError, match="radians"):
+        tracker(bus)

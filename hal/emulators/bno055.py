@@ -3,16 +3,17 @@
 Models what the driver depends on: chip id, the operating-mode state machine (config
 registers take writes only in CONFIG mode; Euler registers hold zero until a fusion mode
 has run), Euler angles following a commanded orientation plus noise, calibration status,
-and NACKs (OSError 121) injected at a seeded rate or on demand.
+the Euler unit (UNIT_SEL: 1/16 degree or 1/900 radian), and NACKs (OSError 121) injected at a seeded rate or on demand.
 """
 from __future__ import annotations
 
 import errno
+import math
 import random
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from hal.bno055 import CHIP_ID, DEFAULT_ADDRESS, Mode, Reg
+from hal.bno055 import CHIP_ID, DEFAULT_ADDRESS, EULER_RADIANS, Mode, Reg
 from hal.interfaces import Orientation
 
 FUSION_MODES = frozenset(range(0x08, 0x0D))  # IMU, COMPASS, M4G, NDOF_FMC_OFF, NDOF
@@ -69,9 +70,10 @@ class EmulatedSMBus:
             return  # fusion stopped: registers keep their last (initially zero) values
         o = self.source()
         values = (o.heading % 360.0, o.roll, o.pitch)
+        per_degree = 900.0 * math.pi / 180.0 if self.regs[Reg.UNIT_SEL] & EULER_RADIANS else 16.0
         for i, deg in enumerate(values):
             deg += self._rng.gauss(0.0, self.noise_deg) if self.noise_deg > 0 else 0.0
-            raw = max(-32768, min(32767, round(deg * 16.0))) & 0xFFFF
+            raw = max(-32768, min(32767, round(deg * per_degree))) & 0xFFFF
             self.regs[Reg.EULER_H_LSB + 2 * i] = raw & 0xFF
             self.regs[Reg.EULER_H_LSB + 2 * i + 1] = raw >> 8
 
