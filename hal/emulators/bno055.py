@@ -3,7 +3,8 @@
 Models what the driver depends on: chip id, the operating-mode state machine (config
 registers take writes only in CONFIG mode; Euler registers hold zero until a fusion mode
 has run), Euler angles following a commanded orientation plus noise, calibration status,
-the Euler unit (UNIT_SEL: 1/16 degree or 1/900 radian), and NACKs (OSError 121) injected at a seeded rate or on demand.
+the Euler unit (UNIT_SEL: 1/16 degree or 1/900 radian; read as degrees, radians come out
+1.8% small, silently), and NACKs (OSError 121) injected at a seeded rate or on demand.
 """
 from __future__ import annotations
 
