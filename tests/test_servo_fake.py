@@ -126,3 +126,10 @@ def test_closed_bus_refuses_calls():
     bus.close()
     with pytest.raises(HalError, match="closed"):
         bus.positions([1])
+
+
+def test_ping_is_false_on_a_timeout_and_records_it():
+    bus, _ = make(faults=Faults(force={"timeout"}, remaining=1))
+    assert not bus.ping(1)
+    assert bus.ping(1)
+    assert [c.outcome for c in bus.history] == ["timeout", "ok"]

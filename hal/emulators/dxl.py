@@ -51,7 +51,11 @@ class PacketError(IntEnum):
 
 
 class Reg(IntEnum):
-    """X-series control table addresses used here."""
+    """X-series control table addresses used here.
+
+    Written from the datasheet, not imported from the driver: a wrong address in the
+    driver must fail against the emulator, not agree with it.
+    """
 
     MODEL_NUMBER = 0
     ID = 7

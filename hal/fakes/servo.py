@@ -63,8 +63,7 @@ class FakeServoBus:
 
     # -- ServoBus -------------------------------------------------------------------
     def ping(self, servo_id: int) -> bool:
-        self._enter("ping", (servo_id,), [servo_id], raise_timeout=False)
-        return servo_id in self._servos and not self._last_outcome_was("timeout")
+        return bool(self._enter("ping", (servo_id,), [servo_id], raise_timeout=False))
 
     def set_torque(self, servo_ids: list[int], enabled: bool) -> None:
         for servo in self._enter("set_torque", (tuple(servo_ids), enabled), servo_ids):
@@ -116,9 +115,6 @@ class FakeServoBus:
                 continue
             delta = s.goal - s.position
             s.position = s.goal if abs(delta) <= step else s.position + (step if delta > 0 else -step)
-
-    def _last_outcome_was(self, outcome: str) -> bool:
-        return bool(self.history) and self.history[-1].outcome == outcome
 
     def _enter(self, call: str, args: tuple, servo_ids: list[int], raise_timeout: bool = True) -> list[_Servo]:
         """Advance the world, draw faults, record the call; return the addressed servos."""
