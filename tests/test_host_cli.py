@@ -119,6 +119,8 @@ def test_resolve_json(host):
     (("fit", "{d}/a.png", "--angle", "5", "--db", "{d}/junk.png"), "not an SQLite file"),
     (("compare", "{d}/a.png", "{d}/small.png"), "differs"),
     (("pdfs", "{d}/a.png", "--mask", "{d}/nope.png"), "no such file"),
+    (("compare", "{d}/a.png", "{d}"), "not a regular file"),
+    (("pdfs", "{d}/a.png", "--mask", "{d}"), "not a regular file"),
     (("synth", "--model", "{d}/junk.png", "--mask", "{d}/m.png", "--angle", "1", "--out", "{d}/o.png"), "JSON"),
     (("synth", "--db", "{d}/none.db", "--mask", "{d}/m.png", "--angle", "1", "--out", "{d}/o.png"), "no such"),
     (("synth", "--db", "{d}", "--mask", "{d}/m.png", "--angle", "1", "--out", "{d}/o.png"), "not a regular file"),

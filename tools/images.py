@@ -19,7 +19,7 @@ def read_image(path: str | Path) -> np.ndarray:
     """An image file as RGB uint8 (H, W, 3); grayscale files are repeated to three channels."""
     p = Path(path)
     if not p.is_file():
-        raise ImageError(f"image {p}: no such file")
+        raise ImageError(f"image {p}: {'not a regular file' if p.exists() else 'no such file'}")
     raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
     if raw is None or raw.size == 0:
         raise ImageError(f"image {p}: not a readable image file")
@@ -36,7 +36,7 @@ def read_mask(path: str | Path, shape: tuple[int, int] | None = None) -> np.ndar
     """A label mask (H, W) uint8; `shape` (H, W) is the image it must match."""
     p = Path(path)
     if not p.is_file():
-        raise ImageError(f"mask {p}: no such file")
+        raise ImageError(f"mask {p}: {'not a regular file' if p.exists() else 'no such file'}")
     raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
     if raw is None or raw.size == 0:
         raise ImageError(f"mask {p}: not a readable image file")
