@@ -161,7 +161,8 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
             view = arm.view_for({sid: emulator.position_deg(sid) for sid in cal.servo_ids})
             return Orientation(heading=view.azimuth, roll=0.0, pitch=-view.elevation)
 
-        tracker = BNO055Tracker(EmulatedSMBus(orientation_source=orientation, seed=int(options.get("seed", 0))))
+        tracker = BNO055Tracker(EmulatedSMBus(orientation_source=orientation, seed=int(options.get("fault_seed", 0)),
+                                              nack_rate=float(options.get("fault_rate", 0.0))))
         frames = Path(tempfile.mkdtemp(prefix="btf-frames-"))
         cleanup.append(lambda: shutil.rmtree(frames, ignore_errors=True))
         _write_sequence(frames, str(options.get("scene", "black")), size, int(options.get("seed", 0)))

@@ -175,3 +175,14 @@ def test_selftest_tracker_check_compares_with_where_the_servos_are():
         assert "calibration" in _tracker(hal)
     finally:
         hal.close()
+
+
+def test_emulated_fault_rate_reaches_the_tracker_bus_too():
+    hal = build_hal({"body": "emulated", "size": (16, 16), "fault_rate": 0.2, "fault_seed": 5}, env={})
+    try:
+        for _ in range(20):
+            o = hal.tracker.orientation()
+            assert view_from_orientation(o).elevation == pytest.approx(90.0, abs=0.1)  # parked straight down
+        assert hal.tracker.retried > 0  # NACKs were injected and absorbed by the driver's retries
+    finally:
+        hal.close()
