@@ -132,6 +132,7 @@ class Link:
         self._news = 0.0  # last ACK that acknowledged something new
         self._timeouts = 0  # RTO expiries since then
         self._dgrams: deque[bytes] = deque()
+        self._dgram_bytes = 0  # datagram fragments not yet written count against max_queue_bytes
         self._queued_bytes = 0
         self._last_tx: float | None = None
         # receiving side
@@ -165,8 +166,9 @@ class Link:
             msg_id = AUTO_BASE + self._store.next_tx(self.node_id, self.link_id)
         elif not 0 <= msg_id < AUTO_BASE:
             raise ValueError(f"msg_id {msg_id} outside 0..2**56-1")
-        if self._queued_bytes + len(payload) > self.max_queue_bytes:
-            raise QueueFull(f"{self._queued_bytes} bytes already queued")
+        held = self._queued_bytes + self._dgram_bytes
+        if held + len(payload) > self.max_queue_bytes:
+            raise QueueFull(f"{held} bytes already queued")
         if reliable:
             if msg_id in self._msgs:
                 raise ValueError(f"msg_id {msg_id} is already in flight")
@@ -174,7 +176,9 @@ class Link:
             self._unsent.append((msg_id, payload))
             self._queued_bytes += len(payload)
         else:
-            self._dgrams.extend(split_datagram(msg_id, payload, self._room))
+            frags = split_datagram(msg_id, payload, self._room)
+            self._dgrams.extend(frags)
+            self._dgram_bytes += sum(map(len, frags))
         return msg_id
 
     @property
@@ -261,7 +265,7 @@ class Link:
             if (self._syn_sent_at is None or now - self._syn_sent_at >= self._rto) and emit(Kind.SYN):
                 self._syn_sent_at = now
         while self._dgrams and emit(Kind.DATAGRAM, self._dgrams[0]):
-            self._dgrams.popleft()
+            self._dgram_bytes -= len(self._dgrams.popleft())
         if self._tx_open:
             self._send_data(now, emit, lambda: budget[0])
         if (self._last_tx is None or now - self._last_tx >= self.heartbeat) and not out:

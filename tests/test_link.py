@@ -2,8 +2,10 @@
 import os
 import tty
 
+import pytest
+
 from radio.auth import FileCounterStore, MemoryCounterStore
-from radio.link import Acked, Delivered, Link, LinkDown, LinkUp
+from radio.link import Acked, Delivered, Link, LinkDown, LinkUp, QueueFull
 from radio.serial_port import FdPort, SerialLink, open_url
 
 KEY = bytes(range(32))
@@ -156,12 +158,17 @@ def test_unreliable_datagrams_are_reassembled_and_deduplicated():
 def test_bounded_queue_refuses_more():
     robot, _ = pair(max_queue_bytes=1000)
     robot.send(b"x" * 900, 0.0, msg_id=1)
-    try:
+    with pytest.raises(QueueFull, match="900 bytes already queued"):
         robot.send(b"x" * 200, 0.0, msg_id=2)
-    except RuntimeError as exc:
-        assert "queued" in str(exc)
-    else:
-        raise AssertionError("QueueFull not raised")
+
+
+def test_unsent_datagrams_count_against_the_queue_bound():
+    robot, _ = pair(max_queue_bytes=1000)
+    robot.send(b"d" * 600, 0.0, reliable=False)
+    with pytest.raises(QueueFull):
+        robot.send(b"d" * 600, 0.0, reliable=False)
+    robot.poll(0.0)  # the fragments go out and free their room
+    robot.send(b"d" * 600, 0.0, reliable=False)
 
 
 def test_two_links_over_a_real_pty_pair():
