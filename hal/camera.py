@@ -150,7 +150,8 @@ class PiCamera2Camera:
             config = cam.create_still_configuration(main={"size": (width, height),
                                                           "format": PICAMERA2_FORMATS[pixel_format]})
             cam.configure(config)
-            granted = tuple(config["main"]["size"])
+            # picamera2 configures a copy: what the camera granted is in its live configuration.
+            granted = tuple(cam.camera_configuration()["main"]["size"])
             if granted != (width, height):
                 raise HalError(f"picamera2: asked for {width}x{height}, granted {granted[0]}x{granted[1]}")
             cam.start()

@@ -173,7 +173,8 @@ def test_capture_before_open_is_an_error():
 
 
 class StandInPicamera2:
-    """The slice of picamera2.Picamera2 the adapter uses."""
+    """The slice of picamera2.Picamera2 the adapter uses; like picamera2, `configure` works on
+    a copy and may adjust the size, so only `camera_configuration()` tells what was granted."""
 
     def __init__(self, grant=None):
         self.grant = grant
@@ -181,10 +182,13 @@ class StandInPicamera2:
         self.config = None
 
     def create_still_configuration(self, main):
-        return {"main": dict(main, size=self.grant or main["size"])}
+        return {"main": dict(main)}
 
     def configure(self, config):
-        self.config = config
+        self.config = {"main": dict(config["main"], size=self.grant or config["main"]["size"])}
+
+    def camera_configuration(self):
+        return self.config
 
     def start(self):
         self.started = True
