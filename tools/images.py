@@ -15,14 +15,19 @@ class ImageError(ValueError):
     """A file that cannot be used as an image or mask; the message names the file and why."""
 
 
+def _imread(p: Path, what: str) -> np.ndarray:
+    if not p.is_file():
+        raise ImageError(f"{what} {p}: {'not a regular file' if p.exists() else 'no such file'}")
+    raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    if raw is None or raw.size == 0:
+        raise ImageError(f"{what} {p}: not a readable image file")
+    return raw
+
+
 def read_image(path: str | Path) -> np.ndarray:
     """An image file as RGB uint8 (H, W, 3); grayscale files are repeated to three channels."""
     p = Path(path)
-    if not p.is_file():
-        raise ImageError(f"image {p}: {'not a regular file' if p.exists() else 'no such file'}")
-    raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-    if raw is None or raw.size == 0:
-        raise ImageError(f"image {p}: not a readable image file")
+    raw = _imread(p, "image")
     if raw.dtype != np.uint8:
         raise ImageError(f"image {p}: {raw.dtype} pixels; only 8-bit images are supported")
     if raw.ndim == 2:
@@ -35,11 +40,7 @@ def read_image(path: str | Path) -> np.ndarray:
 def read_mask(path: str | Path, shape: tuple[int, int] | None = None) -> np.ndarray:
     """A label mask (H, W) uint8; `shape` (H, W) is the image it must match."""
     p = Path(path)
-    if not p.is_file():
-        raise ImageError(f"mask {p}: {'not a regular file' if p.exists() else 'no such file'}")
-    raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
-    if raw is None or raw.size == 0:
-        raise ImageError(f"mask {p}: not a readable image file")
+    raw = _imread(p, "mask")
     if raw.dtype != np.uint8:
         raise ImageError(f"mask {p}: {raw.dtype} pixels; masks are 8-bit label images")
     if raw.ndim == 3:
