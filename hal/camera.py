@@ -110,7 +110,10 @@ class OpenCVCamera:
             frame = frame.reshape(frame.shape[0], frame.shape[1], -1)[..., :1]
             want = np.uint16
         else:
-            frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2RGB if frame.ndim == 2 else cv2.COLOR_BGR2RGB)
+            try:
+                frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2RGB if frame.ndim == 2 else cv2.COLOR_BGR2RGB)
+            except cv2.error:  # e.g. two-channel YUYV handed through unconverted
+                raise HalError(f"{self._where()}: frame {frame.shape} {frame.dtype} is not BGR or gray") from None
             want = np.uint8
         if frame.shape[:2] != (h, w) or frame.dtype != want:
             raise HalError(f"{self._where()}: frame is {frame.shape} {frame.dtype}, expected {h}x{w} {want.__name__}")

@@ -275,3 +275,17 @@ def test_fake_camera_multispectral_and_bad_input():
     assert cam.capture().shape == (24, 32, 6)
     with pytest.raises(HalError, match="unknown scene"):
         FakeCamera("moon", lambda: ViewAngles(90.0))
+
+
+class UnconvertedCapture(QueueingCapture):
+    """A driver that hands YUYV through as two channels per pixel."""
+
+    def retrieve(self):
+        return True, np.zeros((6, 8, 2), np.uint8)
+
+
+def test_an_unconverted_two_channel_frame_is_a_clear_error():
+    cam = camera_on(UnconvertedCapture(queued=0, granted_buffers=1))
+    cam.open(8, 6)
+    with pytest.raises(HalError, match=r"camera 0: frame \(6, 8, 2\) uint8 is not BGR or gray"):
+        cam.capture()
