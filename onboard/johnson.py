@@ -289,7 +289,8 @@ class Johnson:
         t = np.concatenate(([-np.inf], z, [np.inf]))
         # Intervals above the median as differences of the upper tail: 1 - Phi(z) rounds to 0
         # beyond z ~ 8.3, Phi(-z) stays positive out to the clip.
-        below, above = np.diff(normal_cdf(t)), -np.diff(normal_cdf(-t))
+        upper = normal_cdf(-t)
+        below, above = np.diff(normal_cdf(t)), upper[:-1] - upper[1:]  # no -0.0
         return np.where(t[:-1] >= 0.0, above, below)
 
     def pixel_table(self, levels: int = 256) -> np.ndarray:

@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from onboard.censor import (CENSOR_SCALE, censored_counts, expected_histogram, fallback_probs,
                             histogram_l1, place, saturating)
 from onboard.fit import Z_LADDER, FrameFitter, fit_histogram, rebuild
-from onboard.johnson import Family, Johnson
+from onboard.johnson import Z_CLIP, Family, Johnson
 from onboard.percentile import support_of
 from radio.packet import decode, encode_models
 
@@ -277,3 +277,36 @@ def test_histogram_l1_equals_the_sum_over_every_bin(counts, lo, width):
     assert histogram_l1(m, h, lo, width) == pytest.approx(full, abs=1e-12)
     if lo == 0 and width == 1 and h.size == 256:
         assert np.array_equal(m.interval_probabilities(edges), m.level_probabilities())
+
+
+@SETTINGS
+@given(st.one_of(censored_histograms(), st.lists(st.integers(0, 300), min_size=256, max_size=256).map(np.array)),
+       st.lists(st.tuples(st.integers(0, 255), st.integers(1, 3)), max_size=3))
+def test_every_occupied_level_has_positive_probability_unless_beyond_float_range(h, outliers):
+    h = h.copy()
+    for level, n in outliers:  # single stray pixels far from the bulk
+        h[level] += n
+    if not h.any():
+        h[7] = 1
+    m = fit_histogram(h).model
+    if m.family is Family.CONST:
+        return
+    p = m.level_probabilities()
+    occupied = np.flatnonzero(h)
+    zero = occupied[p[occupied] == 0.0]
+    # a level gets exactly zero only when even its nearer edge lies beyond |z| = Z_CLIP - 1 (the
+    # model's probability there is below 1e-250, under float64's reach and 2**-16 sampling)
+    edges = np.concatenate(([-np.inf], m.thresholds(), [np.inf]))
+    nearer = np.minimum(np.abs(edges[zero]), np.abs(edges[zero + 1]))
+    assert np.all(nearer >= Z_CLIP - 1.0), (m, zero, nearer)
+
+
+def test_a_stray_pixel_far_beyond_a_narrow_peak_gets_zero_only_past_float_range():
+    h = np.zeros(256, dtype=np.int64)
+    h[98:103] = [10, 3000, 100_000, 3000, 10]
+    h[200] = 1
+    r = fit_histogram(h)
+    p = r.model.level_probabilities()
+    assert r.support == (97.5, 200.5)  # the support reaches the stray level's outer edge ...
+    # ... but the level's inner edge lies beyond z = Z_CLIP: its probability underflows to +0
+    assert p[200] == 0.0 and not np.any(np.signbit(p)) and float(r.model.z_of_x(199.5)) >= Z_CLIP - 1
