@@ -113,8 +113,8 @@ class Arm:
     def move_to(self, view: ViewAngles, timeout_s: float = 10.0) -> dict[int, float]:
         """Move to a view and wait until settled; returns the servo angles reached."""
         goals = self.joints_for(view)  # limits checked before anything moves
-        self._goals = goals
         self.bus.move(goals)
+        self._goals = goals  # only goals the bus took are waited for
         return self.wait_until_stopped(timeout_s)
 
     def wait_until_stopped(self, timeout_s: float) -> dict[int, float]:
@@ -134,8 +134,8 @@ class Arm:
     def stop_and_hold(self) -> None:
         """Failsafe: hold every joint where it is now."""
         here = self.bus.positions(self.joints.servo_ids)
-        self._goals = here
         self.bus.move(here)
+        self._goals = here
 
     def torque_off(self) -> None:
         self._goals = {}

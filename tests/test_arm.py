@@ -94,3 +94,13 @@ def test_bad_joint_calibration_is_refused(kwargs, match):
     args = {"servo_id": 1, "min_deg": 0.0, "max_deg": 90.0, **kwargs}
     with pytest.raises(ValueError, match=match):
         JointCalibration(**args)
+
+
+def test_a_move_the_bus_refused_is_not_waited_for():
+    arm, bus, _ = rig()
+    arm.move_to(ViewAngles(80.0, 10.0), timeout_s=5.0)
+    bus.faults = Faults(force={"timeout"}, remaining=1)
+    with pytest.raises(DeviceTimeout, match="no status packet"):
+        arm.move_to(ViewAngles(30.0, 90.0), timeout_s=5.0)
+    reached = arm.wait_until_stopped(1.0)  # still where the last accepted move left it
+    assert arm.view_for(reached).elevation == pytest.approx(80.0, abs=1e-6)
