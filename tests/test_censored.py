@@ -275,8 +275,11 @@ def test_histogram_l1_equals_the_sum_over_every_bin(counts, lo, width):
     edges = lo + (np.arange(1, h.size) - 0.5) * width
     full = np.abs(m.interval_probabilities(edges) - h / h.sum()).sum()
     assert histogram_l1(m, h, lo, width) == pytest.approx(full, abs=1e-12)
-    if lo == 0 and width == 1 and h.size == 256:
-        assert np.array_equal(m.interval_probabilities(edges), m.level_probabilities())
+
+
+def test_interval_probabilities_on_level_edges_are_the_level_probabilities():
+    for m in (SHAPES["SU"], SHAPES["SB"], SHAPES["lognormal"], Johnson.normal(250, 3)):
+        assert np.array_equal(m.interval_probabilities(np.arange(255) + 0.5), m.level_probabilities())
 
 
 @SETTINGS
