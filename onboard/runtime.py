@@ -320,6 +320,8 @@ class Runtime:
         self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {nxt.next_index} of {len(nxt.poses)}")
         if nxt.done:
             self.mode = Mode.IDLE
+            self.notifier.status(f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, "
+                                 f"{len(nxt.skipped)} skipped")
         return result
 
     def capture_packets(self, cap: Capture) -> tuple[int, list[tuple[int, bytes]], dict[str, str]]:
@@ -470,8 +472,8 @@ class Runtime:
         if self.cfg.sweep.autostart or self.new_sweep:
             boot = self.autostart()
             extras = {"mode": self.mode.value, "sweep": self.progress.sweep_id, "sweep_state": boot.value}
+        self.notifier.ready(f"btf-robot running: {self.mode.value}")
         self.send_status("boot", extras)
-        self.notifier.ready("btf-robot running")
 
     def step(self) -> None:
         """One turn of the loop; never raises."""

@@ -38,18 +38,25 @@ class Notifier:
             return False
 
     def ready(self, status: str = "") -> bool:
-        return self.notify("READY=1" + (f"\nSTATUS={status}" if status else ""))
+        return self.notify("READY=1" + (f"\nSTATUS={_line(status)}" if status else ""))
 
     def status(self, text: str) -> bool:
-        return self.notify(f"STATUS={text}")
+        """STATUS= for `systemctl status` (one line: a newline would start another field)."""
+        return self.notify(f"STATUS={_line(text)}")
 
     def kick(self) -> bool:
         """WATCHDOG=1, rate-limited to half the configured watchdog interval."""
+        if self._interval == float("inf"):  # the watchdog is another process's
+            return False
         now = self._clock()
         if now - self._last < self._interval / 2:
             return False
         self._last = now
         return self.notify("WATCHDOG=1")
+
+
+def _line(text: str) -> str:
+    return " ".join(str(text).split())[:200]
 
 
 def _watchdog_interval() -> float:
