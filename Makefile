@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
 
-.PHONY: setup demo test bench stress clean
+.PHONY: setup demo test bench stress fuzz clean
 
 setup: $(STAMP)
 
@@ -27,5 +27,12 @@ bench: $(STAMP)
 stress: $(STAMP)
 	BTF_STRESS=1 $(BIN)/python -m pytest -q -m slow --hypothesis-profile=stress tests
 
+# Coverage-guided fuzzing of the radio decoders with atheris (libFuzzer); FUZZ_RUNS inputs.
+FUZZ_RUNS ?= 500000
+fuzz: $(STAMP)
+	$(BIN)/python -m pip install --quiet 'atheris>=2.3'
+	$(BIN)/python tests/fuzz_radio.py --seeds .fuzz-corpus
+	$(BIN)/python tests/fuzz_radio.py .fuzz-corpus -atheris_runs=$(FUZZ_RUNS)
+
 clean:
-	rm -rf $(VENV) demo-out .pytest_cache .hypothesis
+	rm -rf $(VENV) demo-out .pytest_cache .hypothesis .fuzz-corpus
