@@ -28,7 +28,7 @@ class HalConfig:
     servo_port: str = ""
     servo_baud: int = 1_000_000
     tracker_bus: int = 1
-    camera: str = ""  # device index or path, or "picamera2"; unset: picamera2 when installed, else device 0 for the real camera
+    camera: str = ""  # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0
     seed: int = 0
 
 
