@@ -53,14 +53,16 @@ def test_sweep_of_each_plate_sends_every_pose_label_band_model(tmp_path, scene):
 
 
 def test_faults_at_ten_percent_still_finish_and_report_every_skipped_pose(tmp_path):
-    rt, tr = make(tmp_path, "black", rate=0.1)
+    # A stalled servo moves on only at the settle timeout (real seconds): 2 s, not the default 10.
+    rt, tr = make(tmp_path, "black", rate=0.1, extra="[sweep]\nsettle_timeout_s = 2\n")
     sweep(rt)
     packets = decoded(tr)
     measured = [p for p in packets if isinstance(p, pk.ModelsPacket)]
     skipped = [p for p in packets if isinstance(p, pk.StatusPacket) and "skipped_index" in p.extras]
     assert len(measured) + len(skipped) == 7
     assert sorted(p.extras["skipped_index"] for p in skipped) == [s.index for s in rt.progress.skipped]
-    assert all("failed after" in p.text for p in skipped)
+    # "<step> failed after N attempts" or "settle failed: servos ... still moving after 2.0 s"
+    assert all(p.text.startswith("skipped pose: ") and "failed" in p.text for p in skipped)
     assert rt.pipeline.faults  # faults did happen and were retried
 
 
