@@ -21,7 +21,6 @@ from onboard.config import Config
 from onboard.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from onboard.fit import FitResult, FrameFitter
 from radio import packet as pk
-from radio.packet_dependence import dependence_extras
 
 T = TypeVar("T")
 
@@ -240,13 +239,13 @@ def _pose(v: ViewAngles) -> tuple[float, float]:
 
 
 def models_body(robot_id: int, seq: int, now: float, space: str, cap: Capture) -> tuple[int, bytes]:
-    """MODELS for a capture; the first capture of a PCA scene carries the basis in its extras."""
+    """MODELS for a capture, with its dependence when measured; the first capture of a PCA
+    scene carries the basis in its extras."""
     extras = dict(cap.pca.to_extras()) if cap.pca is not None else {}
-    extras.update(dependence_extras(cap.dependence, sorted({lab for lab, _ in cap.results}), len(cap.band_names)))
     body = pk.encode_models(cap.results, robot_id=robot_id, seq=seq, time=now,
                             commanded=_pose(cap.commanded), measured=_pose(cap.measured),
                             feature_space=space, bands=cap.band_names, levels=cap.levels,
-                            extras=extras)
+                            extras=extras, dependence=cap.dependence)
     return int(pk.Kind.MODELS), body
 
 

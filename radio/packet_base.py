@@ -21,9 +21,6 @@ MAX_ARRAY = 256
 MAX_EXTRAS = 16
 MAX_EXTRA_KEY = 32
 MAX_EXTRA_LIST = 64
-# Extras keys whose binary value may be longer than MAX_STR: "d" is the dependence blob
-# (radio.packet_dependence), up to 256 labels x (120 correlations + 8 lags) bytes.
-BLOB_EXTRAS = {"d": 256 * 128}
 UINT32 = 2**32 - 1
 
 
@@ -129,12 +126,12 @@ def want_enum(v: Any, enum_type: type[enum.IntEnum], name: str) -> Any:
     return enum_type(v)
 
 
-def _check_scalar(v: Any, name: str, max_bin: int = MAX_STR) -> Scalar:
+def _check_scalar(v: Any, name: str) -> Scalar:
     if v is None or type(v) in (bool, int, bytes):
         if type(v) is int and not -(2**63) <= v < 2**64:
             raise FrameError(f"{name} integer out of range")
-        if type(v) is bytes and len(v) > max_bin:
-            raise FrameError(f"{name} is longer than {max_bin} bytes")
+        if type(v) is bytes and len(v) > MAX_STR:
+            raise FrameError(f"{name} is longer than {MAX_STR} bytes")
         return v
     if type(v) is float:
         return want_float(v, name)
@@ -157,7 +154,7 @@ def check_extras(v: Any, name: str) -> dict[str, Any]:
                 raise FrameError(f"{name}[{key}] has more than {MAX_EXTRA_LIST} items")
             out[key] = tuple(_check_scalar(x, f"{name}[{key}]") for x in value)
         else:
-            out[key] = _check_scalar(value, f"{name}[{key}]", BLOB_EXTRAS.get(key, MAX_STR))
+            out[key] = _check_scalar(value, f"{name}[{key}]")
     return out
 
 

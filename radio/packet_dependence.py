@@ -1,10 +1,11 @@
-"""The optional dependence entry of a MODELS packet: extras key `DEPENDENCE_KEY`, one blob.
+"""The dependence section of a MODELS blob: per label, grain and band correlation in int8.
 
 Per label, in the packet's label order, B(B-1)/2 band correlations (upper triangle,
 row-major) then the autocorrelation at `LAGS` along rows (dx) and along columns (dy), each
 an int8 in steps of 1/127. A record whose bytes are all -128 means "not measured". For RGB
-that is 11 bytes a label, and the entry's own overhead (map header, key, blob header) is
-at most 6 bytes, so a packet grows by at most 16 bytes per label for up to three bands.
+that is 11 bytes a label. The section sits inside the MODELS blob (`radio.packet_models`),
+flagged by one bit of the label bitmap's length byte, so it costs nothing else but, at most,
+one byte of the blob's msgpack header when it pushes the blob past 255 bytes.
 """
 from __future__ import annotations
 
@@ -17,16 +18,16 @@ from onboard.dependence import LAGS, Dependence, corr_size
 from radio import FrameError
 from radio.packet_base import want_bin
 
-DEPENDENCE_KEY = "d"
 SCALE = 127
 ABSENT = -128
 
 
 def record_size(n_bands: int) -> int:
+    """Bytes per label: band correlations, then both directions' autocorrelation at LAGS."""
     return corr_size(n_bands) + 2 * len(LAGS)
 
 
-def max_blob(n_labels: int, n_bands: int) -> int:
+def section_size(n_labels: int, n_bands: int) -> int:
     return n_labels * record_size(n_bands)
 
 
@@ -38,12 +39,11 @@ def _quantize(values: Sequence[float]) -> np.ndarray:
 
 
 def encode_dependence(deps: Mapping[int, Dependence], labels: Sequence[int], n_bands: int) -> bytes:
-    """The blob for `labels` (the packet's order); labels without an entry are marked absent."""
+    """The section for `labels` (the packet's order); labels without an entry are marked absent."""
     stray = set(deps) - set(labels)
     if stray:
         raise ValueError(f"dependence for labels the packet does not carry: {sorted(stray)}")
-    size = record_size(n_bands)
-    out = np.full((len(labels), size), ABSENT, dtype=np.int8)
+    out = np.full((len(labels), record_size(n_bands)), ABSENT, dtype=np.int8)
     for i, lab in enumerate(labels):
         dep = deps.get(lab)
         if dep is None:
@@ -55,11 +55,11 @@ def encode_dependence(deps: Mapping[int, Dependence], labels: Sequence[int], n_b
 
 
 def decode_dependence(blob: Any, labels: Sequence[int], n_bands: int) -> dict[int, Dependence]:
-    """Untrusted blob -> {label: Dependence}; FrameError names what is wrong."""
+    """Untrusted section -> {label: Dependence}; FrameError names what is wrong."""
     blob = want_bin(blob, "dependence")
     size = record_size(n_bands)
     if len(blob) != len(labels) * size:
-        raise FrameError(f"dependence blob has {len(blob)} bytes, expected "
+        raise FrameError(f"dependence section has {len(blob)} bytes, expected "
                          f"{len(labels)} labels x {size} = {len(labels) * size}")
     codes = np.frombuffer(blob, dtype=np.int8).reshape(len(labels), size)
     out: dict[int, Dependence] = {}
@@ -75,17 +75,6 @@ def decode_dependence(blob: Any, labels: Sequence[int], n_bands: int) -> dict[in
     return out
 
 
-def dependence_extras(deps: Mapping[int, Dependence] | None, labels: Sequence[int],
-                      n_bands: int) -> dict[str, bytes]:
-    """The extras entry for a MODELS packet; empty when nothing was measured."""
-    if not deps:
-        return {}
-    return {DEPENDENCE_KEY: encode_dependence(deps, labels, n_bands)}
-
-
-def packet_dependence(packet: Any) -> dict[int, Dependence]:
-    """The dependence a decoded ModelsPacket carries ({} when it has none)."""
-    blob = packet.extras.get(DEPENDENCE_KEY)
-    if blob is None:
-        return {}
-    return decode_dependence(blob, [x.label for x in packet.labels], len(packet.bands))
+def quantized(deps: Mapping[int, Dependence], labels: Sequence[int], n_bands: int) -> dict[int, Dependence]:
+    """`deps` as the host will receive them (int8 steps), so a packet equals its decoded self."""
+    return decode_dependence(encode_dependence(deps, labels, n_bands), labels, n_bands)

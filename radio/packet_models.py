@@ -15,10 +15,13 @@ Angles are integer centidegrees (0.01 degree); censored fractions are 1/65535 fi
 The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
   angles   >hHhH commanded and measured (elevation, azimuth)
   levels   >H levels - 1
-  labels   one byte nb (0..32), an nb-byte bitmap of the label ids present (bit i of byte j:
-           label 8j + i; the last byte non-zero), then per label, in id order, the varint
-           (LEB128) of count * 16 + z index
+  labels   one byte: nb (0..32) in the low 6 bits, bit 7 set when a dependence section
+           follows the codes, bit 6 zero; an nb-byte bitmap of the label ids present (bit i of
+           byte j: label 8j + i; the last byte non-zero), then per label, in id order, the
+           varint (LEB128) of count * 16 + z index
   codes    per label, per band, four codes (>H up to 256 levels, else >I)
+  dependence  when flagged: per label, its grain and band correlation in int8
+           (`radio.packet_dependence`, 11 bytes per RGB label); never flagged empty
   records  absent when every model is plain; else 2 bits per model (model i at bits 2(i%4) of
            byte i//4): 0 plain, 1 support widened high, 2 widened low, 3 a flagged record; then,
            for each non-plain model in order, the occupied extreme level (B up to 256 levels,
@@ -26,6 +29,9 @@ The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
            z index B, shift b (1/32), censored low H, censored high H, support low, high.
 Only the rare models that are not plain (label's z, no shift, nothing censored, support as
 fitted) cost more than their 8 bytes: a model widened on one side 1 byte and 2 bits.
+Dependence costs its section and no header beyond the flag bit (the section's length follows
+from the labels and bands), so a packet grows by 11 bytes per RGB label, plus one byte of the
+blob's msgpack header when the section pushes it past 255 bytes.
 """
 from __future__ import annotations
 
@@ -39,6 +45,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from onboard.censor import CENSOR_SCALE, MAX_SHIFT_CODE, SHIFT_SCALE, fallback_probs
+from onboard.dependence import Dependence
 from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percentiles, support_point
 from onboard.johnson import Johnson
 from radio import FrameError
@@ -46,6 +53,7 @@ from radio.packet_base import (
     UINT32, Kind, angles_from_wire, angles_to_wire, get_varint, put_varint, want_bin, want_float,
     want_int, want_str,
 )
+from radio.packet_dependence import decode_dependence, encode_dependence, quantized, section_size
 
 MAX_LABELS = 256
 MAX_BANDS = 16
@@ -54,6 +62,8 @@ MIN_LEVELS, MAX_LEVELS = 2, 65536  # PercentileCodec.for_levels' range
 _HEAD = struct.Struct(">hHhHH")  # angles, levels - 1
 _U8, _I8, _U16 = struct.Struct(">B"), struct.Struct(">b"), struct.Struct(">H")
 _Z_BITS = 4  # z index in the low bits of a label's count varint
+_HAS_DEPENDENCE = 0x80  # in the bitmap length byte
+_NB_MASK = 0x3F
 
 
 class TailFlag(enum.IntFlag):
@@ -130,6 +140,8 @@ class ModelsPacket:
     levels: int
     labels: tuple[LabelModels, ...]
     extras: Mapping[str, Any] = field(default_factory=dict)
+    # Grain and band correlation per label id, for some or all labels (empty: none measured).
+    dependence: Mapping[int, Dependence] = field(default_factory=dict)
     # Filled by decode: (label, band index) -> the model recomputed from the codes.
     models: Mapping[tuple[int, int], Johnson] = field(default_factory=dict, compare=False, repr=False)
 
@@ -149,7 +161,7 @@ class ModelsPacket:
         bitmap = bytearray(ids[-1] // 8 + 1 if ids else 0)
         for a in ids:
             bitmap[a // 8] |= 1 << (a % 8)
-        out.append(len(bitmap))
+        out.append(len(bitmap) | (_HAS_DEPENDENCE if self.dependence else 0))
         out += bitmap
         for x in self.labels:
             if not (0 <= x.count <= UINT32 and 0 <= x.z_index < len(Z_LADDER)):
@@ -162,6 +174,8 @@ class ModelsPacket:
         if codes.size and (codes.min() < 0 or codes.max() > np.iinfo(dtype).max):
             raise ValueError(f"percentile codes do not fit {dtype}")
         out += codes.astype(dtype).tobytes()
+        if self.dependence:
+            out += encode_dependence(self.dependence, ids, len(self.bands))
         level = _U8 if self.levels <= 256 else _U16
         entries = [_tail_bytes(t, lab.z_index, level) for lab in self.labels
                    for t in (lab.tails + (None,) * len(self.bands))[:len(self.bands)]]
@@ -190,6 +204,7 @@ class ModelsPacket:
         measured = angles_from_wire(mel, maz, "measured")
         levels = want_int(levels + 1, "levels", MIN_LEVELS, MAX_LEVELS)
         codec = PercentileCodec.for_levels(levels)
+        has_dependence = bool(blob[_HEAD.size] & _HAS_DEPENDENCE)
         ids, pos = _label_ids(blob, _HEAD.size)
         heads = []
         for label in ids:
@@ -208,11 +223,22 @@ class ModelsPacket:
                               offset=pos).astype(np.int64).reshape(n, n_bands, 4)
         if np.any(np.diff(codes, axis=2) < 0):
             raise FrameError("percentile codes decrease within a model")
-        tails = _tails(blob, pos + size, [z for _, _, z in heads], n_bands, levels)
+        pos += size
+        dependence: dict[int, Dependence] = {}
+        if has_dependence:
+            end = pos + section_size(n, n_bands)
+            if end > len(blob):
+                raise FrameError(f"dependence section has {len(blob) - pos} bytes, expected "
+                                 f"{n} labels x {section_size(1, n_bands)}")
+            dependence = decode_dependence(blob[pos:end], ids, n_bands)
+            if not dependence:
+                raise FrameError("dependence section flagged but no label has a measurement")
+            pos = end
+        tails = _tails(blob, pos, [z for _, _, z in heads], n_bands, levels)
         records = tuple(
             LabelModels(label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]), tails[i])
             for i, (label, count, z_index) in enumerate(heads))
-        packet = cls(robot, seq, t, commanded, measured, space, bands, levels, records, extras)
+        packet = cls(robot, seq, t, commanded, measured, space, bands, levels, records, extras, dependence)
         if compute:
             object.__setattr__(packet, "models", _recompute(packet, codec))
         return packet
@@ -257,8 +283,10 @@ def models_packet(
     bands: Sequence[str], levels: int = 256,
     censored: Mapping[int, tuple[float, float]] | None = None,
     extras: Mapping[str, Any] | None = None,
+    dependence: Mapping[int, Dependence] | None = None,
 ) -> ModelsPacket:
-    """Build a MODELS packet from the fitter's results keyed by (label, band index)."""
+    """Build a MODELS packet from the fitter's results keyed by (label, band index);
+    `dependence` (per label, optional) is stored as the host will receive it (int8 steps)."""
     codec = PercentileCodec.for_levels(levels)
     censored = censored or {}
     stray = set(censored) - {lab for lab, _ in fits}
@@ -287,9 +315,11 @@ def models_packet(
         ))
     if len(fits) != len(records) * len(bands):
         raise ValueError("fits hold band indices outside the band list")
+    ids = [x.label for x in records]
     return ModelsPacket(
         robot_id, seq, time, tuple(commanded), tuple(measured), feature_space, tuple(bands),
         levels, tuple(records), dict(extras or {}),
+        quantized(dependence, ids, len(bands)) if dependence else {},
     )
 
 
@@ -350,7 +380,9 @@ def _tail_bytes(t: Tail | None, label_z: int, level: struct.Struct) -> tuple[int
 
 
 def _label_ids(blob: bytes, pos: int) -> tuple[list[int], int]:
-    nb = blob[pos]
+    if blob[pos] & ~(_NB_MASK | _HAS_DEPENDENCE):
+        raise FrameError(f"label bitmap length byte {blob[pos]:#x} has a reserved bit set")
+    nb = blob[pos] & _NB_MASK
     pos += 1
     if nb > MAX_LABELS // 8 or pos + nb > len(blob) or (nb and not blob[pos + nb - 1]):
         raise FrameError(f"label bitmap of {nb} bytes: too long, cut short or not canonical")

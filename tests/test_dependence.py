@@ -10,9 +10,7 @@ from onboard.fit import FrameFitter
 from onboard.johnson import Johnson
 from radio import FrameError
 from radio import packet as pk
-from radio.packet_dependence import (
-    DEPENDENCE_KEY, decode_dependence, dependence_extras, encode_dependence, packet_dependence,
-)
+from radio.packet_dependence import decode_dependence, encode_dependence, record_size
 
 HEADER = dict(robot_id=1, seq=5, time=10.0, commanded=(60.0, 0.0), measured=(60.0, 0.0),
               feature_space="rgb")
@@ -102,34 +100,57 @@ def _fit_stub(n_labels: int):
 
 
 @pytest.mark.parametrize("n_labels", [1, 2, 4, 8, 16])
-def test_packet_grows_11_bytes_per_rgb_region_plus_at_most_7(n_labels):
+def test_packet_grows_at_most_16_bytes_per_rgb_region_even_for_one_region(n_labels):
     fits, labels, img = _fit_stub(n_labels)
     models = {k: r.model for k, r in fits.items()}
     deps = measure(img, labels, models)
     regions = sorted({lab for lab, _ in fits})
+    assert len(regions) == n_labels and set(deps) == set(regions)
     plain = pk.encode_models(fits, bands=("R", "G", "B"), **HEADER)
-    extras = dependence_extras(deps, regions, 3)
-    rich = pk.encode_models(fits, bands=("R", "G", "B"), extras=extras, **HEADER)
+    rich = pk.encode_models(fits, bands=("R", "G", "B"), dependence=deps, **HEADER)
     growth = len(rich) - len(plain)
-    # 11 bytes a region; the entry itself costs 7 (array and map headers, key, blob header).
-    assert 11 * len(regions) < growth <= 11 * len(regions) + 7
-    if len(regions) >= 2:
-        assert growth <= 16 * len(regions)
+    # 11 bytes a region inside the blob; one more only if the blob's msgpack header grows.
+    assert record_size(3) == 11
+    assert 11 * n_labels <= growth <= 11 * n_labels + 1
+    assert growth <= 16 * n_labels
     packet = pk.decode(rich)
-    got = packet_dependence(packet)
-    assert set(got) == set(deps)
-    assert corr_size(3) + 2 * len(LAGS) == len(packet.extras[DEPENDENCE_KEY]) // len(regions)
+    assert set(packet.dependence) == set(deps)
+    for lab, d in deps.items():
+        got = packet.dependence[lab]
+        for a, b in zip((*d.corr, *d.dx, *d.dy), (*got.corr, *got.dx, *got.dy)):
+            assert abs(a - b) <= 0.5 / 127 + 1e-12
+    assert packet.models == pk.decode(plain).models  # the models themselves are untouched
 
 
-def test_a_packet_without_the_entry_has_no_dependence():
+def test_a_packet_keeps_dependence_for_some_labels_only():
+    fits, labels, img = _fit_stub(4)
+    deps = measure(img, labels, {k: r.model for k, r in fits.items()})
+    some = {lab: deps[lab] for lab in (0, 2)}
+    packet = pk.models_packet(fits, bands=("R", "G", "B"), dependence=some, **HEADER)
+    back = pk.decode(pk.encode(packet))
+    assert set(back.dependence) == {0, 2}
+    assert back == packet  # the packet holds its dependence already quantized as sent
+
+
+def test_a_packet_without_dependence_has_none_and_no_section():
     fits, _, _ = _fit_stub(2)
-    assert packet_dependence(pk.decode(pk.encode_models(fits, bands=("R", "G", "B"), **HEADER))) == {}
+    body = pk.encode_models(fits, bands=("R", "G", "B"), **HEADER)
+    assert pk.decode(body).dependence == {}
+    assert not msgpack.unpackb(body)[7][10] & 0x80
 
 
-def test_oversized_dependence_entry_is_refused_by_the_decoder():
+def test_dependence_for_a_label_the_packet_lacks_or_of_other_bands_is_refused():
+    fits, _, _ = _fit_stub(1)
+    with pytest.raises(ValueError, match="does not carry"):
+        pk.models_packet(fits, bands=("R", "G", "B"), dependence={7: Dependence.independent(3)}, **HEADER)
+    with pytest.raises(ValueError, match="bands"):
+        pk.models_packet(fits, bands=("R", "G", "B"), dependence={0: Dependence.independent(2)}, **HEADER)
+
+
+def test_dependence_is_not_carried_in_the_extras_map():
     fits, _, _ = _fit_stub(1)
     body = msgpack.unpackb(pk.encode_models(fits, bands=("R", "G", "B"), **HEADER))
-    body.append({DEPENDENCE_KEY: b"\x00" * (256 * 128 + 1)})
+    body.append({"d": b"\x00" * 600})
     with pytest.raises(FrameError, match="longer"):
         pk.decode(msgpack.packb(body, use_bin_type=True))
 
@@ -154,7 +175,7 @@ def test_capture_sends_dependence_only_when_configured(tmp_path, on):
     labels[:, 64:] = 1
     cap = _pipeline(tmp_path, on)(labels).process(img, ViewAngles(90), ViewAngles(90))
     _, body = models_body(1, 1, 0.0, "rgb", cap)
-    got = packet_dependence(pk.decode(body))
+    got = pk.decode(body).dependence
     if on:
         assert set(got) == {0, 1} and got[0].dx[0] == pytest.approx(0.8, abs=0.08)
     else:

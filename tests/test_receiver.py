@@ -14,7 +14,7 @@ from tools.store import Store
 KEY = bytes(range(32))
 
 
-def models_body(seq, elevation=60.0, scene="mixed", extras=None, space="rgb"):
+def models_body(seq, elevation=60.0, scene="mixed", extras=None, space="rgb", dependence=None):
     view = render(scene, ViewAngles(elevation, 0.0), (40, 48), seed=0)
     f = FrameFitter(4, 3)
     f.add(view.image, view.mask)
@@ -22,7 +22,7 @@ def models_body(seq, elevation=60.0, scene="mixed", extras=None, space="rgb"):
     bands = ("R", "G", "B") if space == "rgb" else ("P1", "P2", "P3")
     body = pk.encode_models(fits, robot_id=3, seq=seq, time=100.0 + seq, commanded=(elevation, 0.0),
                             measured=(elevation + 0.2, 0.1), feature_space=space, bands=bands,
-                            extras=extras)
+                            extras=extras, dependence=dependence)
     return body, fits, view.mask
 
 
@@ -148,13 +148,11 @@ def test_over_the_link_captures_are_stored_before_acknowledgement_and_commands_a
 def _dependence(seq, elevation=60.0):
     """A MODELS body carrying the dependence measured on its own view, and that dependence."""
     from onboard.dependence import measure
-    from radio.packet_dependence import dependence_extras
 
     view = render("mixed", ViewAngles(elevation, 0.0), (40, 48), seed=0)
     _, fits, _ = models_body(seq, elevation)
     deps = measure(view.image, view.mask, {k: r.model for k, r in fits.items()})
-    labels = sorted({lab for lab, _ in fits})
-    return models_body(seq, elevation, extras=dependence_extras(deps, labels, 3))[0], deps
+    return models_body(seq, elevation, dependence=deps)[0], deps
 
 
 def test_dependence_in_a_models_packet_is_stored_and_reused_by_unchanged_markers(store):
@@ -172,15 +170,17 @@ def test_dependence_in_a_models_packet_is_stored_and_reused_by_unchanged_markers
     assert rx.rejected_extras == 0
 
 
-def test_malformed_dependence_is_counted_and_the_capture_stored_without_it(store):
-    from radio.packet_dependence import DEPENDENCE_KEY
+def test_malformed_dependence_makes_the_packet_bad_and_stores_nothing(store):
+    import msgpack
 
+    items = msgpack.unpackb(models_body(1)[0])
+    blob = bytearray(items[7])
+    blob[10] |= 0x80  # flags a dependence section the blob does not hold
+    items[7] = bytes(blob)
     rx = Receiver(store)
-    item = rx.handle(models_body(1, extras={DEPENDENCE_KEY: b"\x01\x02\x03"})[0])
-    assert item.stored and "dependence rejected" in item.text
-    assert rx.rejected_extras == 1
-    (cap,) = store.captures()
-    assert store.dependence(cap.id) == {} and len(store.models(cap.id)) == 6
+    item = rx.handle(msgpack.packb(items, use_bin_type=True))
+    assert item.kind is ItemKind.BAD and "dependence" in item.text
+    assert store.captures() == []
 
 
 def test_pca_basis_arrives_once_per_scene_and_applies_to_later_captures(store):

@@ -19,12 +19,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from onboard.dependence import Dependence
 from onboard.features import PcaBasis
 from onboard.fit import PercentileCodec, Z_LADDER
 from radio import FrameError
 from radio import packet as pk
-from radio.packet_dependence import packet_dependence
 from radio.link import Delivered, Link, LinkDown, LinkStats, LinkUp
 from radio.serial_port import Port
 from tools.store import Store
@@ -125,7 +123,8 @@ class Receiver:
         self.store, self.scene = store, scene
         self.counts: dict[str, int] = {k.value: 0 for k in ItemKind}
         self.duplicates = 0
-        # Malformed optional entries (dependence, PCA basis): the capture is stored without them.
+        # A malformed PCA basis in the extras: the capture is stored without it. (Dependence is
+        # part of the MODELS blob: a bad record makes the whole packet undecodable.)
         self.rejected_extras = 0
 
     def handle(self, payload: bytes) -> Item:
@@ -176,12 +175,7 @@ class Receiver:
                 fits[(rec.label, band)] = _Fit(m, rec.count, z, codec.decode(codes), 0.0, 0.0,
                                                *rec.censored(band))
         notes = []
-        dependence: dict[int, Dependence] = {}
-        try:
-            dependence = packet_dependence(p)
-        except FrameError as exc:
-            self.rejected_extras += 1
-            notes.append(f"dependence rejected: {exc}")
+        dependence = dict(p.dependence)
         pca = None
         try:
             pca = PcaBasis.from_extras(dict(p.extras))
