@@ -4,6 +4,8 @@ from __future__ import annotations
 import msgpack
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from onboard.dependence import LAGS, Dependence, corr_size, measure
 from onboard.fit import FrameFitter
@@ -145,6 +147,30 @@ def test_dependence_for_a_label_the_packet_lacks_or_of_other_bands_is_refused():
         pk.models_packet(fits, bands=("R", "G", "B"), dependence={7: Dependence.independent(3)}, **HEADER)
     with pytest.raises(ValueError, match="bands"):
         pk.models_packet(fits, bands=("R", "G", "B"), dependence={0: Dependence.independent(2)}, **HEADER)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.binary(min_size=22, max_size=22))
+def test_any_section_bytes_decode_to_steps_of_1_127_or_a_frame_error(section):
+    fits, _, _ = _fit_stub(2)
+    plain = pk.encode_models(fits, bands=("R", "G", "B"), **HEADER)
+    assert not any(t for lab in pk.decode(plain).labels for t in lab.tails)  # the blob ends with its codes
+    items = msgpack.unpackb(plain)
+    blob = bytearray(items[7])
+    blob[10] |= 0x80
+    items[7] = bytes(blob) + section
+    codes = np.frombuffer(section, np.int8).reshape(2, 11)
+    try:
+        got = pk.decode(msgpack.packb(items, use_bin_type=True)).dependence
+    except FrameError:
+        assert (codes == -128).any(axis=1).any()
+        return
+    for row, lab in zip(codes, (0, 1)):
+        if (row == -128).all():
+            assert lab not in got
+        else:
+            d = got[lab]
+            assert np.array_equal(np.rint(np.array((*d.corr, *d.dx, *d.dy)) * 127), row)
 
 
 def test_dependence_is_not_carried_in_the_extras_map():

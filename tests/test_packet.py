@@ -16,7 +16,9 @@ from radio.packet import (
     LogLevel, LogPacket, MaskPacket, ModelsPacket, NackPacket, Reason, RobotState, StatusPacket,
     UnchangedPacket, decode, downsample_labels, encode, encode_mask, encode_models, models_packet,
 )
+from onboard.dependence import Dependence
 from radio.packet_base import get_varint
+from radio.packet_dependence import record_size
 
 HEADER = dict(robot_id=3, seq=41, time=1_700_000_000.25, commanded=(45.0, 30.0),
               measured=(44.93, 29.87), feature_space="rgb")
@@ -151,14 +153,30 @@ def _sections(body: bytes) -> dict[str, int]:
     """Byte counts of the MODELS blob's parts (radio.packet_models doc)."""
     items = msgpack.unpackb(body)
     blob, n_bands = items[7], len(items[6])
-    nb = blob[10]
+    nb = blob[10] & 0x3F
     ids = [8 * j + i for j in range(nb) for i in range(8) if blob[11 + j] >> i & 1]
     pos = 11 + nb
     for _ in ids:
         _, pos = get_varint(blob, pos, "count", 6)
     width = 2 if struct.unpack_from(">H", blob, 8)[0] < 256 else 4
     codes = len(ids) * n_bands * 4 * width
-    return {"labels": pos - 10, "codes": codes, "records": len(blob) - pos - codes}
+    dependence = len(ids) * record_size(n_bands) if blob[10] & 0x80 else 0
+    return {"labels": pos - 10, "codes": codes, "dependence": dependence,
+            "records": len(blob) - pos - codes - dependence}
+
+
+def test_dependence_sits_between_codes_and_records_and_both_round_trip():
+    fits = _fits(3, 3, seed=2)
+    deps = {1: Dependence((0.3, -0.2, 0.9), (0.8, 0.6, 0.4, 0.1), (0.7, 0.5, 0.2, 0.0)),
+            7: Dependence.independent(3)}  # labels 1, 4, 7; label 4 unmeasured
+    packet = models_packet(fits, bands=("R", "G", "B"), censored={4: (0.01, 0.2)}, dependence=deps, **HEADER)
+    body = encode(packet)
+    parts = _sections(body)
+    assert parts["dependence"] == 3 * 11 and parts["records"] > 0
+    back = decode(body)
+    assert back.dependence == packet.dependence and set(back.dependence) == {1, 7}
+    assert back.models == decode(encode_models(fits, bands=("R", "G", "B"), censored={4: (0.01, 0.2)},
+                                               **HEADER)).models
 
 
 def test_fixed_point_error_is_at_most_half_a_step_under_a_hundredth_of_a_gray_level():
@@ -308,6 +326,10 @@ BAD = {
     "record: z ladder": _blob(lambda b: None, b"\x03\x00\x40\x40"),  # flag Z, then z index 64
     "after its records": _blob(lambda b: None, b"\x01\x00\x07\x07"),
     "extras": _raw(*_models_fields(), [1, 2]),
+    "reserved bit": _blob(lambda b: b.__setitem__(10, b[10] | 0x40)),
+    "dependence section has 0 bytes": _blob(lambda b: b.__setitem__(10, b[10] | 0x80)),
+    "no label has a measurement": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80" * 22),
+    "dependence code -128": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80" + b"\x00" * 21),
     "unknown command": _raw(SCHEMA_VERSION, int(Kind.COMMAND), 1, 99, {}),
     "takes arguments": _raw(SCHEMA_VERSION, int(Kind.COMMAND), 1, int(CommandName.PING), {"x": 1}),
     "empty run": _raw(SCHEMA_VERSION, int(Kind.MASK), 1, 1, 8, 8, 2, 2, b"\x01\x02", b"\x00\x04\x00\x00"),

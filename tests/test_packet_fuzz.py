@@ -11,6 +11,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from onboard.dependence import Dependence
 from onboard.fit import fit_histogram
 from radio import FrameError
 from radio.packet import (
@@ -32,7 +33,9 @@ def _valid_bodies() -> list[bytes]:
     return [
         encode_models(fits, robot_id=1, seq=7, time=12.5, commanded=(40.0, 10.0),
                       measured=(39.9, 10.2), feature_space="rgb", bands=("R", "G", "B"),
-                      censored={3: (0.01, 0.2)}, extras={"note": "x"}),
+                      censored={3: (0.01, 0.2)}, extras={"note": "x"},
+                      dependence={0: Dependence((0.5, -0.3, 0.1), (0.9, 0.7, 0.4, 0.1), (0.8, 0.6, 0.2, -0.1)),
+                                  9: Dependence.independent(3)}),
         encode_mask(labels, robot_id=1, seq=7, max_side=32),
         encode(UnchangedPacket(1, 9, 5.0, (30.0, 0.0), (29.5, 359.5), 4)),
         encode(StatusPacket(2, 10.5, RobotState.SWEEPING, (45.0, 90.0), 12, 4096, 17, "ok")),
