@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from onboard.dependence import LAGS, Dependence, corr_size, measure
+from onboard.dependence import LAGS, Dependence, measure
 from onboard.fit import FrameFitter
 from onboard.johnson import Johnson
 from radio import FrameError

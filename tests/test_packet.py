@@ -9,7 +9,7 @@ import msgpack
 import numpy as np
 import pytest
 
-from onboard.fit import Z_LADDER, FrameFitter, PercentileCodec, fit_histogram, fit_values
+from onboard.fit import Z_LADDER, FrameFitter, PercentileCodec, fit_histogram
 from radio import FrameError
 from radio.packet import (
     MAX_BODY, SCHEMA_VERSION, AckPacket, CommandName, CommandPacket, Kind, LabelModels,
