@@ -13,15 +13,18 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from enum import Enum
 
 import numpy as np
+from scipy.optimize import minimize
 
 from benchmarks import moments_johnson
 from benchmarks.stability_grid import SATURATIONS, Point, Saturation
-from onboard.censor import expected_histogram
-from onboard.fit import fit_histogram
-from onboard.johnson import Johnson
+from onboard.censor import expected_histogram, histogram_l1
+from onboard.fit import fit_histogram, histogram_percentiles, rebuild, z_for_count
+from onboard.johnson import Family, Johnson, normal_cdf
+from onboard.percentile import model_from_percentiles
 
 U = np.linspace(0.01, 0.99, 99)
 U_W1 = (np.arange(2000) + 0.5) / 2000
@@ -105,3 +108,97 @@ def evaluate(point: Point, sizes: list[Size], rng: np.random.Generator,
             for method in METHODS:
                 out[(method, size, sat)] = fit_and_score(method, counts, truth)
     return out
+
+
+# -- why a grid point is bad: the 8-bit floor, the fitter, or the grid --------------------------
+
+
+class Cause(Enum):
+    FLOOR = "a: 8-bit floor"  # the fit is within a level of what the quantized curve itself gives
+    FITTER = "b: fitter"  # a fit from the same 8-bit counts reaches the floor; ours does not
+    GRID = "c: grid"  # the scaling folds mass into the end levels, or the curve is finer than float64
+    OPEN = "open"  # none of the above shown
+
+
+@dataclass(frozen=True)
+class Diagnosis:
+    """One grid point's true curve, the best an 8-bit answer can do, and what the fit does, all
+    from the noise-free counts of `n` pixels (deterministic, so anyone can repeat it)."""
+    point: Point
+    n: int
+    levels90: int  # fewest levels holding 90% of the mass
+    peak: tuple[int, float]  # the fullest level and its mass
+    at_bound: bool  # the fullest level is the first or last occupied one
+    outside: float  # true mass beyond -0.5 .. 255.5, folded into the end levels
+    true_percentiles: tuple[float, ...]  # the four the fitter reads, x(-3z) .. x(3z), of the true curve
+    read: tuple[float, ...]  # the four the fitter read from the counts
+    gap: float  # smallest gap between the four true percentiles, gray
+    floor: float  # worst quantile error of the curve's own histogram, read as the fitter reads it
+    exact: float  # worst quantile error of the percentile formulas fed the true quantiles
+    fit: Score  # our fit of the counts
+    piles: float  # our fit of the counts cut to the occupied levels (end piles read as censored)
+    unwidened: float  # our fit without widening its support to the occupied levels
+    refined: float  # our fits refined by histogram L1 (Nelder-Mead, their own families)
+    cause: Cause
+    why: str
+
+
+def diagnose(point: Point, n: int) -> Diagnosis:
+    c, truth = point.curve, Truth.of(point.curve)
+    counts = expected_histogram(c, n)
+    occ = np.flatnonzero(counts)
+    f0, f1 = int(occ[0]), int(occ[-1])
+    peak = int(truth.p.argmax())
+    floor = float(np.abs(histogram_percentiles(counts, U) - truth.q)[truth.inside].max(initial=0.0))
+    z = z_for_count(n)
+    true_pct = c.ppf(np.array([normal_cdf(k * z) for k in (-3, -1, 1, 3)]))
+    with warnings.catch_warnings(), np.errstate(all="ignore"):
+        warnings.simplefilter("ignore")
+        exact = score(model_from_percentiles(tuple(true_pct), z, n), truth).worst
+        fit = fit_histogram(counts)
+        piled = fit_histogram(counts[f0:f1 + 1], lo=float(f0)).model
+        unwidened = score(rebuild(replace(fit, support=None)), truth).worst
+        refined = score(min((_refined(m, counts) for m in (fit.model, piled)),
+                            key=lambda m: histogram_l1(m, counts)), truth).worst
+    got, piles = score(fit.model, truth, fit.fallback), score(piled, truth).worst
+    outside = float(c.cdf(-0.5) + (1.0 - c.cdf(255.5)))
+    gap = float(np.diff(true_pct).min())
+    # the cheapest remedy (for the fitter) that reaches the floor, else the best of them
+    remedies = [(piles, f"the pile at level {peak} read as censored"),
+                (unwidened, "the support is not widened to the occupied levels"), (refined, "refined by histogram L1")]
+    best, how = next((r for r in remedies if r[0] <= floor + 1.0), min(remedies, key=lambda r: r[0]))
+    if outside > 0.01:
+        cause, why = Cause.GRID, f"the scaling folds {outside:.1%} of the mass into the end levels"
+    elif got.worst <= floor + 1.0:
+        cause, why = Cause.FLOOR, "within a level of the quantized curve's own quantiles"
+    elif exact > 1.0:
+        cause, why = Cause.GRID, (f"two true percentiles {gap:.0e} gray apart: even the exact quantiles "
+                                  f"miss by {exact:.0f}; numerically a point mass plus a spread")
+    elif best <= floor + 1.0:
+        cause, why = Cause.FITTER, f"{how}: {best:.1f}"
+    else:
+        cause, why = Cause.OPEN, f"best remedy tried ({how}) {best:.1f}"
+    levels90 = int(np.searchsorted(np.cumsum(np.sort(truth.p)[::-1]), 0.9) + 1)
+    return Diagnosis(point, n, levels90, (peak, float(truth.p[peak])), peak in (f0, f1), outside,
+                     tuple(float(x) for x in true_pct), tuple(fit.percentiles), gap, floor, exact, got, piles,
+                     unwidened, refined, cause, why)
+
+
+def _refined(model: Johnson, counts: np.ndarray) -> Johnson:
+    """`model` moved by Nelder-Mead to a local minimum of the histogram L1, in its own family:
+    what the 8-bit counts alone can pin down (a reference, far too slow for the robot)."""
+    if model.family is Family.CONST:
+        return model
+    sign = 1.0 if model.lam > 0 else -1.0
+
+    def build(v: np.ndarray) -> Johnson:
+        return Johnson(model.family, float(v[0]), float(np.exp(v[1])), float(v[2]), sign * float(np.exp(v[3])))
+
+    def loss(v: np.ndarray) -> float:
+        try:
+            return histogram_l1(build(v), counts)
+        except ValueError:
+            return 2.0
+    v0 = np.array([model.gamma, math.log(model.delta), model.xi, math.log(abs(model.lam))])
+    best = minimize(loss, v0, method="Nelder-Mead", options={"maxiter": 3000, "xatol": 1e-7, "fatol": 1e-10})
+    return build(best.x) if best.fun < loss(v0) else model
