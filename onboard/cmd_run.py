@@ -58,7 +58,9 @@ def run(args: argparse.Namespace) -> int:
     from radio.auth import FileCounterStore
     from radio.link import Link
     from onboard.outbox import OutboxError
-    from onboard.runtime import LinkTransport, Runtime, Segmentation
+    from onboard.runtime import Runtime
+    from onboard.segmentation import Segmentation
+    from onboard.transport import LinkTransport
     from onboard.watchdog import Notifier
 
     cfg.state_dir.mkdir(parents=True, exist_ok=True)

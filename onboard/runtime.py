@@ -19,70 +19,23 @@ from __future__ import annotations
 import copy
 import enum
 import json
-import os
 import time
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Any, Callable, Protocol
+from typing import Any, Callable
 
 from hal.interfaces import ViewAngles
 from onboard import config as config_mod
 from onboard import capture as wire
 from onboard.capture import Capture, Pipeline, PoseSkipped
-from radio import FrameError
-from radio import packet as pk
 from onboard.config import Config, ConfigError
 from onboard.outbox import Outbox, OutboxFull
 from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore
+from onboard.transport import Acked, LinkState, Received, Transport
 from onboard.watchdog import Notifier
-
-
-# -- the link seam ---------------------------------------------------------------------
-
-
-@dataclass(frozen=True, slots=True)
-class Received:
-    body: bytes
-
-
-@dataclass(frozen=True, slots=True)
-class Acked:
-    msg_id: int
-
-
-@dataclass(frozen=True, slots=True)
-class LinkState:
-    up: bool
-
-
-class Transport(Protocol):
-    """What the runtime needs from a link: reliable send under a persistent id, and events."""
-
-    def send(self, body: bytes, msg_id: int, now: float) -> None: ...
-    def poll(self, now: float) -> list[Received | Acked | LinkState]: ...
-
-
-class MemoryTransport:
-    """An in-memory link for tests: `sent` holds (msg_id, body); push events with `deliver`."""
-
-    def __init__(self, auto_ack: bool = True) -> None:
-        self.sent: list[tuple[int, bytes]] = []
-        self.auto_ack = auto_ack
-        self._events: deque = deque()
-
-    def send(self, body: bytes, msg_id: int, now: float) -> None:
-        self.sent.append((msg_id, body))
-        if self.auto_ack:
-            self._events.append(Acked(msg_id))
-
-    def deliver(self, event: Received | Acked | LinkState) -> None:
-        self._events.append(event)
-
-    def poll(self, now: float) -> list[Received | Acked | LinkState]:
-        out = list(self._events)
-        self._events.clear()
-        return out
+from radio import FrameError
+from radio import packet as pk
 
 
 # -- the runtime -----------------------------------------------------------------------
@@ -498,12 +451,6 @@ class Runtime:
         return 0
 
 
-def _write_json(path: Path, record: dict) -> None:
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(record))
-    os.replace(tmp, path)
-
-
 def _read_pca(text: str | None, legacy: Path) -> Any:
     """The scene's PCA basis saved before a restart (None if none or unreadable: refit)."""
     from onboard.features import PcaBasis
@@ -527,115 +474,3 @@ def _flat_status(st: dict) -> dict:
     out["faults"] = list(st["faults"])
     out["errors"] = list(st["errors"])
     return out
-
-
-# -- segmentation for the configured method ---------------------------------------------
-
-
-class Segmentation:
-    """Labels per frame for `segment.method`, through `onboard.segment`.
-
-    isodata: a `Segmenter` with centres fitted once per scene and a palette of clutter
-    types persisted in `state_dir/palette.json`, so labels mean the same across views and
-    restarts. mask: the label file, read at start. scene: the fake camera's own mask of
-    the frame it rendered (ground truth). `changed` comes from the Segmenter in every case.
-    """
-
-    def __init__(self, cfg: Config, hal: Any = None) -> None:
-        from onboard import segment as sg_mod
-        from onboard.isodata import IsodataParams
-
-        self.cfg = cfg
-        self.hal = hal
-        sg = cfg.segment
-        self.palette_path = cfg.state_dir / "palette.json"
-        try:
-            params = IsodataParams(k=sg.k, min_samples=sg.min_samples, split_std=sg.split_std,
-                                   merge_distance=sg.merge_distance, max_merges=sg.max_merges,
-                                   iterations=sg.iterations, subsample=sg.subsample, seed=cfg.hal.seed)
-            method = sg_mod.SegmentMethod.MASK if sg.method == "mask" else sg_mod.SegmentMethod.ISODATA
-            scfg = sg_mod.SegmentConfig(method, mask_path=None if sg.mask is None else str(sg.mask),
-                                        n_labels=sg.n_labels, isodata=params,
-                                        palette_size=min(sg.n_labels, sg_mod.MAX_LABEL + 1),
-                                        refit_drift=sg.refit_drift)
-            self.segmenter = sg_mod.Segmenter.from_config(scfg, self._read_palette())
-        except ValueError as exc:
-            raise ConfigError(f"segment: {exc}") from None
-        self._saved = self._record()
-
-    def _read_palette(self) -> dict | None:
-        if self.cfg.segment.method != "isodata" or not self.palette_path.exists():
-            return None
-        try:
-            rec = json.loads(self.palette_path.read_text())
-        except (OSError, ValueError) as exc:
-            raise ValueError(f"palette file {self.palette_path} is unreadable ({exc}); "
-                             "remove it to start a new palette") from None
-        if not isinstance(rec, dict):
-            raise ValueError(f"palette file {self.palette_path} does not hold a palette record")
-        return rec
-
-    def _record(self) -> dict | None:
-        pal = self.segmenter.palette
-        return None if pal is None else pal.to_record()
-
-    def _save_palette(self) -> None:
-        rec = self._record()
-        if rec is None or rec == self._saved:
-            return
-        _write_json(self.palette_path, rec)
-        self._saved = rec
-
-    def force_send(self) -> None:
-        """The next capture sends its label map whether or not it changed."""
-        self.segmenter.force_send()
-
-    def __call__(self, feats: Any, frame: Any, measured: ViewAngles) -> tuple[Any, bool]:
-        method = self.cfg.segment.method
-        if method == "scene":
-            labels = getattr(getattr(self.hal, "camera", None), "last_mask", None)
-            if labels is None or labels.shape != feats.data.shape[:2]:
-                raise PoseSkipped("segment: the camera has no ground-truth mask for this frame")
-            self.segmenter.note(labels)
-        else:
-            try:
-                labels = self.segmenter.labels_for(feats)
-            except ValueError as exc:
-                raise PoseSkipped(f"segment: {exc}") from None
-            self._save_palette()
-        return labels, self.segmenter.changed
-
-
-# -- binding to radio.link over a byte port ----------------------------------------------
-
-
-class LinkTransport:
-    """The sans-I/O `radio.link.Link` bound to a pyserial-like port (read/write/in_waiting)."""
-
-    def __init__(self, link: Any, port: Any) -> None:
-        self.link = link
-        self.port = port
-
-    def send(self, body: bytes, msg_id: int, now: float) -> None:
-        self.link.send(body, now, reliable=True, msg_id=msg_id)
-
-    def poll(self, now: float) -> list[Received | Acked | LinkState]:
-        from radio import link as lk
-
-        data = self.port.read(max(1, getattr(self.port, "in_waiting", 0) or 0))
-        events = self.link.receive(data, now) if data else []
-        out = self.link.poll(now)
-        if out:
-            self.port.write(out)
-        events = [*events, *self.link.pop_events()]
-        mine: list[Received | Acked | LinkState] = []
-        for ev in events:
-            if isinstance(ev, lk.Delivered):
-                mine.append(Received(ev.payload))
-            elif isinstance(ev, lk.Acked):
-                mine.append(Acked(ev.msg_id))
-            elif isinstance(ev, lk.LinkUp):
-                mine.append(LinkState(True))
-            elif isinstance(ev, lk.LinkDown):
-                mine.append(LinkState(False))
-        return mine

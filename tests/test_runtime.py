@@ -13,7 +13,9 @@ from hal.interfaces import ViewAngles
 from onboard import config
 from onboard.capture import Pipeline
 from onboard.outbox import Outbox
-from onboard.runtime import Acked, LinkState, MemoryTransport, Mode, Received, Runtime, Segmentation
+from onboard.runtime import Mode, Runtime
+from onboard.segmentation import Segmentation
+from onboard.transport import Acked, LinkState, MemoryTransport, Received
 from radio import packet as pk
 
 BASE = '[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\nfault_rate = {rate}\nfault_seed = 3\n' \
@@ -218,7 +220,9 @@ def test_runtime_imports_nothing_from_the_host_and_stays_under_150_mb(tmp_path):
     code = f"""
 import json, resource, sys
 from onboard import config
-from onboard.runtime import MemoryTransport, Runtime, Segmentation
+from onboard.runtime import Runtime
+from onboard.segmentation import Segmentation
+from onboard.transport import MemoryTransport
 from hal.factory import build_hal
 cfg = config.load({str(path)!r})
 hal = build_hal(cfg.hal)

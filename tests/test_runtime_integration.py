@@ -15,7 +15,9 @@ from hal.interfaces import HalError
 from onboard import config
 from onboard.config import ConfigError
 from onboard.features import PcaBasis
-from onboard.runtime import MemoryTransport, Received, Runtime, Segmentation
+from onboard.runtime import Runtime
+from onboard.segmentation import Segmentation
+from onboard.transport import MemoryTransport, Received
 from radio import FrameError
 from radio import packet as pk
 

@@ -9,7 +9,9 @@ import pytest
 
 from hal.factory import build_hal
 from onboard import cli, config
-from onboard.runtime import MemoryTransport, Mode, Runtime, Segmentation
+from onboard.runtime import Mode, Runtime
+from onboard.segmentation import Segmentation
+from onboard.transport import MemoryTransport
 from onboard.watchdog import Notifier
 
 ROOT = Path(__file__).resolve().parents[1]
