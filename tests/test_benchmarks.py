@@ -11,8 +11,8 @@ from benchmarks.__main__ import discover, main, run_one
 from benchmarks.common import Context, Saving, Section, paired_rounds
 from benchmarks.johnson_moments import shape_moments, solve_shape
 from benchmarks.moments_johnson import MomentFitError, fit_moments
-from benchmarks.stability_grid import SATURATIONS, Saturation, curve, grid
-from benchmarks.stability_score import METHODS, Size, Truth, evaluate, fit_and_score, score
+from benchmarks.stability_grid import SATURATIONS, Point, Saturation, curve, grid
+from benchmarks.stability_score import METHODS, Cause, Size, Truth, diagnose, evaluate, fit_and_score, score
 from onboard.johnson import Family, Johnson
 
 EXPECTED = {"core", "dependence", "ingest", "onboard", "peers", "runtime", "sampling", "scene", "stability",
@@ -202,3 +202,47 @@ def test_quick_stability_map_has_the_saturation_axis_and_no_percentile_failure(q
     assert all(label in header for label in ("none", "10% at 255", "40% at 255", "10% at 0", "40% at 0"))
     assert "**What censoring buys**" in text and "**Near the boundary**" in text
     assert (out / "stability_percentile.png").stat().st_size > 1000
+
+
+def test_quick_stability_cells_give_median_90th_percentile_and_worst_in_order(quick):
+    text, _ = quick("stability")
+    cell = re.compile(r"^(\d+\.\d) / (\d+\.\d) / (\d+\.\d) \((\d+\.\d|-)\) / \d+\.\d / \d\.\d{3}( \[\d+\])?( \{\d+\})?$")
+    for row in tables(text)[0][2:]:
+        for c in row.split("|")[2:-1]:
+            m = cell.match(c.strip())
+            assert m, c
+            med, p90, worst = (float(m.group(k)) for k in (1, 2, 3))
+            assert med <= p90 <= worst and (m.group(4) == "-" or float(m.group(4)) <= worst)
+    assert "**Why the worst points are bad**" in text
+    diag = next(t for t in tables(text) if "L1-refined" in t[0])
+    assert len(diag) == 2 + 3 and all(re.search(r"\| (a|b|c): |\| open: ", r) for r in diag[2:])
+
+
+def test_diagnosis_of_a_normal_curve_is_the_8_bit_floor():
+    d = diagnose(next(p for p in grid((0.0,)) if p.where == "normal point"), 100_000)
+    assert d.cause is Cause.FLOOR and d.floor <= 0.5 and d.exact < 0.01 and d.fit.worst <= d.floor + 1.0
+    assert d.outside < 0.002 and not d.at_bound and 20 < d.levels90 < 200
+
+
+def test_diagnosis_of_a_pile_at_the_bound_finds_a_remedy_that_reaches_the_floor():
+    # beta1 4, beta2 5.3: an SB curve with about 65% of its mass in level 20, its lower bound
+    d = diagnose(Point(4.0, 5.3, "pile", curve(4.0, 5.3)), 1_000_000)
+    assert d.peak[0] == 20 and 0.6 < d.peak[1] < 0.7 and d.at_bound and d.outside == 0.0
+    assert d.floor <= 0.5 and d.exact < 0.01  # the counts and the exact quantiles both pin the curve
+    assert d.piles <= d.floor + 1.0 and d.refined <= d.floor + 1.0
+    assert d.cause in (Cause.FITTER, Cause.FLOOR)  # FLOOR once the fitter reads such piles itself
+    if d.cause is Cause.FITTER:
+        assert d.why.startswith("the pile at level 20") and d.fit.worst > d.floor + 1.0
+
+
+def test_diagnosis_calls_a_pile_finer_than_float64_a_grid_artifact():
+    d = diagnose(Point(4.0, 5.1, "spike", curve(4.0, 5.1)), 1_000_000)
+    assert d.gap < 1e-6 and d.exact > 1.0 and d.floor <= 0.5
+    assert d.cause is Cause.GRID and "exact quantiles" in d.why
+
+
+def test_diagnosis_calls_a_curve_spilling_past_the_8_bit_range_a_grid_artifact():
+    d = diagnose(Point(0.0, 3.0, "wide", Johnson.normal(128.0, 100.0)), 100_000)
+    below, above = (0.5 * math.erfc(t / 100.0 / math.sqrt(2.0)) for t in (128.5, 127.5))
+    assert d.outside == pytest.approx(below + above, rel=1e-9)
+    assert d.cause is Cause.GRID and "folds" in d.why
