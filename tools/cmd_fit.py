@@ -5,11 +5,9 @@ import argparse
 import json
 import time
 
-import numpy as np
 
-from onboard.fit import FrameFitter
 from tools.cli import CliError
-from tools.images import SPACES, ImageError, feature_bands, read_image, read_mask
+from tools.images import SPACES, fit_image
 from tools.store import CorruptDatabase, Store
 from tools.synth import models_document
 
@@ -32,14 +30,10 @@ def run(args: argparse.Namespace) -> int:
     if args.db and args.angle is None:
         raise CliError("--db needs --angle: every stored capture has a view angle")
     try:
-        image = read_image(args.image)
-        mask = read_mask(args.mask, image.shape[:2]) if args.mask else np.zeros(image.shape[:2], np.uint8)
-        feats, pca = feature_bands(image, args.space)
-    except (ImageError, ValueError) as exc:
+        fitted = fit_image(args.image, args.mask, args.space)
+    except ValueError as exc:  # ImageError too
         raise CliError(str(exc)) from None
-    fitter = FrameFitter(int(mask.max()) + 1, feats.data.shape[2], bins=feats.levels)
-    fitter.add(feats.data, mask)
-    results = fitter.fit()
+    feats, pca, mask, results = fitted.feats, fitted.pca, fitted.labels, fitted.results
     doc = models_document(args.space, feats.band_names, feats.levels, args.angle, results,
                           pca=None if pca is None else pca.to_record(), image=str(args.image))
     if args.db:

@@ -5,10 +5,15 @@ stored as single-channel PNG so every label value survives a round trip.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
+
+if TYPE_CHECKING:
+    from onboard.features import FeatureFrame, PcaBasis
 
 
 class ImageError(ValueError):
@@ -121,6 +126,28 @@ def feature_bands(image: np.ndarray, space: str, pca=None):
     if space == "pca" and pca is None:
         pca = PcaBasis.fit(image)
     return compute(image, FeatureSpec(FeatureSpace(space)), pca=pca), pca
+
+
+@dataclass(frozen=True)
+class FittedImage:
+    """An image on disk fitted with the robot's own FrameFitter, label by label, band by band."""
+
+    feats: "FeatureFrame"
+    pca: "PcaBasis | None"
+    labels: np.ndarray  # the mask's labels, or all 0 without a mask
+    results: dict
+
+
+def fit_image(image_path: str | Path, mask_path: str | Path | None, space: str) -> FittedImage:
+    """Read, convert and fit one image; ImageError (a ValueError) names what is wrong."""
+    from onboard.fit import FrameFitter
+
+    image = read_image(image_path)
+    labels = read_mask(mask_path, image.shape[:2]) if mask_path else np.zeros(image.shape[:2], np.uint8)
+    feats, pca = feature_bands(image, space)
+    fitter = FrameFitter(int(labels.max()) + 1, feats.data.shape[2], bins=feats.levels)
+    fitter.add(feats.data, labels)
+    return FittedImage(feats, pca, labels, fitter.fit())
 
 
 def to_rgb(bands: np.ndarray, space: str, pca=None) -> np.ndarray:

@@ -19,9 +19,9 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from onboard.fit import FitResult, FrameFitter
+from onboard.fit import FitResult
 from tools.datasets import Angles, DatasetImage, Layout, scan
-from tools.images import ImageError, feature_bands, read_image, read_mask
+from tools.images import ImageError, fit_image, read_mask
 from tools.store import Store
 
 # Images per database commit, and the longest a fitted image waits for its commit.
@@ -70,14 +70,11 @@ def dataset_robot(root: str | Path) -> str:
 def fit_job(job: Job) -> Fitted:
     """Fit one image (runs in a worker). Raises IngestError naming the file."""
     try:
-        image = read_image(job.path)
-        labels = read_mask(job.mask, image.shape[:2]) if job.mask else np.zeros(image.shape[:2], np.uint8)
-        feats, _ = feature_bands(image, job.space)
-    except (ImageError, ValueError) as exc:
+        fitted = fit_image(job.path, job.mask, job.space)
+    except ValueError as exc:  # ImageError too
         raise IngestError(str(exc)) from None
-    fitter = FrameFitter(int(labels.max()) + 1, feats.data.shape[2], bins=feats.levels)
-    fitter.add(feats.data, labels)
-    return Fitted(job.name, tuple(feats.band_names), fitter.fit(), labels if job.mask else None)
+    return Fitted(job.name, tuple(fitted.feats.band_names), fitted.results,
+                  fitted.labels if job.mask else None)
 
 
 def _mask_for(image: DatasetImage, mask: Path | None) -> str | None:
