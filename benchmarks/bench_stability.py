@@ -119,12 +119,12 @@ def _diagnosis_text(ds: list[Diagnosis]) -> list[str]:
              + (f" and {len(by[Cause.OPEN])} are open" if by[Cause.OPEN] else "") + ". "
              f"The floor is {min(d.floor for d in ds):.2f}-{max(d.floor for d in ds):.2f} gray: the 8-bit counts "
              "pin every quantile that closely, so an error of many gray is never the quantization itself. "
-             f"The scaling clips nothing that matters (at most {max(d.outside for d in ds):.0e} of the mass "
-             "lies outside 0..255)."]
+             + (f"The scaling clips nothing that matters (at most {max(d.outside for d in ds):.0e} of the mass "
+                "lies outside 0..255)." if max(d.outside for d in ds) <= 0.01 else "")]
     if pile:
         d = max(pile, key=lambda d: d.fit.worst)
         parts.append(
-            f" {len(pile)} (b) points are SB curves with {min(x.peak[1] for x in pile):.0%}-"
+            f" {_count(len(pile), '(b) point')} {'is a curve' if len(pile) == 1 else 'are curves'} with {min(x.peak[1] for x in pile):.0%}-"
             f"{max(x.peak[1] for x in pile):.0%} of their mass piled into the one level at their bound: the "
             "fitter spreads that level's mass evenly across it and reads its low percentiles inside it (at "
             f"beta1 = {d.point.beta1:g}, beta2 = {d.point.beta2:.2f}: x(-3z), x(-z) read "
@@ -135,25 +135,32 @@ def _diagnosis_text(ds: list[Diagnosis]) -> list[str]:
             f"{max(x.piles for x in pile):.1f} gray.")
     for how in sorted({d.why.split(":")[0] for d in rest}):
         group = [d for d in rest if d.why.startswith(how)]
-        parts.append(f" {len(group)} (b) point(s) ({', '.join(f'{d.point.beta1:g}/{d.point.beta2:.2f}' for d in group)}: "
-                     f"{', '.join(f'{d.fit.worst:.1f}' for d in group)} gray) reach the floor when {how}: "
-                     f"{', '.join(f'{_remedy(d, how):.1f}' for d in group)}.")
-    grid_pts = [d for d in by[Cause.GRID] if d.exact > 1.0]
-    if grid_pts:
+        parts.append(f" {_count(len(group), '(b) point')} (beta1/beta2 "
+                     f"{', '.join(f'{d.point.beta1:g}/{d.point.beta2:.2f}' for d in group)}: "
+                     f"{', '.join(f'{d.fit.worst:.1f}' for d in group)} gray) {'reaches' if len(group) == 1 else 'reach'} "
+                     f"the floor when {how}: "
+                     f"{', '.join(f'{d.remedy:.1f}' for d in group)}.")
+    fine = [d for d in by[Cause.GRID] if d.exact > 1.0]
+    if fine:
+        band = " in the near-boundary band" if all(d.point.near_boundary for d in fine) else ""
         parts.append(
-            f" The {len(grid_pts)} (c) point(s) "
-            f"({', '.join(f'{d.point.beta1:g}/{d.point.beta2:.2f}' for d in grid_pts)}, in the near-boundary "
-            f"band) are SB curves with delta {min(d.point.curve.delta for d in grid_pts):.3f}-"
-            f"{max(d.point.curve.delta for d in grid_pts):.3f}: their pile at the bound is narrower than "
-            f"float64 resolves (two true percentiles {max(d.gap for d in grid_pts):.0e} gray apart or less), "
-            f"so even the exact quantiles miss by {min(d.exact for d in grid_pts):.0f}-"
-            f"{max(d.exact for d in grid_pts):.0f} gray; numerically they are a point mass plus a spread, "
-            "which no four-percentile Johnson fit represents.")
+            f" {_count(len(fine), '(c) point')} (beta1/beta2 "
+            f"{', '.join(f'{d.point.beta1:g}/{d.point.beta2:.2f}' for d in fine)}{band}: delta "
+            f"{', '.join(f'{d.point.curve.delta:.3f}' for d in fine)}) put "
+            f"{', '.join(f'{d.peak[1]:.0%}' for d in fine)} of the mass into a pile at the bound narrower than "
+            f"float64 resolves (two true percentiles {max(d.gap for d in fine):.0e} gray apart or less), so even "
+            f"the exact quantiles miss by {', '.join(f'{d.exact:.0f}' for d in fine)} gray: numerically a point "
+            "mass plus a spread, which no four-percentile Johnson fit represents; such points measure the grid, "
+            "not the fitter.")
+    clipped = [d for d in by[Cause.GRID] if d not in fine]
+    if clipped:
+        parts.append(f" {_count(len(clipped), '(c) point')} lose "
+                     f"{', '.join(f'{d.outside:.1%}' for d in clipped)} of the mass to the scaling.")
     return ["".join(parts)]
 
 
-def _remedy(d: Diagnosis, how: str) -> float:
-    return d.refined if how.startswith("refined") else d.unwidened if how.startswith("support") else d.piles
+def _count(k: int, noun: str) -> str:
+    return f"{k} {noun}{'' if k == 1 else 's'}"
 
 
 def _censoring(points, sizes, res) -> list[str]:

@@ -139,6 +139,7 @@ class Diagnosis:
     piles: float  # our fit of the counts cut to the occupied levels (end piles read as censored)
     unwidened: float  # our fit without widening its support to the occupied levels
     refined: float  # our fits refined by histogram L1 (Nelder-Mead, their own families)
+    remedy: float  # the error of the remedy `why` names (the first of the three to reach the floor)
     cause: Cause
     why: str
 
@@ -181,7 +182,7 @@ def diagnose(point: Point, n: int) -> Diagnosis:
     levels90 = int(np.searchsorted(np.cumsum(np.sort(truth.p)[::-1]), 0.9) + 1)
     return Diagnosis(point, n, levels90, (peak, float(truth.p[peak])), peak in (f0, f1), outside,
                      tuple(float(x) for x in true_pct), tuple(fit.percentiles), gap, floor, exact, got, piles,
-                     unwidened, refined, cause, why)
+                     unwidened, refined, best, cause, why)
 
 
 def _refined(model: Johnson, counts: np.ndarray) -> Johnson:
