@@ -69,6 +69,20 @@ def censored_counts(counts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return _censored_end(c[..., 0], c[..., 1], c[..., 2]), _censored_end(c[..., -1], c[..., -2], c[..., -3])
 
 
+def piled_counts(counts: np.ndarray, first: np.ndarray, last: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels piled at each row's first and last occupied bin (`first`, `last`), by the censoring
+    test read there: at the sensor limits the same counts as `censored_counts`. Rows spanning
+    fewer than four occupied-range bins have no piles (too little to tell a pile from a peak)."""
+    c = np.asarray(counts)
+    r = np.arange(c.shape[0])
+    wide = last - first >= 3
+    f0, f1 = np.where(wide, first, 0), np.where(wide, last, 3)
+    low = _censored_end(c[r, f0], c[r, f0 + 1], c[r, f0 + 2])
+    high = _censored_end(c[r, f1], c[r, f1 - 1], c[r, f1 - 2])
+    zero = np.zeros_like(low)
+    return np.where(wide, low, zero), np.where(wide, high, zero)
+
+
 def _censored_end(end: np.ndarray, next1: np.ndarray, next2: np.ndarray) -> np.ndarray:
     n1, n2 = next1.astype(np.float64), next2.astype(np.float64)
     # a density rising towards the limit extrapolates linearly; a falling one stays at next1

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from onboard.censor import (MIN_REPORTED, SHIFT_SCALE, Placement, censored_counts, fallback_probs,
-                            histogram_l1, place, quantize)
+                            histogram_l1, piled_counts, place, quantize)
 from onboard.johnson import Johnson
 from onboard.percentile import model_from_percentiles, sl_band, support_of, widen
 
@@ -210,6 +210,11 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
     beta1, beta2 = _betas(counts, lo, bin_width)
     if censor:
         low_n, high_n = censored_counts(counts)
+        # Piles at an interior first or last occupied level (a pole at a bound inside the
+        # range) are read like censored ones: percentiles placed clear of them.
+        pile_lo, pile_hi = piled_counts(counts, first, last)
+        pile_lo[first == 0] = 0
+        pile_hi[last == bins - 1] = 0
     plans: list[tuple[Placement, float, float] | None] = []
     for i in range(rows):
         count, z = totals[i], zs[i]
@@ -218,7 +223,7 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
             continue
         low = quantize(float(low_n[i]) / count) if censor else 0.0
         high = quantize(float(high_n[i]) / count) if censor else 0.0
-        where = place(z, low, high, count, Z_LADDER)
+        where = _placement(z, low, high, count, pile_lo[i], pile_hi[i]) if censor else Placement(z)
         if where == Placement(z) and max(low, high) < MIN_REPORTED:
             low = high = 0.0
         plans.append((where, low, high))
@@ -238,11 +243,23 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
             continue
         where, low, high = plans[i]
         fit = _fit_one(counts[i], cum[i], where, low, high, count, f0, f1, lo, bin_width, codec, raw.get(i))
-        if low or high:
+        if low or high or where != Placement(z):
             fit = _best_censored(counts[i], cum[i], fit, z, count, f0, f1, lo, bin_width, codec)
         out.append(FitResult(fit.model, count, fit.z, fit.percentiles, float(beta1[i]), float(beta2[i]),
                              fit.shift, low, high, fit.fallback, fit.support))
     return out
+
+
+def _placement(z: float, low: float, high: float, count: int, pile_lo: int, pile_hi: int) -> Placement:
+    """Where to read the percentiles of a row with censored fractions low, high at the sensor
+    limits and pile_lo, pile_hi pixels piled at an interior end. An interior pile is genuine
+    density (an SB's pole at its bound): the model must hold it, not clip it, so it never takes
+    the fallback, whose normal only reproduces piles at the sensor limits."""
+    if pile_lo or pile_hi:
+        where = place(z, low + quantize(pile_lo / count), high + quantize(pile_hi / count), count, Z_LADDER)
+        if not where.fallback:
+            return where
+    return place(z, low, high, count, Z_LADDER)
 
 
 def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, high: float, count: int,
@@ -265,17 +282,18 @@ def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, 
 
 def _best_censored(counts: np.ndarray, cum: np.ndarray, placed: FitResult, z: float, count: int,
                    f0: int, f1: int, lo: float, bin_width: float, codec: PercentileCodec) -> FitResult:
-    """Of the censored placement, the normal fallback and the plain symmetric read at the label's
-    z (censored fractions still recorded), the model whose bin probabilities are nearest the
-    histogram (L1; the first of equals). A shifted fit extrapolates the pile-up from what the
-    uncensored part shows, and a U- or J-shaped histogram can mislead it where the plain read
-    would not; the comparison keeps censoring from ever fitting the histogram worse. Only
-    censored models pay for it. The choice travels as shift, z and fallback flag."""
+    """Of the censored placement, the normal fallback (only when a sensor limit is censored) and
+    the plain symmetric read at the label's z (censored fractions still recorded), the model
+    whose bin probabilities are nearest the histogram (L1; the first of equals). A shifted fit
+    extrapolates the pile-up from what the uncensored part shows, and a U- or J-shaped histogram
+    can mislead it where the plain read would not; the comparison keeps censoring from ever
+    fitting the histogram worse. Only censored or piled models pay for it. The choice travels
+    as shift, z and fallback flag."""
     low, high = placed.censored_low, placed.censored_high
     cands = [placed]
     done = Placement(placed.z, round(placed.shift * SHIFT_SCALE), placed.fallback)
     for where in (Placement(placed.z, 0, True), Placement(z)):
-        if where != done:
+        if where != done and (low or high or not where.fallback):
             cands.append(_fit_one(counts, cum, where, low, high, count, f0, f1, lo, bin_width, codec))
     errors = [histogram_l1(c.model, counts, lo, bin_width) for c in cands]
     return cands[errors.index(min(errors))]

@@ -208,6 +208,41 @@ def test_frame_fitter_reports_per_band_saturation():
     assert rec.censored(1)[0] == 0.0 and rec.censored(2)[1] == 0.0
 
 
+# SB curves of the stability map with a pole at their lower bound 20 (far from the sensor limit 0):
+# 37-65% of the mass in level 20. Spread evenly across the level, the pile put x(-3z), x(-z)
+# inside it (19.59, 19.96 where the truth has 20.00, 20.00) and the fit missed by 52-131 gray.
+POLES = {(4.0, 5.3): (1.0722620, 0.1116835), (1.0, 2.1): (0.5979602, 0.0680679),
+         (2.0, 3.3): (0.8316139, 0.1543545), (0.5, 1.6): (0.4347894, 0.0769553),
+         (0.1, 1.2): (0.1993141, 0.0857871)}
+
+
+@pytest.mark.parametrize("betas", sorted(POLES))
+def test_a_pile_at_an_interior_bound_is_read_clear_of_and_held_by_the_model(betas):
+    truth = Johnson(Family.SB, *POLES[betas], 20.0, 215.0)
+    h = expected_histogram(truth, 10**6)
+    r, plain = fit_histogram(h), fit_histogram(h, censor=False)
+    u = np.linspace(0.01, 0.99, 197)
+    error = lambda m: float(np.max(np.abs(m.ppf(u) - truth.ppf(u))))
+    assert error(plain.model) > 40 and error(r.model) <= 1.0, (r, error(r.model))
+    # placed clear of the pile; the sensor limits saw nothing, so nothing is reported censored
+    assert r.shift > 0 and r.censored_low == r.censored_high == 0.0 and not r.fallback
+    # the pile is genuine density: the model itself (no clipping at 0) puts it in level 20
+    assert r.model.level_probabilities()[20] == pytest.approx(h[20] / 1e6, abs=0.05)
+    assert histogram_l1(r.model, h) < histogram_l1(plain.model, h)
+    fits = {(0, b): r for b in range(3)}
+    assert decode(encode_models(fits, bands=("R", "G", "B"), **HEADER)).models[(0, 1)] == r.model
+
+
+def test_a_narrow_peak_at_the_first_occupied_level_is_not_read_as_a_pile_when_that_fits_worse():
+    # a normal's bulk with a one-level spike at its lowest level: a shifted SB would put the
+    # spike's mass beyond it, so the comparison keeps whichever model fits the histogram better
+    h = expected_histogram(Johnson.normal(100.0, 10.0), 10**5)
+    occupied = np.flatnonzero(h)
+    h[occupied[0]] += 20_000
+    r, plain = fit_histogram(h), fit_histogram(h, censor=False)
+    assert histogram_l1(r.model, h) <= histogram_l1(plain.model, h)
+    assert rebuild(r) == r.model
+
 # -- properties ----------------------------------------------------------------------------------
 
 SETTINGS = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
