@@ -302,11 +302,13 @@ def _best_censored(counts: np.ndarray, cum: np.ndarray, placed: FitResult, z: fl
 def support_point(level: int, side: int, codec: PercentileCodec, lo: float = 0.0,
                   bin_width: float = 1.0) -> float:
     """The point a bounded support must reach when `level` is the lowest (side 0) or highest
-    (side 1) occupied bin: that bin's outer edge, snapped through the codec. The receiver
-    calls it on the transmitted level."""
+    (side 1) occupied bin: that bin's centre, snapped through the codec. The level's values then
+    lie in the support and the level has positive probability, and the support moves no further
+    than that: widening to the outer edge, half a level more, moved a pole-at-bound SB's
+    quantiles by up to 3.6 gray. The receiver calls it on the transmitted level."""
     if side not in (0, 1):
         raise ValueError(f"side must be 0 (low) or 1 (high), got {side}")
-    return codec.snap_one(lo + bin_width * (level + side - 0.5))
+    return codec.snap_one(lo + bin_width * (level + (0.25 if side == 0 else -0.25)))
 
 
 def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_probs, low: float,

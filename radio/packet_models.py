@@ -347,7 +347,7 @@ def _tail_of(r: FitResult, label_z: float, override: tuple[float, float] | None,
 
 
 def _level_of(point: float, side: int, codec: PercentileCodec) -> int:
-    level = round(point + 0.5 - side)
+    level = round(point - 0.25 + 0.5 * side)  # support_point: a quarter level inside
     if support_point(level, side, codec) != point:
         raise ValueError(f"support point {point} is not a level")
     return level

@@ -139,10 +139,10 @@ def test_a_model_widened_on_one_side_costs_one_byte_and_two_bits():
     fits = _fits(8, 3)
     widened = [f for f in fits.values() if f.support]
     # the fixture's records are all one-sided widenings, nothing censored or shifted
-    assert len(widened) == 3 and all(f.support.count(None) == 1 for f in widened)
+    assert len(widened) == 2 and all(f.support.count(None) == 1 for f in widened)
     assert not any(f.shift or f.censored_low or f.censored_high or f.fallback for f in fits.values())
     body = encode_models(fits, bands=("R", "G", "B"), **HEADER)
-    assert _sections(body)["records"] == 24 // 4 + 3
+    assert _sections(body)["records"] == 24 // 4 + 2
     plain = {k: f for k, f in fits.items() if not f.support}
     for k in set(fits) - set(plain):  # the same models without their widening: no records at all
         plain[k] = dataclasses.replace(fits[k], support=None)
