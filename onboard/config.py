@@ -13,6 +13,8 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Mapping
 
+from onboard.sweep import SweepPlan
+
 
 class ConfigError(ValueError):
     """The configuration cannot be used; the message is one line naming the problem."""
@@ -216,6 +218,10 @@ def check(cfg: Config) -> None:
         raise ConfigError("sweep.azimuths must name at least one azimuth")
     if s.retries < 0 or s.settle_timeout_s <= 0 or s.pose_tolerance_deg < 0:
         raise ConfigError("sweep.retries, sweep.settle_timeout_s and sweep.pose_tolerance_deg must be >= 0")
+    try:
+        SweepPlan(s.start, s.stop, s.step, s.azimuths)
+    except ValueError as exc:
+        raise ConfigError(f"[sweep]: {exc}") from None
     h = cfg.hal
     if min(h.size) < 8:
         raise ConfigError(f"hal.size must be at least 8x8, got {h.size}")

@@ -31,7 +31,7 @@ from onboard import capture as wire
 from onboard.capture import Capture, Pipeline, PoseSkipped
 from onboard.config import Config, ConfigError
 from onboard.outbox import Outbox, OutboxFull
-from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore
+from onboard.sweep import MAX_POSES as MAX_SWEEP_POSES, Boot, SweepPlan, SweepProgress, SweepStore
 from onboard.transport import Acked, LinkState, Received, Transport
 from onboard.watchdog import Notifier
 from radio import FrameError
@@ -47,7 +47,6 @@ class Mode(enum.StrEnum):
     FAILSAFE = "failsafe"
 
 
-MAX_SWEEP_POSES = 4096
 PCA_KEY = "pca"  # the scene's basis, in the outbox state with the packet that carries it
 SETTABLE = {
     "sweep": ("start", "stop", "step", "azimuths", "settle_timeout_s", "retries", "pose_tolerance_deg"),
@@ -168,7 +167,7 @@ class Runtime:
         return {
             "mode": self.mode.value,
             "sweep": None if p is None else {
-                "id": p.sweep_id, "next": p.next_index, "poses": len(p.poses), "active": p.active,
+                "id": p.sweep_id, "next": p.next_index, "poses": p.plan.count, "active": p.active,
                 "skipped": [[s.index, s.commanded.elevation, s.commanded.azimuth, s.reason]
                             for s in p.skipped[-16:]],
             },
@@ -270,7 +269,7 @@ class Runtime:
         self.progress = nxt
         if cap is not None:
             self.captured(cap, seq)
-        self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {nxt.next_index} of {len(nxt.poses)}")
+        self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {nxt.next_index} of {nxt.plan.count}")
         if nxt.done:
             self.mode = Mode.IDLE
             self.notifier.status(f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, "
@@ -367,13 +366,13 @@ class Runtime:
             azs = tuple(float(a) for a in args.get("azimuths", self.cfg.sweep.azimuths))
             if "elevations" in args:
                 els = tuple(float(e) for e in args["elevations"])
+                if not els:
+                    raise ValueError("SWEEP elevations is empty")
                 plan = SweepPlan(els[0], els[-1], 1.0, azs, els)
-            else:
+            else:  # SweepPlan bounds the pose count before any list is built
                 plan = SweepPlan(float(args["start"]), float(args["stop"]), float(args["step"]), azs)
-            if len(plan.poses()) > MAX_SWEEP_POSES:
-                raise ValueError(f"sweep of {len(plan.poses())} poses exceeds {MAX_SWEEP_POSES}")
             p = self.start_sweep(plan)
-            return True, {"sweep": p.sweep_id, "poses": len(p.poses)}
+            return True, {"sweep": p.sweep_id, "poses": p.plan.count}
         if name == "ABORT":
             self.stop_sweep()
             arm.stop_and_hold()

@@ -23,6 +23,8 @@ from typing import Iterable, Protocol
 
 from hal.interfaces import ViewAngles
 
+MAX_POSES = 4096  # a plan is listed and persisted whole: bound it before building it
+
 
 @dataclass(frozen=True, slots=True)
 class SweepPlan:
@@ -39,15 +41,37 @@ class SweepPlan:
             raise ValueError(f"sweep step must be positive, got {self.step}")
         if not self.azimuths:
             raise ValueError("a sweep needs at least one azimuth")
+        if not all(math.isfinite(v) for v in self.azimuths):
+            raise ValueError("sweep azimuths must be finite")
+        if not all(0.0 <= e <= 90.0 for e in (self.start, self.stop, *self.elevations)):
+            raise ValueError("sweep elevations must lie in [0, 90] degrees")
+        if self.count > MAX_POSES:
+            raise ValueError(f"a sweep of {self.count} poses exceeds {MAX_POSES}")
+
+    @property
+    def _per_azimuth(self) -> int:
+        if self.elevations:
+            return len(self.elevations)
+        return int(math.floor(abs(self.stop - self.start) / self.step + 1e-9)) + 1
+
+    @property
+    def count(self) -> int:
+        """How many poses `poses()` lists, computed without listing them."""
+        return self._per_azimuth * len(self.azimuths)
+
+    def pose(self, index: int) -> ViewAngles:
+        """The index-th pose of `poses()`."""
+        a, i = divmod(index, self._per_azimuth)
+        if not 0 <= index < self.count:
+            raise IndexError(f"pose {index} outside a plan of {self.count}")
+        if self.elevations:
+            return ViewAngles(float(self.elevations[i]), float(self.azimuths[a]))
+        direction = -1.0 if self.stop < self.start else 1.0
+        return ViewAngles(self.start + direction * i * self.step, float(self.azimuths[a]))
 
     def poses(self) -> list[ViewAngles]:
         """Elevations from start toward stop (inclusive, either direction), per azimuth."""
-        if self.elevations:
-            return [ViewAngles(float(e), float(a)) for a in self.azimuths for e in self.elevations]
-        direction = -1.0 if self.stop < self.start else 1.0
-        n = int(math.floor(abs(self.stop - self.start) / self.step + 1e-9)) + 1
-        elevations = [self.start + direction * i * self.step for i in range(n)]
-        return [ViewAngles(e, float(a)) for a in self.azimuths for e in elevations]
+        return [self.pose(i) for i in range(self.count)]
 
     def to_record(self) -> dict:
         return {**asdict(self), "azimuths": list(self.azimuths), "elevations": list(self.elevations)}
@@ -83,11 +107,10 @@ class SweepProgress:
 
     @property
     def done(self) -> bool:
-        return self.next_index >= len(self.poses)
+        return self.next_index >= self.plan.count
 
     def current(self) -> ViewAngles | None:
-        poses = self.poses
-        return poses[self.next_index] if self.next_index < len(poses) else None
+        return None if self.done else self.plan.pose(self.next_index)
 
     def already_measured(self, view: ViewAngles, tolerance_deg: float) -> bool:
         """Whether a capture of this sweep was filed within tolerance of `view`."""

@@ -66,6 +66,7 @@ def test_good_file_loads_into_frozen_records_with_paths_relative_to_the_file(tmp
         ("[sweep]\nstart = nan", "must be finite"),
         ("[segment]\nmethod = 'mask'\nmask = 'nowhere.png'", "no such file"),
         ("hal = 3", "[hal] must be a table"),
+        ("[sweep]\nstep = 0.001", "exceeds 4096"),
     ],
 )
 def test_each_bad_config_raises_one_line_naming_the_problem(tmp_path, text, words):

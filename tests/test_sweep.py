@@ -22,6 +22,19 @@ def test_plan_runs_upward_too_and_rejects_bad_steps():
         SweepPlan(90, 30, 0)
 
 
+def test_plan_size_is_bounded_before_any_pose_is_listed():
+    with pytest.raises(ValueError, match="exceeds 4096"):
+        SweepPlan(90, 0, 1e-12)  # 9e13 poses: refused by arithmetic, not by building them
+    with pytest.raises(ValueError, match=r"\[0, 90\]"):
+        SweepPlan(0, 0, 1, elevations=(30.0, 120.0))
+    with pytest.raises(ValueError, match="finite"):
+        SweepPlan(90, 30, 10, (float("nan"),))
+    plan = SweepPlan(90, 30, 10, (0.0, 90.0))
+    assert plan.count == 14 and [plan.pose(i) for i in range(14)] == plan.poses()
+    with pytest.raises(IndexError):
+        plan.pose(14)
+
+
 @given(st.floats(0, 90), st.floats(0, 90), st.floats(0.5, 45))
 def test_plan_never_leaves_the_start_stop_interval(start, stop, step):
     poses = SweepPlan(start, stop, step).poses()
