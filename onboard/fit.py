@@ -212,9 +212,9 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
         low_n, high_n = censored_counts(counts)
         # Piles at an interior first or last occupied level (a pole at a bound inside the
         # range) are read like censored ones: percentiles placed clear of them.
-        pile_lo, pile_hi = piled_counts(counts, first, last)
-        pile_lo[first == 0] = 0
-        pile_hi[last == bins - 1] = 0
+        piles = piled_counts(counts, first, last)
+        pile_lo = np.where(first == 0, 0, piles[0]).tolist()
+        pile_hi = np.where(last == bins - 1, 0, piles[1]).tolist()
     plans: list[tuple[Placement, float, float] | None] = []
     for i in range(rows):
         count, z = totals[i], zs[i]
@@ -243,7 +243,7 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
             continue
         where, low, high = plans[i]
         fit = _fit_one(counts[i], cum[i], where, low, high, count, f0, f1, lo, bin_width, codec, raw.get(i))
-        if low or high or where != Placement(z):
+        if low or high or where.shift_code or where.fallback or where.z != z:
             fit = _best_censored(counts[i], cum[i], fit, z, count, f0, f1, lo, bin_width, codec)
         out.append(FitResult(fit.model, count, fit.z, fit.percentiles, float(beta1[i]), float(beta2[i]),
                              fit.shift, low, high, fit.fallback, fit.support))
