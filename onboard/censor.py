@@ -15,6 +15,10 @@ limits (or, at an uncensored end, the middle of the uncensored mass). Its clippe
 exactly the censored fractions at the limits and spread the rest between, which is all such a
 histogram says.
 
+Piles inside the range: the same test at the first or last occupied level finds a pile at a
+bound inside the sensor's range (an SB's pole); the percentiles are placed clear of it the same
+way, but it is density, not clipping: nothing is reported censored and there is no fallback.
+
 Choice: a shifted fit extrapolates the pile-up from the uncensored part, and on U- and J-shaped
 histograms that can go badly wrong where the plain read would not. So for every censored model
 the fitter compares the shifted fit, the fallback and the plain symmetric read at the label's z

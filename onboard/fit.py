@@ -270,8 +270,8 @@ def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, 
     normal_probs = fallback_probs(low, high) if where.fallback else None
     pct, model = _fit_placed(counts, cum, where, normal_probs, low, high, count, lo, bin_width, codec, raw)
     support = None
-    # Bounded supports must reach the outer edge of every occupied bin, so each bin lies
-    # wholly inside and has mass; only the side that falls short is recorded (it travels).
+    # Bounded supports must reach into every occupied bin (support_point), so each has mass;
+    # only the side that falls short is recorded (it travels).
     ends = (support_point(f0, 0, codec, lo, bin_width), support_point(f1, 1, codec, lo, bin_width))
     s_lo, s_hi = support_of(model)
     if s_lo > ends[0] or s_hi < ends[1]:
