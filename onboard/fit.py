@@ -189,8 +189,7 @@ def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
     occupied = np.flatnonzero(counts)
     if occupied.size == 0:
         raise ValueError("histogram is empty: nothing to fit")
-    # exact even for counts near 2**53 (a float sum would round)
-    count = sum(int(c) for c in counts[occupied]) if counts.dtype.kind in "iu" else int(round(float(counts.sum())))
+    count = _exact_total(counts, occupied)
     if codec is None:
         bits = 16 if counts.size <= 256 else 32
         codec = PercentileCodec(lo - 0.5 * bin_width, lo + (counts.size - 0.5) * bin_width, bits)
@@ -351,6 +350,15 @@ def _probs(z: float) -> tuple[float, float, float, float]:
     return (_phi(-3 * z), _phi(-z), _phi(z), _phi(3 * z))
 
 
+def _exact_total(counts: np.ndarray, occupied: np.ndarray) -> int:
+    """The pixel count, exact even for counts near 2**53 or 2**64 (a float sum would round)."""
+    if counts.dtype.kind not in "iu":
+        return int(round(float(counts.sum())))
+    if counts.dtype.itemsize < 8 or int(counts.max()) < (1 << 62) // counts.size:
+        return int(counts.sum(dtype=np.int64))  # cannot overflow: the common case, fast
+    return sum(int(c) for c in counts[occupied])
+
+
 def fit_values(values: np.ndarray, value_range: tuple[float, float] | None = None,
                bins: int | None = None) -> FitResult:
     """Fit raw values. Integer dtypes default to one bin per level over the dtype's range;
@@ -363,9 +371,10 @@ def fit_values(values: np.ndarray, value_range: tuple[float, float] | None = Non
     if v.dtype.kind == "f" and not np.all(np.isfinite(v)):
         raise ValueError("values contain NaN or inf")
     lo, hi, bins = _value_grid(v.dtype, value_range, bins, v)
-    vmin, vmax = float(v.min()), float(v.max())
-    if vmin < lo or vmax > hi:
-        raise ValueError(f"values [{vmin}, {vmax}] outside the declared range [{lo}, {hi}]")
+    if value_range is not None:  # otherwise the grid is the dtype's or the data's own range
+        vmin, vmax = float(v.min()), float(v.max())
+        if vmin < lo or vmax > hi:
+            raise ValueError(f"values [{vmin}, {vmax}] outside the declared range [{lo}, {hi}]")
     counts, width, centre0 = _bin(v, lo, hi, bins)
     return fit_histogram(counts, centre0, width)
 
