@@ -21,6 +21,7 @@ import enum
 import json
 import time
 from collections import deque
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable
@@ -36,6 +37,7 @@ from onboard.transport import Acked, LinkState, Received, Transport
 from onboard.watchdog import Notifier
 from radio import FrameError
 from radio import packet as pk
+from radio.link import QueueFull
 
 
 # -- the runtime -----------------------------------------------------------------------
@@ -52,6 +54,14 @@ SETTABLE = {
     "sweep": ("start", "stop", "step", "azimuths", "settle_timeout_s", "retries", "pose_tolerance_deg"),
     "skip": ("min_pixels", "percentile_precision", "unchanged_tolerance", "skip_measured_pose"),
 }
+
+
+class Interrupted(Exception):
+    """ABORT, TORQUE_OFF, a new SWEEP or the failsafe took the arm while it was working."""
+
+
+ARM_COMMANDS = ("GOTO", "CAPTURE", "REBOOT_SERVO")  # refused while a pose is being measured
+INTERRUPTING = ("ABORT", "TORQUE_OFF", "SWEEP")  # end the pose being measured
 
 
 class Runtime:
@@ -78,7 +88,7 @@ class Runtime:
                                                                cfg.outbox_quota_bytes)
         self.sweeps = SweepStore(self.outbox, legacy_dir=cfg.state_dir)
         self.new_sweep = new_sweep
-        self.pipeline = Pipeline(cfg, hal, segmenter, pump=self.service, sleep=sleep)
+        self.pipeline = Pipeline(cfg, hal, segmenter, pump=self._pump, sleep=sleep)
         self.pipeline.pca = _read_pca(self.outbox.state(PCA_KEY), cfg.state_dir / "pca.json")
         self.notifier = notifier if notifier is not None else Notifier(address="")
         self.mode = Mode.IDLE
@@ -96,6 +106,10 @@ class Runtime:
         self.pose: ViewAngles | None = None
         self.errors: deque[str] = deque(maxlen=16)
         self.paused_reason = ""
+        # Commands are answered while the arm works (the pipeline pumps the link), so an
+        # interrupting command or the failsafe must end that work, not be undone by it.
+        self._busy = False
+        self._interrupt = ""
 
     # -- plumbing --------------------------------------------------------------------
 
@@ -129,7 +143,10 @@ class Runtime:
         if room <= 0:
             return
         for msg_id, body in self.outbox.pending(limit=room, after=self._last_sent):
-            self.transport.send(body, msg_id, now)
+            try:
+                self.transport.send(body, msg_id, now)
+            except QueueFull:  # the link holds enough already: offer the rest later
+                return
             self._in_flight.add(msg_id)
             self._last_sent = msg_id
 
@@ -150,9 +167,28 @@ class Runtime:
         elif self.ever_up and self.mode is not Mode.FAILSAFE:
             self._failsafe()
 
+    def _pump(self) -> None:
+        """Service the link while the arm works; end that work when it was interrupted."""
+        try:
+            self.service()
+        except Exception as exc:  # a link fault is not the pose's fault
+            self.errors.append(f"{type(exc).__name__}: {exc}")
+        if self._interrupt:
+            raise Interrupted(self._interrupt)
+
+    @contextmanager
+    def _arm_work(self):
+        self._busy, self._interrupt = True, ""
+        try:
+            yield
+        finally:
+            self._busy, self._interrupt = False, ""
+
     def _failsafe(self) -> None:
         self._resume_mode = self.mode
         self.mode = Mode.FAILSAFE
+        if self._busy:
+            self._interrupt = "failsafe"
         self.failsafe_events.append({"since": self.wall(), "until": None})
         del self.failsafe_events[:-8]
         try:
@@ -234,15 +270,21 @@ class Runtime:
         nxt = copy.deepcopy(p)
         cap = None
         try:
-            self.pipeline.move(commanded)
-            measured = self.pipeline.measure_view()
-            if self.cfg.skip.skip_measured_pose and p.already_measured(measured, self.cfg.sweep.pose_tolerance_deg):
-                raise PoseSkipped(f"already measured in this sweep (measured {measured.elevation:.1f}°, "
-                                  f"{measured.azimuth:.1f}°)")
-            frame = self.pipeline.frame()
-            cap = self.pipeline.process(frame, commanded, measured)
-        except PoseSkipped as exc:
-            skipped = nxt.record_skipped(exc.reason)
+            with self._arm_work():
+                self.pipeline.move(commanded)
+                measured = self.pipeline.measure_view()
+                if self.cfg.skip.skip_measured_pose and p.already_measured(measured, self.cfg.sweep.pose_tolerance_deg):
+                    raise PoseSkipped(f"already measured in this sweep (measured {measured.elevation:.1f}°, "
+                                      f"{measured.azimuth:.1f}°)")
+                frame = self.pipeline.frame()
+                cap = self.pipeline.process(frame, commanded, measured)
+        except Interrupted:  # the command or failsafe that interrupted has set the state
+            return "interrupted"
+        except Exception as exc:
+            # A fault the pipeline did not foresee skips the pose with its reason
+            # instead of failing the same pose forever.
+            reason = exc.reason if isinstance(exc, PoseSkipped) else f"internal: {type(exc).__name__}: {exc}"
+            skipped = nxt.record_skipped(reason)
             packets = [self.status_packet(f"skipped pose: {skipped.reason}", {
                 "sweep": p.sweep_id, "skipped_index": skipped.index,
                 "skipped_elevation": skipped.commanded.elevation,
@@ -327,19 +369,23 @@ class Runtime:
             ok, result = self.handle(cmd.name.name, dict(cmd.args))
         except PoseSkipped as exc:
             ok, result, reason = False, exc.reason, pk.Reason.HARDWARE
+        except Interrupted as exc:
+            ok, result, reason = False, f"interrupted by {exc}", pk.Reason.BUSY
         except OutboxFull as exc:
             ok, result, reason = False, str(exc), pk.Reason.OUTBOX_FULL
         except (ConfigError, KeyError, ValueError) as exc:
             ok, result, reason = False, f"{type(exc).__name__}: {exc}", pk.Reason.BAD_ARGUMENT
         except Exception as exc:  # a command that fails is answered, never fatal
             ok, result = False, f"{type(exc).__name__}: {exc}"
+        if ok and self._busy and cmd.name.name in INTERRUPTING:
+            self._interrupt = cmd.name.name  # the pose being measured ends at the next link service
         if ok:
             extras = result if isinstance(result, dict) else {}
             self.queue(*wire.reply_body(cmd.command_id, True, cmd.name.name, extras))
         else:
             if isinstance(result, str) and result.startswith("unknown command"):
                 reason = pk.Reason.UNKNOWN_COMMAND
-            elif isinstance(result, str) and result.startswith("failsafe"):
+            elif isinstance(result, str) and result.startswith(("failsafe", "busy")):
                 reason = pk.Reason.BUSY
             self.queue(*wire.reply_body(cmd.command_id, False, str(result), reason=reason))
 
@@ -352,22 +398,24 @@ class Runtime:
             return True, _flat_status(self.status())
         if self.mode is Mode.FAILSAFE:
             return False, "failsafe active: the link was lost; it clears when the link is back up"
+        if name in ARM_COMMANDS and self._busy:
+            return False, "busy: the arm is measuring a pose; send it again, or ABORT first"
         if name == "GOTO":
             view = ViewAngles(float(args["elevation"]), float(args.get("azimuth", 0.0)))
-            self.pipeline.move(view)
-            m = self.pipeline.measure_view()
+            with self._arm_work():
+                self.pipeline.move(view)
+                m = self.pipeline.measure_view()
             return True, {"elevation": m.elevation, "azimuth": m.azimuth}
         if name == "CAPTURE":
-            measured = self.pipeline.measure_view()
-            commanded = measured
-            cap = self.pipeline.process(self.pipeline.frame(), commanded, measured)
+            with self._arm_work():
+                measured = self.pipeline.measure_view()
+                cap = self.pipeline.process(self.pipeline.frame(), measured, measured)
             return True, {"seq": self.send_capture(cap), "models": len(cap.results)}
         if name == "SWEEP":
+            # The packet decoder has checked every argument's type and range.
             azs = tuple(float(a) for a in args.get("azimuths", self.cfg.sweep.azimuths))
             if "elevations" in args:
                 els = tuple(float(e) for e in args["elevations"])
-                if not els:
-                    raise ValueError("SWEEP elevations is empty")
                 plan = SweepPlan(els[0], els[-1], 1.0, azs, els)
             else:  # SweepPlan bounds the pose count before any list is built
                 plan = SweepPlan(float(args["start"]), float(args["stop"]), float(args["step"]), azs)

@@ -145,15 +145,18 @@ def test_failsafe_holds_the_arm_and_is_reported_when_the_link_returns(tmp_path):
     assert rt.mode is Mode.FAILSAFE
     bus = rt.hal.servo_bus
     held = bus.positions([1, 2])
-    command(tr, 20, pk.CommandName.GOTO, elevation=40.0, azimuth=0.0)
+    rt.sleep(0.05)
+    rt.step()
+    assert bus.positions([1, 2]) == pytest.approx(held, abs=0.5)  # held, no sweep move
+    command(tr, 20, pk.CommandName.GOTO, elevation=40.0, azimuth=0.0)  # read before the link is up
     tr.deliver(LinkState(True))
     before = len(tr.sent)
     rt.step()
     assert rt.mode is Mode.SWEEPING  # resumed
     r = replies(tr)
+    assert isinstance(r[20], pk.NackPacket) and r[20].reason is pk.Reason.BUSY
     statuses = [pk.decode(b) for _, b in tr.sent[before - 1:]]
     assert any(isinstance(p, pk.StatusPacket) and "failsafe" in p.text for p in statuses)
-    assert held == pytest.approx(bus.positions([1, 2]), abs=1.0) or 20 in r
 
 
 def test_goto_during_failsafe_is_refused_with_a_reason(tmp_path):
@@ -354,3 +357,81 @@ def test_a_restart_after_a_finished_sweep_does_not_sweep_again(tmp_path):
     assert [e for e, _ in again] == [70, 80, 90]
     assert min(s for _, s in again) > max(s for _, s in poses_by_seq(host_view(tr)))
     assert rt3.progress.sweep_id == rt.progress.sweep_id + 1
+
+
+# -- commands and the failsafe while a pose is being measured --------------------------
+# The pipeline services the link while the arm moves, so these arrive mid-pose.
+
+
+def mid_pose(tmp_path, *events):
+    """A runtime past its first pose, with `events` waiting for the next pose's move."""
+    rt, tr = make(tmp_path, "black", extra=PLAN3)
+    rt.boot()
+    tr.deliver(LinkState(True))
+    rt.step()
+    assert rt.progress.next_index == 1
+    for ev in events:
+        tr.deliver(ev)
+    return rt, tr
+
+
+def test_abort_mid_pose_stops_the_sweep_without_skipping_or_reviving_the_pose(tmp_path):
+    rt, tr = mid_pose(tmp_path, Received(pk.encode(pk.CommandPacket(7, pk.CommandName.ABORT, {}))))
+    assert rt.sweep_step() == "interrupted"
+    assert isinstance(replies(tr)[7], pk.AckPacket)
+    assert rt.mode is Mode.IDLE and not rt.progress.active
+    assert rt.progress.next_index == 1 and not rt.progress.skipped
+    saved = rt.sweeps.load()  # what a restart would resume from
+    assert not saved.active and saved.next_index == 1 and not saved.skipped
+
+
+def test_failsafe_mid_pose_holds_the_arm_and_measures_the_pose_after_the_link_returns(tmp_path):
+    rt, tr = mid_pose(tmp_path, LinkState(False))
+    assert rt.sweep_step() == "interrupted"
+    assert rt.mode is Mode.FAILSAFE and rt.progress.next_index == 1 and not rt.progress.skipped
+    bus = rt.hal.servo_bus
+    held = bus.positions([1, 2])
+    rt.step()
+    rt.sleep(0.05)
+    rt.step()
+    assert bus.positions([1, 2]) == pytest.approx(held, abs=0.5)  # no move while failsafe
+    tr.deliver(LinkState(True))
+    sweep(rt)
+    assert not rt.progress.skipped
+    assert [e for e, _ in poses_by_seq(host_view(tr))] == [70, 80, 90]
+
+
+def test_arm_commands_mid_pose_are_refused_as_busy_and_the_pose_completes(tmp_path):
+    goto = pk.CommandPacket(8, pk.CommandName.GOTO, {"elevation": 40.0, "azimuth": 0.0})
+    rt, tr = mid_pose(tmp_path, Received(pk.encode(goto)))
+    assert rt.sweep_step() == "measured"
+    nack = replies(tr)[8]
+    assert isinstance(nack, pk.NackPacket) and nack.reason is pk.Reason.BUSY
+    assert rt.progress.next_index == 2 and not rt.progress.skipped
+
+
+def test_a_sweep_command_mid_pose_replaces_the_sweep_for_good(tmp_path):
+    new = pk.CommandPacket(9, pk.CommandName.SWEEP, {"elevations": [60.0], "azimuths": [0.0]})
+    rt, tr = mid_pose(tmp_path, Received(pk.encode(new)))
+    old_id = rt.progress.sweep_id
+    assert rt.sweep_step() == "interrupted"
+    assert rt.progress.sweep_id == old_id + 1 and rt.progress.next_index == 0
+    assert rt.sweeps.load().sweep_id == old_id + 1  # the old sweep's pose did not overwrite it
+    sweep(rt)
+    assert [e for e, _ in poses_by_seq(host_view(tr))] == [60, 90]
+
+
+def test_an_unforeseen_fault_skips_the_pose_with_its_reason_and_the_sweep_goes_on(tmp_path):
+    rt, tr = make(tmp_path, "black", extra=PLAN3)
+    real = rt.pipeline.process
+
+    def broken_once(frame, commanded, measured):
+        if commanded.elevation == 80.0:
+            raise RuntimeError("fitter state corrupt")
+        return real(frame, commanded, measured)
+
+    rt.pipeline.process = broken_once
+    sweep(rt)
+    assert [(s.index, s.reason) for s in rt.progress.skipped] == \
+        [(1, "internal: RuntimeError: fitter state corrupt")]
+    assert [e for e, _ in poses_by_seq(host_view(tr))] == [70, 90]
