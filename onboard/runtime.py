@@ -475,15 +475,17 @@ class Runtime:
         self.notifier.ready(f"btf-robot running: {self.mode.value}")
         self.send_status("boot", extras)
 
-    def step(self) -> None:
-        """One turn of the loop; never raises."""
+    def step(self) -> str:
+        """One turn of the loop; what the sweep did ("" when nothing). Never raises."""
         try:
             self.service()
             if self.mode is Mode.SWEEPING:
-                self.sweep_step()
+                result = self.sweep_step()
                 self.service()
+                return result
         except Exception as exc:
             self.errors.append(f"{type(exc).__name__}: {exc}")
+        return ""
 
     def idle(self) -> bool:
         """Nothing to do: no active sweep and every packet acknowledged."""
@@ -492,8 +494,8 @@ class Runtime:
     def run(self, stop: Callable[["Runtime"], bool] = lambda rt: False, tick_s: float = 0.01) -> int:
         self.boot()
         while not stop(self):
-            self.step()
-            if self.mode is not Mode.SWEEPING:
+            # Rest unless a pose was just done: a paused sweep (outbox full) must not spin.
+            if self.step() not in ("measured", "skipped"):
                 self.sleep(tick_s)
         return 0
 

@@ -435,3 +435,20 @@ def test_an_unforeseen_fault_skips_the_pose_with_its_reason_and_the_sweep_goes_o
     assert [(s.index, s.reason) for s in rt.progress.skipped] == \
         [(1, "internal: RuntimeError: fitter state corrupt")]
     assert [e for e, _ in poses_by_seq(host_view(tr))] == [70, 90]
+
+
+def test_a_sweep_paused_by_a_full_outbox_rests_between_turns_instead_of_spinning(tmp_path):
+    path = tmp_path / "robot.toml"
+    path.write_text(BASE.format(scene="black", rate=0.0, extra=PLAN3))
+    cfg = config.load(path)
+    hal = build_hal(cfg.hal)
+    hal.camera.open(80, 60)
+    cfg.state_dir.mkdir()
+    rests = []
+    rt = Runtime(cfg, hal, MemoryTransport(auto_ack=False), Segmentation(cfg, hal),
+                 outbox=Outbox(cfg.state_dir / "outbox.sqlite", quota_bytes=400),
+                 sleep=lambda s: rests.append(s))
+    turns = []
+    rt.run(lambda r: turns.append(1) or len(turns) > 20, tick_s=0.01)
+    assert rt.mode is Mode.SWEEPING and "outbox full" in rt.paused_reason
+    assert rests.count(0.01) >= 15  # every paused turn rests a tick
