@@ -156,12 +156,12 @@ class Pipeline:
         n_labels = self.cfg.segment.n_labels
         counts = skip.label_counts(labels, n_labels)
         keep = skip.kept_labels(counts, self.cfg.skip.min_pixels)
-        stride = skip.subsample_stride(counts, keep, self.cfg.skip.percentile_precision)
         data = feats.data
+        stride = skip.subsample_stride(counts, keep, self.cfg.skip.percentile_precision, data.shape[1])
         fitter = self.fitter(data.shape[2], feats.levels)
         fitter.reset()
         if stride > 1:
-            # A deterministic pixel lattice: every stride-th pixel of each row block.
+            # A deterministic lattice: every stride-th pixel in row-major order.
             flat_d = data.reshape(-1, data.shape[2])[::stride]
             flat_l = labels.reshape(-1)[::stride]
             fitter.add(flat_d[:, None, :], flat_l[:, None])

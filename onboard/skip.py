@@ -47,17 +47,22 @@ def pixels_for_precision(precision: float) -> int:
     return int(math.ceil(0.25 / (precision * precision)))
 
 
-def subsample_stride(counts: np.ndarray, keep: Sequence[int], precision: float) -> int:
+def subsample_stride(counts: np.ndarray, keep: Sequence[int], precision: float, width: int = 1) -> int:
     """A pixel stride (1 = every pixel) leaving each kept region >= the needed pixels.
 
     A stride is deterministic (same frame, same pixels) and costs nothing to apply;
-    0 precision turns the rule off.
+    0 precision turns the rule off. Over a row-major frame `width` pixels wide the
+    stride is kept coprime with the width, so the lattice visits every column instead
+    of a few (a stride of exactly the width would sample one column).
     """
     if precision <= 0.0 or not keep:
         return 1
     needed = pixels_for_precision(precision)
     smallest = int(min(counts[k] for k in keep))
-    return max(1, smallest // needed)
+    stride = max(1, smallest // needed)
+    while math.gcd(stride, width) > 1:  # smaller, so still >= the needed pixels
+        stride -= 1
+    return stride
 
 
 def unchanged(

@@ -33,6 +33,17 @@ def test_precision_sets_the_pixels_needed_and_the_stride():
         skip.pixels_for_precision(0.7)
 
 
+def test_stride_over_a_frame_visits_every_column_not_a_few():
+    h, w = 600, 800
+    counts = np.array([h * w])
+    assert skip.subsample_stride(counts, (0,), 0.0125, width=1) == 300  # 1600 pixels needed
+    stride = skip.subsample_stride(counts, (0,), 0.0125, width=w)
+    assert stride == 299  # 300 shares factors with 800: the next smaller coprime stride
+    cols = np.arange(0, h * w, stride) % w
+    assert len(np.unique(cols)) == w and len(cols) >= 1600
+    assert len(np.unique(np.arange(0, h * w, 300) % w)) == 8  # what 300 would have sampled
+
+
 def test_strided_subsample_keeps_percentiles_within_the_target_precision():
     rng = np.random.default_rng(1)
     values = rng.gamma(2.0, 20.0, 1_000_000)
