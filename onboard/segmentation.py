@@ -13,7 +13,10 @@ from onboard.config import Config, ConfigError
 
 def _write_json(path: Path, record: dict) -> None:
     tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(record))
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write(json.dumps(record))
+        f.flush()
+        os.fsync(f.fileno())  # a power cut must not leave a torn palette behind the rename
     os.replace(tmp, path)
 
 
@@ -22,7 +25,8 @@ class Segmentation:
 
     isodata: a `Segmenter` with centres fitted once per scene and a palette of clutter
     types persisted in `state_dir/palette.json`, so labels mean the same across views and
-    restarts. mask: the label file, read at start. scene: the fake camera's own mask of
+    restarts; a palette saved for other feature bands is not reused (its entries would be
+    colours of another space). mask: the label file, read at start. scene: the fake camera's own mask of
     the frame it rendered (ground truth). `changed` comes from the Segmenter in every case.
     """
 
@@ -34,6 +38,7 @@ class Segmentation:
         self.hal = hal
         sg = cfg.segment
         self.palette_path = cfg.state_dir / "palette.json"
+        self.features = f"{cfg.features.space}:{','.join(cfg.features.bands)}"
         try:
             params = IsodataParams(k=sg.k, min_samples=sg.min_samples, split_std=sg.split_std,
                                    merge_distance=sg.merge_distance, max_merges=sg.max_merges,
@@ -58,11 +63,13 @@ class Segmentation:
                              "remove it to start a new palette") from None
         if not isinstance(rec, dict):
             raise ValueError(f"palette file {self.palette_path} does not hold a palette record")
+        if rec.get("features", self.features) != self.features:
+            return None  # made for other bands: a new palette replaces it at the first save
         return rec
 
     def _record(self) -> dict | None:
         pal = self.segmenter.palette
-        return None if pal is None else pal.to_record()
+        return None if pal is None else {**pal.to_record(), "features": self.features}
 
     def _save_palette(self) -> None:
         rec = self._record()

@@ -118,13 +118,30 @@ def test_isodata_palette_survives_a_restart(tmp_path):
     first = rt._last_labels.copy()
     rt.outbox.close()
     rt2, tr2 = make(tmp_path, text)  # same state directory
-    assert rt2.pipeline.segmenter.segmenter.palette.to_record() == saved
+    assert {**rt2.pipeline.segmenter.segmenter.palette.to_record(), "features": "rgb:"} == saved
     rt2.boot()
     command(rt2, tr2, 1, pk.CommandName.CAPTURE)
     assert (rt2._last_labels == first).mean() > 0.99  # the same view keeps its labels
     (rt.cfg.state_dir / "palette.json").write_text("{not json")
     with pytest.raises(ConfigError, match="palette file"):
         Segmentation(rt.cfg, rt.hal)
+
+
+def test_a_palette_saved_for_other_bands_is_replaced_not_matched(tmp_path):
+    isodata = "[segment]\nmethod = 'isodata'\nsplit_std = 12\nsubsample = 2000\n"
+    rt, tr = make(tmp_path, HAL.format(scene="mixed") + isodata + NO_AUTO)
+    rt.boot()
+    assert isinstance(command(rt, tr, 1, pk.CommandName.CAPTURE), pk.AckPacket)
+    rt.outbox.close()
+    # The same state directory, now fitting gray: 3-band colour entries cannot label it.
+    gray = HAL.format(scene="mixed") + "[features]\nspace = 'gray'\n" + isodata + NO_AUTO
+    rt2, tr2 = make(tmp_path, gray)
+    assert rt2.pipeline.segmenter.segmenter.palette.entries == []
+    rt2.boot()
+    ack = command(rt2, tr2, 1, pk.CommandName.CAPTURE)
+    assert isinstance(ack, pk.AckPacket) and ack.extras["models"] >= 1
+    saved = json.loads((rt.cfg.state_dir / "palette.json").read_text())
+    assert saved["features"] == "gray:" and all(len(e) == 1 for e in saved["entries"])
 
 
 def test_sweep_command_takes_start_stop_step_and_optional_azimuths(tmp_path):
