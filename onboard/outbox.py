@@ -90,10 +90,12 @@ class Outbox:
         packets: Iterable[tuple[int, bytes]] = (),
         state: Mapping[str, str] | None = None,
         created: float | None = None,
+        reserve: int = 0,
     ) -> list[int]:
         """Store packets and state entries in one durable transaction; their message ids.
 
-        All or nothing: at the quota (`OutboxFull`) or on a write error nothing is stored.
+        All or nothing: past the quota less `reserve` bytes (`OutboxFull`) or on a write
+        error nothing is stored. Bulk data passes a reserve so replies still fit.
         """
         rows = [_checked(kind, body) for kind, body in packets]
         entries = [(str(k), str(v)) for k, v in (state or {}).items()]
@@ -101,7 +103,7 @@ class Outbox:
         size = sum(len(b) for _, b in rows)
         with self._lock:
             need = self.bytes_used + size + ROW_OVERHEAD * len(rows)
-            if rows and need > self.quota_bytes:
+            if rows and need > self.quota_bytes - reserve:
                 raise OutboxFull(
                     f"outbox full: {self.bytes_used} of {self.quota_bytes} bytes used by "
                     f"{self._count} unacknowledged packets; acquisition paused until the host acknowledges"
@@ -180,7 +182,11 @@ class Outbox:
     @property
     def full(self) -> bool:
         """True when not even a small packet would fit; the runtime pauses acquisition."""
-        return self.bytes_used + ROW_OVERHEAD + 1 > self.quota_bytes
+        return self.full_for(0)
+
+    def full_for(self, reserve: int) -> bool:
+        """True when not even a small packet would fit below the quota less `reserve`."""
+        return self.bytes_used + ROW_OVERHEAD + 1 > self.quota_bytes - reserve
 
     def check(self) -> str:
         """SQLite's integrity check: 'ok' for a sound database, else the first problem."""

@@ -110,6 +110,8 @@ class Runtime:
         # interrupting command or the failsafe must end that work, not be undone by it.
         self._busy = False
         self._interrupt = ""
+        # Captures stop short of the quota, so replies and STATUS still fit when they do.
+        self._reserve = self.outbox.quota_bytes // 8
 
     # -- plumbing --------------------------------------------------------------------
 
@@ -263,7 +265,7 @@ class Runtime:
         p = self.progress
         if p is None or p.done:
             return "done"
-        if self.outbox.full or self._full_until_ack:
+        if self.outbox.full_for(self._reserve) or self._full_until_ack:
             self.paused_reason = "outbox full: acquisition paused until the host acknowledges"
             return "paused"
         commanded = p.current()
@@ -301,7 +303,7 @@ class Runtime:
                 "sweep": p.sweep_id, "measured": len(nxt.measured), "skipped": len(nxt.skipped)},
                 pk.RobotState.IDLE))
         try:
-            self.outbox.commit(packets, {**state, **self.sweeps.entry(nxt)})
+            self.outbox.commit(packets, {**state, **self.sweeps.entry(nxt)}, reserve=self._reserve)
         except OutboxFull as exc:
             if cap is not None:
                 self.pipeline.rollback(cap)
@@ -347,7 +349,7 @@ class Runtime:
         """Queue one capture outside a sweep (the CAPTURE command); its sequence number."""
         seq, packets, state = self.capture_packets(cap)
         try:
-            self.outbox.commit(packets, state)
+            self.outbox.commit(packets, state, reserve=self._reserve)
         except OutboxFull:
             self.pipeline.rollback(cap)
             raise

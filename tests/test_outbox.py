@@ -158,3 +158,17 @@ def test_kill_9_at_random_instants_loses_and_duplicates_nothing(tmp_path):
     assert len(confirmed) > 20, "the writer never got going; the test proved nothing"
     with Outbox(path) as box:
         assert len(box) == len(box.pending(100000))
+
+
+def test_a_reserve_keeps_room_below_the_quota_for_other_rows(tmp_path):
+    row = 100 + ROW_OVERHEAD
+    with Outbox(tmp_path / "o.db", quota_bytes=10 * row) as box:
+        for _ in range(8):
+            box.commit([(1, b"d" * 100)], reserve=2 * row)
+        assert box.full_for(2 * row) and not box.full
+        with pytest.raises(OutboxFull):
+            box.commit([(1, b"d" * 100)], {"k": "v"}, reserve=2 * row)
+        assert box.state("k") is None  # all or nothing
+        box.put(2, b"r" * 100)  # a row without the reserve still fits
+        box.put(2, b"r" * 100)
+        assert box.full and len(box) == 10

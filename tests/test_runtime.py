@@ -452,3 +452,25 @@ def test_a_sweep_paused_by_a_full_outbox_rests_between_turns_instead_of_spinning
     rt.run(lambda r: turns.append(1) or len(turns) > 20, tick_s=0.01)
     assert rt.mode is Mode.SWEEPING and "outbox full" in rt.paused_reason
     assert rests.count(0.01) >= 15  # every paused turn rests a tick
+
+
+def test_commands_are_still_answered_when_captures_have_filled_the_outbox(tmp_path):
+    path = tmp_path / "robot.toml"
+    path.write_text(BASE.format(scene="mixed", rate=0.0, extra="[sweep]\nstart = 90\nstop = 0\nstep = 2\n"))
+    cfg = config.load(path)
+    hal = build_hal(cfg.hal)
+    hal.camera.open(80, 60)
+    cfg.state_dir.mkdir()
+    tr = MemoryTransport(auto_ack=False)
+    box = Outbox(cfg.state_dir / "outbox.sqlite", quota_bytes=8192)
+    rt = Runtime(cfg, hal, tr, Segmentation(cfg, hal), outbox=box)
+    rt.boot()
+    while not rt.paused_reason:
+        rt.step()
+    assert rt.sweep_step() == "paused"
+    for cid in (1, 2, 3):
+        command(tr, cid, pk.CommandName.PING if cid < 3 else pk.CommandName.STATUS)
+    rt.service()
+    answered = {p.command_id for _, body in box.pending(limit=1000)
+                if isinstance(p := pk.decode(body), (pk.AckPacket, pk.NackPacket))}
+    assert answered == {1, 2, 3} and box.bytes_used <= 8192
