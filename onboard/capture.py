@@ -23,6 +23,7 @@ from onboard.fit import FitResult, FrameFitter
 from radio import packet as pk
 
 T = TypeVar("T")
+MAX_POSES_REMEMBERED = 512  # previous models kept per pose for the UNCHANGED rule
 
 
 class PoseSkipped(Exception):
@@ -173,7 +174,7 @@ class Pipeline:
         key = skip.pose_key(commanded)
         same = skip.unchanged(self._previous.get(key), results, self.cfg.skip.unchanged_tolerance)
         if not same:  # compare with the last models sent, so slow drift is still caught
-            self._previous[key] = results
+            remember(self._previous, key, results)
         pca = self.pca if self.pca_pending else None
         self.pca_pending = False
         dep = None
@@ -232,6 +233,15 @@ class SeqCounter:
         """`seq` was committed with its packets."""
         self._next = max(self._next, seq + 1)
         self.last = seq
+
+
+def remember(table: dict, key: Any, value: Any, limit: int = MAX_POSES_REMEMBERED) -> None:
+    """Set `table[key]`, forgetting the least recently set key past `limit` (GOTO and
+    CAPTURE reach any pose, so a long mission must not grow the table without bound)."""
+    table.pop(key, None)
+    table[key] = value
+    while len(table) > limit:
+        del table[next(iter(table))]
 
 
 def _pose(v: ViewAngles) -> tuple[float, float]:

@@ -343,7 +343,7 @@ class Runtime:
         self._last_labels = cap.labels
         key = wire.skip.pose_key(cap.commanded)
         if not (cap.unchanged and key in self._last_models):
-            self._last_models[key] = seq
+            wire.remember(self._last_models, key, seq)
 
     def send_capture(self, cap: Capture) -> int:
         """Queue one capture outside a sweep (the CAPTURE command); its sequence number."""

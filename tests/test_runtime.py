@@ -474,3 +474,21 @@ def test_commands_are_still_answered_when_captures_have_filled_the_outbox(tmp_pa
     answered = {p.command_id for _, body in box.pending(limit=1000)
                 if isinstance(p := pk.decode(body), (pk.AckPacket, pk.NackPacket))}
     assert answered == {1, 2, 3} and box.bytes_used <= 8192
+
+
+def test_per_pose_memory_is_bounded_over_a_long_mission(tmp_path):
+    from onboard.capture import MAX_POSES_REMEMBERED, remember
+
+    table = {}
+    for k in range(3 * MAX_POSES_REMEMBERED):
+        remember(table, (k, 0), k)
+    remember(table, (2 * MAX_POSES_REMEMBERED, 0), "again")  # re-set: now the newest
+    assert len(table) == MAX_POSES_REMEMBERED
+    assert list(table)[-1] == (2 * MAX_POSES_REMEMBERED, 0) and (0, 0) not in table
+    rt, tr = make(tmp_path, "black", extra="[sweep]\nautostart = false\n")
+    rt.boot()
+    for cid, el in enumerate((90.0, 80.0, 70.0)):
+        command(tr, 2 * cid, pk.CommandName.GOTO, elevation=el, azimuth=0.0)
+        command(tr, 2 * cid + 1, pk.CommandName.CAPTURE)
+        rt.step()
+    assert len(rt.pipeline._previous) == len(rt._last_models) == 3
