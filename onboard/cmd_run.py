@@ -4,6 +4,8 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import signal
+import sqlite3
+import sys
 import time
 
 from onboard import config as config_mod
@@ -97,6 +99,11 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         return rt.run(stop)
+    except (OutboxError, OSError, sqlite3.Error) as exc:
+        # The disk under the outbox failed (boot writes, or beneath step()'s own guard): one
+        # line and status 1, which systemd restarts, unlike a configuration error's 2.
+        print(f"btf-robot: error: state_dir {cfg.state_dir}: {exc}", file=sys.stderr)
+        return 1
     finally:
         rt.outbox.close()
         hal.close()

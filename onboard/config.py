@@ -201,6 +201,9 @@ def from_mapping(data: Mapping[str, Any], base: Path = Path(".")) -> Config:
         else:
             known = ", ".join([*_TOP, *(f"[{s}]" for s in _SECTIONS)])
             raise ConfigError(f"unknown key {key} (known: {known})")
+    for key, cls in _SECTIONS.items():
+        if key not in top:  # absent sections still resolve their default paths against base
+            top[key] = _section(cls, {}, key, base)
     top.setdefault("state_dir", base / "state")
     cfg = Config(**top)
     check(cfg)

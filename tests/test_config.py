@@ -112,3 +112,31 @@ def test_btf_robot_run_stops_at_start_with_one_line_and_exit_2(tmp_path, text, w
     assert out.returncode == 2, out.stderr
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and words in lines[0] and "Traceback" not in out.stderr
+
+
+def test_a_failing_state_disk_after_start_is_one_line_and_exit_1(tmp_path, monkeypatch, capsys):
+    """Not a configuration error (exit 2, not restarted): systemd restarts status 1."""
+    import sqlite3
+
+    from onboard.cli import main
+    from onboard.runtime import Runtime
+
+    (tmp_path / "robot.key").write_text("00" * 32)
+    (tmp_path / "robot.key").chmod(0o600)
+    path = tmp_path / "robot.toml"
+    path.write_text('state_dir = "state"\n[hal]\nbody = "fake"\nsize = [24, 32]\n'
+                    '[link]\nkey_file = "robot.key"\n[segment]\nmethod = "scene"\n')
+
+    def broken_boot(self):
+        raise sqlite3.OperationalError("disk I/O error")
+
+    monkeypatch.setattr(Runtime, "boot", broken_boot)
+    assert main(["run", "--config", str(path), "--max-seconds", "5"]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "disk I/O error" in err[0] and "state_dir" in err[0]
+
+
+def test_default_paths_resolve_against_the_config_file_even_without_their_section(tmp_path):
+    cfg = config.load(write(tmp_path, '[hal]\nbody = "fake"\n'))
+    assert cfg.link.key_file == tmp_path.resolve() / "robot.key"
+    assert cfg.state_dir == tmp_path.resolve() / "state"
