@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.johnson import Family, Johnson, normal_ppf
+from onboard.johnson import Family, Johnson, normal_ppf_one
 
 CENSOR_SCALE = 65535  # fractions travel as 1/65535 fixed point
 SHIFT_SCALE = 32  # shifts travel as int8 multiples of 1/32
@@ -95,6 +95,16 @@ def _censored_end(end: np.ndarray, next1: np.ndarray, next2: np.ndarray) -> np.n
     return np.where(excess & (end >= MIN_CENSORED_PIXELS), end, 0)
 
 
+def censored_end_one(end, next1, next2):
+    """_censored_end of one end level given as Python numbers: the same test in the same float
+    steps (one histogram needs no arrays), `end` or 0."""
+    n1, n2 = float(next1), float(next2)
+    ref = max(n1, 2.0 * n1 - n2)
+    if float(end) > EXCESS * ref + NOISE_SDS * math.sqrt(n1 + 1.0) and end >= MIN_CENSORED_PIXELS:
+        return end
+    return 0
+
+
 def quantize(fraction: float) -> float:
     """A censored fraction as it travels (1/65535 fixed point)."""
     if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
@@ -149,7 +159,7 @@ def histogram_l1(model: Johnson, counts: np.ndarray, lo: float = 0.0, bin_width:
 
 
 def _ppf(u: float) -> float:
-    return float(normal_ppf(min(max(u, 0.0), 1.0)))
+    return normal_ppf_one(min(max(u, 0.0), 1.0))
 
 
 def fallback_probs(low: float, high: float) -> tuple[float, float]:

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.censor import (MIN_REPORTED, SHIFT_SCALE, Placement, censored_counts, fallback_probs,
-                            histogram_l1, piled_counts, place, quantize)
+from onboard.censor import (MIN_REPORTED, SHIFT_SCALE, Placement, censored_counts, censored_end_one,
+                            fallback_probs, histogram_l1, piled_counts, place, quantize)
 from onboard.johnson import Johnson
 from onboard.percentile import model_from_percentiles, sl_band, support_of, widen
 
@@ -153,6 +153,23 @@ def _percentile_rows(counts: np.ndarray, cum: np.ndarray, probs: np.ndarray, lo:
     return lo + bin_width * (k - 0.5 + frac)
 
 
+def _percentiles_one(counts: np.ndarray, cum: np.ndarray, probs, lo: float,
+                     bin_width: float) -> list[float]:
+    """_percentile_rows of one row in scalar steps: the same float operations, so the same
+    numbers (searchsorted finds what the batch's comparison count finds in a sorted row)."""
+    bins = cum.size
+    total = float(cum[-1])
+    targets = [p * total for p in probs]
+    out = []
+    for t, k in zip(targets, np.searchsorted(cum, targets, side="left").tolist()):
+        k = min(k, bins - 1)
+        here = float(counts[k])
+        below = float(cum[k]) - here
+        frac = min(max((t - below) / max(here, 1.0), 0.0), 1.0)
+        out.append(lo + bin_width * (k - 0.5 + frac))
+    return out
+
+
 def _betas(counts: np.ndarray, lo: float, bin_width: float) -> tuple[np.ndarray, np.ndarray]:
     """beta1, beta2 of each spread histogram row (uniform within each bin, so never degenerate)."""
     w = np.asarray(counts, dtype=np.float64)
@@ -194,26 +211,22 @@ def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
         bits = 16 if counts.size <= 256 else 32
         codec = PercentileCodec(lo - 0.5 * bin_width, lo + (counts.size - 0.5) * bin_width, bits)
     z = z_for_count(count) if z is None else z
-    return _fit_rows(counts[None, :], [count], [z], lo, bin_width, codec, censor)[0]
+    return _fit_rows(counts[None, :], [count], [z], lo, bin_width, codec, censor, occupied)[0]
 
 
 def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, bin_width: float,
-              codec: PercentileCodec, censor: bool = True) -> list[FitResult]:
+              codec: PercentileCodec, censor: bool = True,
+              occupied: np.ndarray | None = None) -> list[FitResult]:
     """Fit each row of (rows, bins) counts; every row has pixels. Shared by fit_histogram and
-    FrameFitter.fit, so both give the same model for the same histogram."""
+    FrameFitter.fit, so both give the same model for the same histogram. A single row may come
+    with its occupied bins (flatnonzero) already found."""
     rows, bins = counts.shape
     cum = np.cumsum(counts, axis=1, dtype=np.float64)
-    nz = counts > 0
-    first = np.argmax(nz, axis=1)
-    last = bins - 1 - np.argmax(nz[:, ::-1], axis=1)
     beta1, beta2 = _betas(counts, lo, bin_width)
-    if censor:
-        low_n, high_n = censored_counts(counts)
-        # Piles at an interior first or last occupied level (a pole at a bound inside the
-        # range) are read like censored ones: percentiles placed clear of them.
-        piles = piled_counts(counts, first, last)
-        pile_lo = np.where(first == 0, 0, piles[0]).tolist()
-        pile_hi = np.where(last == bins - 1, 0, piles[1]).tolist()
+    if rows == 1:  # one histogram (fit_histogram): scalar steps, the same numbers
+        first, last, low_n, high_n, pile_lo, pile_hi = _ends_one(counts[0], occupied, censor)
+    else:
+        first, last, low_n, high_n, pile_lo, pile_hi = _ends_rows(counts, censor)
     plans: list[tuple[Placement, float, float] | None] = []
     for i in range(rows):
         count, z = totals[i], zs[i]
@@ -228,9 +241,12 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
         plans.append((where, low, high))
     # The four percentiles of every row read by the symmetric method, in one batch.
     batch = [i for i, p in enumerate(plans) if p is not None and not p[0].fallback]
-    raw = dict(zip(batch, _percentile_rows(
-        counts[batch], cum[batch], np.array([_placed_probs(plans[i][0]) for i in batch]).reshape(-1, 4),
-        lo, bin_width)))
+    if rows == 1:
+        raw = {i: _percentiles_one(counts[i], cum[i], _placed_probs(plans[i][0]), lo, bin_width) for i in batch}
+    else:
+        raw = dict(zip(batch, _percentile_rows(
+            counts[batch], cum[batch], np.array([_placed_probs(plans[i][0]) for i in batch]).reshape(-1, 4),
+            lo, bin_width)))
     out = []
     for i in range(rows):
         count, z = totals[i], zs[i]
@@ -247,6 +263,43 @@ def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float,
         out.append(FitResult(fit.model, count, fit.z, fit.percentiles, float(beta1[i]), float(beta2[i]),
                              fit.shift, low, high, fit.fallback, fit.support))
     return out
+
+
+def _ends_rows(counts: np.ndarray, censor: bool):
+    """Per row: first and last occupied bin, censored counts at the sensor limits and piles at
+    an interior first or last occupied level (a pole at a bound inside the range), which are
+    read like censored ones: percentiles placed clear of them."""
+    rows, bins = counts.shape
+    nz = counts > 0
+    first = np.argmax(nz, axis=1)
+    last = bins - 1 - np.argmax(nz[:, ::-1], axis=1)
+    if not censor:
+        return first.tolist(), last.tolist(), None, None, None, None
+    low_n, high_n = censored_counts(counts)
+    piles = piled_counts(counts, first, last)
+    pile_lo = np.where(first == 0, 0, piles[0]).tolist()
+    pile_hi = np.where(last == bins - 1, 0, piles[1]).tolist()
+    return first.tolist(), last.tolist(), low_n.tolist(), high_n.tolist(), pile_lo, pile_hi
+
+
+def _ends_one(counts: np.ndarray, occupied: np.ndarray | None, censor: bool):
+    """_ends_rows of one row by scalar steps (censor.censored_end_one): the same numbers."""
+    bins = counts.size
+    if occupied is None:
+        occupied = np.flatnonzero(counts)
+    first, last = int(occupied[0]), int(occupied[-1])
+    if not censor:
+        return [first], [last], None, None, None, None
+    low_n = high_n = pile_lo = pile_hi = 0
+    if bins >= 4:
+        c = counts[[0, 1, 2, -1, -2, -3]].tolist()
+        low_n, high_n = censored_end_one(*c[:3]), censored_end_one(*c[3:])
+    if last - first >= 3:
+        if first != 0:
+            pile_lo = censored_end_one(*counts[first:first + 3].tolist())
+        if last != bins - 1:
+            pile_hi = censored_end_one(*counts[last - 2:last + 1].tolist()[::-1])
+    return [first], [last], [low_n], [high_n], [pile_lo], [pile_hi]
 
 
 def _placement(z: float, low: float, high: float, count: int, pile_lo: int, pile_hi: int) -> Placement:
@@ -316,13 +369,13 @@ def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_pr
     """(snapped percentiles, model) for one histogram read at `where`."""
     bins = counts.size
     if where.fallback:
-        ends = histogram_percentiles(counts, normal_probs, lo, bin_width, cum)
+        ends = _percentiles_one(counts, cum, normal_probs, lo, bin_width)
         a = lo + bin_width * 0.5 if low > 0.0 else float(ends[0])
         e = lo + bin_width * (bins - 1.5) if high > 0.0 else float(ends[1])
         pct = codec.snap([a, a, e, e])
     else:
         if raw is None:
-            raw = histogram_percentiles(counts, _placed_probs(where), lo, bin_width, cum)
+            raw = _percentiles_one(counts, cum, _placed_probs(where), lo, bin_width)
         pct = codec.snap(raw)
     return pct, model_from_percentiles(pct, where.z, count, shift=where.shift, normal_probs=normal_probs)
 

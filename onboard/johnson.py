@@ -27,7 +27,6 @@ Z_CLIP = 37.0
 _LN_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 _LUT_BITS = 16
 _NORMAL = statistics.NormalDist()
-_erfc = np.frompyfunc(math.erfc, 1, 1)
 _inv_cdf = np.frompyfunc(_NORMAL.inv_cdf, 1, 1)
 
 
@@ -42,7 +41,10 @@ class Family(enum.StrEnum):
 def normal_cdf(z: np.ndarray | float) -> np.ndarray:
     """Phi(z), accurate in both tails (erfc, not 1 - erf)."""
     z = np.asarray(z, dtype=np.float64)
-    return np.asarray(_erfc(-z / math.sqrt(2.0)), dtype=np.float64) * 0.5
+    w = -z / math.sqrt(2.0)
+    # math.erfc element by element (numpy has none); fromiter skips the object array.
+    e = np.fromiter(map(math.erfc, w.ravel().tolist()), dtype=np.float64, count=w.size)
+    return e.reshape(w.shape) * 0.5
 
 
 def normal_ppf(u: np.ndarray | float) -> np.ndarray:
@@ -51,10 +53,8 @@ def normal_ppf(u: np.ndarray | float) -> np.ndarray:
     if not np.all((u >= 0.0) & (u <= 1.0)):  # also rejects NaN
         raise ValueError("probabilities must lie in [0, 1]")
     lo, hi = _PPF_LO, _PPF_HI
-    if u.ndim == 0:  # the same steps on a Python float: fitting asks one at a time
-        v = float(u)
-        z = -Z_CLIP if v <= lo else Z_CLIP if v >= 1.0 else _NORMAL.inv_cdf(min(max(v, lo), hi))
-        return np.asarray(min(max(z, -Z_CLIP), Z_CLIP))
+    if u.ndim == 0:
+        return np.asarray(normal_ppf_one(float(u)))
     inner = np.clip(u, lo, hi)
     z = np.asarray(_inv_cdf(inner), dtype=np.float64)
     return np.clip(np.where(u <= lo, -Z_CLIP, np.where(u >= 1.0, Z_CLIP, z)), -Z_CLIP, Z_CLIP)
@@ -62,6 +62,16 @@ def normal_ppf(u: np.ndarray | float) -> np.ndarray:
 
 _PPF_LO = float(normal_cdf(-Z_CLIP))
 _PPF_HI = min(float(normal_cdf(Z_CLIP)), math.nextafter(1.0, 0.0))
+
+
+def normal_ppf_one(u: float) -> float:
+    """normal_ppf of one probability as a Python float, the same steps without arrays
+    (fitting asks one at a time)."""
+    if not 0.0 <= u <= 1.0:  # also rejects NaN
+        raise ValueError("probabilities must lie in [0, 1]")
+    lo, hi = _PPF_LO, _PPF_HI
+    z = -Z_CLIP if u <= lo else Z_CLIP if u >= 1.0 else _NORMAL.inv_cdf(min(max(u, lo), hi))
+    return min(max(z, -Z_CLIP), Z_CLIP)
 
 
 def _expit(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -289,9 +299,15 @@ class Johnson:
         t = np.concatenate(([-np.inf], z, [np.inf]))
         # Intervals above the median as differences of the upper tail: 1 - Phi(z) rounds to 0
         # beyond z ~ 8.3, Phi(-z) stays positive out to the clip.
+        pos = t[:-1] >= 0.0
+        j = int(np.count_nonzero(~pos))
+        if not pos[:j].any():
+            # Increasing edges (the usual case): each side's Phi only where its intervals are.
+            lower, upper = normal_cdf(t[:j + 1]), normal_cdf(-t[j:])
+            return np.concatenate((np.diff(lower), upper[:-1] - upper[1:]))
         upper = normal_cdf(-t)
         below, above = np.diff(normal_cdf(t)), upper[:-1] - upper[1:]  # no -0.0
-        return np.where(t[:-1] >= 0.0, above, below)
+        return np.where(pos, above, below)
 
     def pixel_table(self, levels: int = 256) -> np.ndarray:
         """2**16-entry lookup table: a uniform random uint16 index gives a level whose

@@ -11,7 +11,7 @@ import math
 
 import numpy as np
 
-from onboard.johnson import Z_CLIP, Family, Johnson, normal_ppf
+from onboard.johnson import Z_CLIP, Family, Johnson, normal_ppf_one
 
 # ln d has a sampling sd of roughly 4 / sqrt(count); the SL band is one such sd wide on each
 # side, never narrower than the floor that keeps the SU/SB forms well conditioned.
@@ -99,7 +99,7 @@ def _shifted(model: Johnson, shift: float) -> Johnson:
 
 def _normal_through(a: float, e: float, pa: float, pe: float) -> Johnson:
     """The normal with P(X < a) = pa and P(X < e) = pe, a < e (0 < pa < pe < 1)."""
-    za, ze = float(normal_ppf(pa)), float(normal_ppf(pe))
+    za, ze = normal_ppf_one(pa), normal_ppf_one(pe)
     if not ze - za >= _MIN_DZ:  # all the mass at the limits: a wide normal between them
         mid = 0.5 * (za + ze)
         za, ze = mid - 0.5 * _MIN_DZ, mid + 0.5 * _MIN_DZ
