@@ -145,17 +145,30 @@ def histogram_l1(model: Johnson, counts: np.ndarray, lo: float = 0.0, bin_width:
     """Sum over bins of |P_model(bin) - count / total| (bin k centred on lo + k * bin_width, the
     end bins holding the tails, as a clipping sensor does). Only the occupied bins and the empty
     runs between them are evaluated: the same sum as over every bin, cheaper for deep sensors."""
+    return l1_on_grid(model, l1_grid(counts, lo, bin_width))
+
+
+def l1_grid(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """(edges, observed probabilities) that histogram_l1 compares a model on; built once when
+    several models are compared on one histogram."""
     c = np.asarray(counts)
     bins = c.size
     occ = np.flatnonzero(c)
     # edge k separates bins k - 1 and k; the outer edges 0 and bins are the sensor's limits
-    k = np.union1d(occ, occ + 1)
-    k = k[(k > 0) & (k < bins)]
-    p = model.interval_probabilities(lo + (k - 0.5) * bin_width)
+    mark = np.zeros(bins + 1, dtype=bool)
+    mark[occ] = True
+    mark[occ + 1] = True
+    mark[0] = mark[bins] = False
+    k = np.flatnonzero(mark)
     # each interval starts at bin 0 or an edge; an occupied bin is an interval of its own
     starts = np.concatenate(([0], k))
-    h = c[starts].astype(np.float64) / float(c.sum())
-    return float(np.abs(p - h).sum())
+    return lo + (k - 0.5) * bin_width, c[starts].astype(np.float64) / float(c.sum())
+
+
+def l1_on_grid(model: Johnson, grid: tuple[np.ndarray, np.ndarray]) -> float:
+    """histogram_l1 of `model` on a grid from l1_grid."""
+    edges, h = grid
+    return float(np.abs(model.interval_probabilities(edges) - h).sum())
 
 
 def _ppf(u: float) -> float:

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from onboard.censor import (MIN_REPORTED, SHIFT_SCALE, Placement, censored_counts, censored_end_one,
-                            fallback_probs, histogram_l1, piled_counts, place, quantize)
+                            fallback_probs, l1_grid, l1_on_grid, piled_counts, place, quantize)
 from onboard.johnson import Johnson
 from onboard.percentile import model_from_percentiles, sl_band, support_of, widen
 
@@ -347,7 +347,8 @@ def _best_censored(counts: np.ndarray, cum: np.ndarray, placed: FitResult, z: fl
     for where in (Placement(placed.z, 0, True), Placement(z)):
         if where != done and (low or high or not where.fallback):
             cands.append(_fit_one(counts, cum, where, low, high, count, f0, f1, lo, bin_width, codec))
-    errors = [histogram_l1(c.model, counts, lo, bin_width) for c in cands]
+    grid = l1_grid(counts, lo, bin_width)
+    errors = [l1_on_grid(c.model, grid) for c in cands]
     return cands[errors.index(min(errors))]
 
 
