@@ -6,6 +6,7 @@ percentiles, so ties in 8-bit data never make a gap zero or bias the family.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -173,17 +174,28 @@ def _percentiles_one(counts: np.ndarray, cum: np.ndarray, probs, lo: float,
 def _betas(counts: np.ndarray, lo: float, bin_width: float) -> tuple[np.ndarray, np.ndarray]:
     """beta1, beta2 of each spread histogram row (uniform within each bin, so never degenerate)."""
     w = np.asarray(counts, dtype=np.float64)
-    w = w / w.sum(axis=-1, keepdims=True)
-    c = lo + bin_width * np.arange(w.shape[-1])
+    w = w / np.add.reduce(w, axis=-1, keepdims=True)
+    c = _centres(lo, bin_width, w.shape[-1])
     # Row-wise sums (not matmul): the same numbers for a row alone or in a batch.
-    mu = (w * c).sum(axis=-1)
+    mu = np.add.reduce(w * c, axis=-1)
     dv = c - mu[..., None]
     dv2 = dv * dv
     h2 = bin_width * bin_width / 12.0
-    m2 = (w * dv2).sum(axis=-1) + h2
-    m3 = (w * dv * (dv2 + 3.0 * h2)).sum(axis=-1)
-    m4 = (w * dv2 * (dv2 + 6.0 * h2)).sum(axis=-1) + bin_width ** 4 / 80.0
+    wdv2 = w * dv2
+    m2 = np.add.reduce(wdv2, axis=-1) + h2
+    t = w * dv
+    t *= dv2 + 3.0 * h2
+    m3 = np.add.reduce(t, axis=-1)
+    wdv2 *= dv2 + 6.0 * h2
+    m4 = np.add.reduce(wdv2, axis=-1) + bin_width ** 4 / 80.0
     return m3 * m3 / m2 ** 3, m4 / (m2 * m2)
+
+
+@functools.lru_cache(maxsize=16)
+def _centres(lo: float, bin_width: float, bins: int) -> np.ndarray:
+    c = lo + bin_width * np.arange(bins)
+    c.flags.writeable = False  # shared between calls
+    return c
 
 
 def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
@@ -197,21 +209,31 @@ def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
         raise ValueError(f"counts must be a non-empty 1-D array, got shape {counts.shape}")
     if counts.dtype.kind not in "iuf":
         raise ValueError(f"counts must be numeric, got dtype {counts.dtype}")
-    if counts.dtype.kind == "f" and not np.all(np.isfinite(counts)):
+    if counts.dtype.kind == "f" and not np.isfinite(counts).all():
         raise ValueError("counts must be finite")
-    if np.any(counts < 0):
+    if counts.dtype.kind != "u" and counts.min() < 0:
         raise ValueError("counts must be non-negative")
     if not (math.isfinite(lo) and math.isfinite(bin_width) and bin_width > 0):
         raise ValueError(f"need finite lo and positive bin_width, got {lo}, {bin_width}")
     occupied = np.flatnonzero(counts)
     if occupied.size == 0:
         raise ValueError("histogram is empty: nothing to fit")
-    count = _exact_total(counts, occupied)
+    return _fit_counts(counts, occupied, _exact_total(counts, occupied), lo, bin_width, codec, z, censor)
+
+
+def _fit_counts(counts: np.ndarray, occupied: np.ndarray, count: int, lo: float, bin_width: float,
+                codec: PercentileCodec | None, z: float | None, censor: bool) -> FitResult:
+    """fit_histogram of checked counts, their occupied bins and exact total."""
     if codec is None:
-        bits = 16 if counts.size <= 256 else 32
-        codec = PercentileCodec(lo - 0.5 * bin_width, lo + (counts.size - 0.5) * bin_width, bits)
+        codec = _default_codec(lo, bin_width, counts.size)
     z = z_for_count(count) if z is None else z
     return _fit_rows(counts[None, :], [count], [z], lo, bin_width, codec, censor, occupied)[0]
+
+
+@functools.lru_cache(maxsize=16)
+def _default_codec(lo: float, bin_width: float, bins: int) -> PercentileCodec:
+    """The range of the bins at 16 bits (32 above 256 bins)."""
+    return PercentileCodec(lo - 0.5 * bin_width, lo + (bins - 0.5) * bin_width, 16 if bins <= 256 else 32)
 
 
 def _fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, bin_width: float,
@@ -430,7 +452,8 @@ def fit_values(values: np.ndarray, value_range: tuple[float, float] | None = Non
         if vmin < lo or vmax > hi:
             raise ValueError(f"values [{vmin}, {vmax}] outside the declared range [{lo}, {hi}]")
     counts, width, centre0 = _bin(v, lo, hi, bins)
-    return fit_histogram(counts, centre0, width)
+    # Counts of v's values: non-negative integers summing to v.size, nothing to re-check.
+    return _fit_counts(counts, np.flatnonzero(counts), v.size, centre0, width, None, None, True)
 
 
 def _value_grid(dtype: np.dtype, value_range, bins, v: np.ndarray | None = None):
