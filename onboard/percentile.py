@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from onboard.johnson import Z_CLIP, Family, Johnson, normal_ppf_one
 
 # ln d has a sampling sd of roughly 4 / sqrt(count); the SL band is one such sd wide on each
