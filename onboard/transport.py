@@ -9,15 +9,12 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any, Protocol
 
+from radio.link import Acked  # the link's own event: the peer holds message msg_id
+
 
 @dataclass(frozen=True, slots=True)
 class Received:
     body: bytes
-
-
-@dataclass(frozen=True, slots=True)
-class Acked:
-    msg_id: int
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,8 +75,8 @@ class LinkTransport:
         for ev in events:
             if isinstance(ev, lk.Delivered):
                 mine.append(Received(ev.payload))
-            elif isinstance(ev, lk.Acked):
-                mine.append(Acked(ev.msg_id))
+            elif isinstance(ev, Acked):
+                mine.append(ev)
             elif isinstance(ev, lk.LinkUp):
                 mine.append(LinkState(True))
             elif isinstance(ev, lk.LinkDown):
