@@ -201,7 +201,9 @@ def _censoring(points, sizes, res) -> list[str]:
             f"gray levels up to 10% censored: {'met' if q_ok else 'NOT met'}; model-to-truth histogram L1 "
             f"at most {L1_BAR} up to 40% censored: {'met' if l1_ok else 'NOT met'} (the bar is set on "
             "samples against data; here the fit's level probabilities meet the true ones, without "
-            "sampling noise).", ""]
+            "sampling noise). The issue states these bars for clipped normal, SU, SB and lognormal "
+            "curves, where tests/test_censored.py checks them; this grid adds J-shaped curves beside "
+            "the band, whose pole at the lower bound a crushed limit swallows (the table below).", ""]
     return out
 
 
