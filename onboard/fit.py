@@ -15,11 +15,11 @@ import numpy as np
 from onboard.censor import (MIN_REPORTED, SHIFT_SCALE, Placement, censored_counts, censored_end_one,
                             fallback_probs, l1_grid, l1_on_grid, piled_counts, place, quantize)
 from onboard.johnson import Johnson
-from onboard.percentile import model_from_percentiles, sl_band, support_of, widen
+from onboard.percentile import model_from_percentiles, support_of, widen
 
 __all__ = [
-    "Z_LADDER", "FitResult", "PercentileCodec", "fit_histogram", "fit_values",
-    "model_from_percentiles", "rebuild", "sl_band", "support_point", "z_for_count",
+    "Z_LADDER", "FitResult", "FrameFitter", "PercentileCodec", "fit_histogram", "fit_values",
+    "histogram_percentiles", "model_from_percentiles", "rebuild", "support_point", "z_for_count",
 ]
 
 # z values tried from the top; the packet sends the index of the one used.
@@ -48,6 +48,8 @@ def z_for_count(count: int) -> float:
 
 @dataclass(frozen=True, slots=True)
 class FitResult:
+    """One (label, band) fit: the model and what the packet carries to rebuild it."""
+
     model: Johnson
     count: int
     z: float
@@ -338,7 +340,7 @@ def _placement(z: float, low: float, high: float, count: int, pile_lo: int, pile
 
 def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, high: float, count: int,
              f0: int, f1: int, lo: float, bin_width: float, codec: PercentileCodec,
-             raw: np.ndarray | None = None) -> FitResult:
+             raw: list[float] | None = None) -> FitResult:
     """One histogram read at `where` (`raw`: its percentiles, when already read), its support
     widened to the occupied bins f0..f1 if short (betas left at zero: the caller has them)."""
     normal_probs = fallback_probs(low, high) if where.fallback else None
@@ -377,10 +379,10 @@ def _best_censored(counts: np.ndarray, cum: np.ndarray, placed: FitResult, z: fl
 def support_point(level: int, side: int, codec: PercentileCodec, lo: float = 0.0,
                   bin_width: float = 1.0) -> float:
     """The point a bounded support must reach when `level` is the lowest (side 0) or highest
-    (side 1) occupied bin: that bin's centre, snapped through the codec. The level's values then
-    lie in the support and the level has positive probability, and the support moves no further
-    than that: widening to the outer edge, half a level more, moved a pole-at-bound SB's
-    quantiles by up to 3.6 gray. The receiver calls it on the transmitted level."""
+    (side 1) occupied bin: a quarter level into that bin from its inner edge, snapped through
+    the codec, so the level has positive probability while the bound moves as little as it can
+    (widening to the bin's outer edge moved a pole-at-bound SB's quantiles by up to 3.6 gray).
+    The receiver calls it on the transmitted level."""
     if side not in (0, 1):
         raise ValueError(f"side must be 0 (low) or 1 (high), got {side}")
     return codec.snap_one(lo + bin_width * (level + (0.25 if side == 0 else -0.25)))
@@ -388,7 +390,7 @@ def support_point(level: int, side: int, codec: PercentileCodec, lo: float = 0.0
 
 def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_probs, low: float,
                 high: float, count: int, lo: float, bin_width: float, codec: PercentileCodec,
-                raw: np.ndarray | None = None):
+                raw: list[float] | None = None):
     """(snapped percentiles, model) for one histogram read at `where`."""
     bins = counts.size
     if where.fallback:
@@ -480,11 +482,9 @@ def _value_grid(dtype: np.dtype, value_range, bins, v: np.ndarray | None = None)
 def _bin_geometry(lo: float, hi: float, bins: int, integer: bool) -> tuple[float, float]:
     """(bin width, centre of bin 0). Integer data whose levels fill the bins one each
     is centred on the levels; otherwise the bins tile [lo, hi]."""
-    if hi == lo:
+    if hi == lo or (integer and hi - lo + 1 == bins):
         return 1.0, lo
-    if integer and hi - lo + 1 == bins:
-        return 1.0, lo
-    width = (hi - lo) / bins if hi > lo else 1.0
+    width = (hi - lo) / bins
     return width, lo + 0.5 * width
 
 
@@ -555,10 +555,10 @@ class FrameFitter:
         if height == 0 or width == 0:
             return
         step = max(1, self.chunk_pixels // width)
-        flat = self.counts.reshape(-1)
         if self._fits16 and self._unit_levels and frame.dtype == np.uint8:
             self._add_8bit(frame, labels, step)
             return
+        flat = self.counts.reshape(-1)
         for r0 in range(0, height, step):
             lab, vals = labels[r0:r0 + step], frame[r0:r0 + step]
             self._check_labels(lab)
@@ -604,7 +604,7 @@ class FrameFitter:
         """Fit every (label, band) with at least `min_count` pixels; others go to empty_labels."""
         totals = self.counts[:, 0, :].sum(axis=1)
         keep = [lab for lab in range(self.n_labels) if int(totals[lab]) >= max(min_count, 1)]
-        self.empty_labels = tuple(lab for lab in range(self.n_labels) if lab not in set(keep))
+        self.empty_labels = tuple(sorted(set(range(self.n_labels)) - set(keep)))
         if not keep:
             return {}
         counts = [int(totals[lab]) for lab in keep for _ in range(self.n_bands)]

@@ -36,9 +36,10 @@ def model_from_percentiles(percentiles, z: float, count: int, *, shift: float = 
     `shift` s moves the four points along the normal scale (censored data: keep them out of
     the pile-up); the symmetric forms still apply with gamma lowered by s. `normal_probs`
     (pa, pe) instead asks for the normal with P(X < a) = pa and P(X < e) = pe (the censored
-    fallback, see onboard.fit). `support` (lo, hi): points a bounded support must contain,
-    None for a side without a requirement (see `widen`). Deterministic: the host calls it on the transmitted values to recompute
-    the robot's model bit for bit. All four equal means a constant region.
+    fallback, see onboard.censor). `support` (lo, hi): points a bounded support must contain,
+    None for a side without a requirement (see `widen`). Deterministic: the host calls it on
+    the transmitted values to recompute the robot's model bit for bit. All four equal means a
+    constant region.
     """
     if len(percentiles) != 4:
         raise ValueError(f"need four percentiles, got {len(percentiles)}")
