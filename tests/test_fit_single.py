@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from onboard.censor import _censored_end, censored_end_one, histogram_l1
-from onboard.fit import FrameFitter, _percentile_rows, _percentiles_one, fit_histogram, fit_values
+from onboard.fit import FrameFitter, fit_histogram, fit_values
+from onboard.histfit import _percentile_rows, _percentiles_one
 from onboard.johnson import Family, Johnson, normal_cdf
 
 
