@@ -78,8 +78,8 @@ def _percentile_rows(counts: np.ndarray, cum: np.ndarray, probs: np.ndarray, lo:
 
 def _percentiles_one(counts: np.ndarray, cum: np.ndarray, probs, lo: float,
                      bin_width: float) -> list[float]:
-    """_percentile_rows of one row in scalar steps: the same float operations, so the same
-    numbers (searchsorted finds what the batch's comparison count finds in a sorted row)."""
+    """_percentile_rows of one row in scalar steps, for speed: the same float operations, so the
+    same numbers (searchsorted finds what the batch's comparison count finds in a sorted row)."""
     bins = cum.size
     total = float(cum[-1])
     targets = [p * total for p in probs]
@@ -161,7 +161,9 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
     rows, bins = counts.shape
     cum = np.cumsum(counts, axis=1, dtype=np.float64)
     beta1, beta2 = _betas(counts, lo, bin_width)
-    if rows == 1:  # one histogram (fit_histogram): scalar steps, the same numbers
+    # One row (fit_histogram, or a frame of one label and band) in scalar steps: array overhead
+    # would dominate it. The same float operations, so the same numbers.
+    if rows == 1:
         first, last, low_n, high_n, pile_lo, pile_hi = _ends_one(counts[0], occupied, censor)
     else:
         first, last, low_n, high_n, pile_lo, pile_hi = _ends_rows(counts, censor)
@@ -177,11 +179,11 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
         if where == Placement(z) and max(low, high) < MIN_REPORTED:
             low = high = 0.0
         plans.append((where, low, high))
-    # The four percentiles of every row read by the symmetric method, in one batch.
-    batch = [i for i, p in enumerate(plans) if p is not None and not p[0].fallback]
-    if rows == 1:
-        raw = {i: _percentiles_one(counts[i], cum[i], _probs_at(plans[i][0]), lo, bin_width) for i in batch}
-    else:
+    # Every row's four percentiles in one array pass (fallbacks read two of their own); a single
+    # row reads its own in _fit_one, by scalar steps.
+    raw = {}
+    if rows > 1:
+        batch = [i for i, p in enumerate(plans) if p is not None and not p[0].fallback]
         raw = dict(zip(batch, _percentile_rows(
             counts[batch], cum[batch], np.array([_probs_at(plans[i][0]) for i in batch]).reshape(-1, 4),
             lo, bin_width)))
@@ -221,7 +223,8 @@ def _ends_rows(counts: np.ndarray, censor: bool):
 
 
 def _ends_one(counts: np.ndarray, occupied: np.ndarray | None, censor: bool):
-    """_ends_rows of one row by scalar steps (censor.censored_end_one): the same numbers."""
+    """_ends_rows of one row by scalar steps (censor.censored_end_one), for speed: the same
+    numbers."""
     bins = counts.size
     if occupied is None:
         occupied = np.flatnonzero(counts)
@@ -254,11 +257,21 @@ def _placement(z: float, low: float, high: float, count: int, pile_lo: int, pile
 
 def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, high: float, count: int,
              f0: int, f1: int, lo: float, bin_width: float, codec: PercentileCodec,
-             raw: list[float] | None = None) -> FitResult:
+             raw: np.ndarray | None = None) -> FitResult:
     """One histogram read at `where` (`raw`: its percentiles, when already read), its support
     widened to the occupied bins f0..f1 if short (betas left at zero: the caller has them)."""
-    normal_probs = fallback_probs(low, high) if where.fallback else None
-    pct, model = _fit_placed(counts, cum, where, normal_probs, low, high, count, lo, bin_width, codec, raw)
+    normal_probs = None
+    if where.fallback:
+        # four points a, a, e, e: the censor limits, or where a side is uncensored the middle of
+        # the uncensored mass (onboard.censor)
+        normal_probs = fallback_probs(low, high)
+        mid = _percentiles_one(counts, cum, normal_probs, lo, bin_width)
+        a = lo + bin_width * 0.5 if low > 0.0 else mid[0]
+        e = lo + bin_width * (counts.size - 1.5) if high > 0.0 else mid[1]
+        pct = codec.snap([a, a, e, e])
+    else:
+        pct = codec.snap(_percentiles_one(counts, cum, _probs_at(where), lo, bin_width) if raw is None else raw)
+    model = model_from_percentiles(pct, where.z, count, shift=where.shift, normal_probs=normal_probs)
     support = None
     # Bounded supports must reach into every occupied bin (support_point), so each has mass;
     # only the side that falls short is recorded (it travels).
@@ -290,23 +303,6 @@ def _best_censored(counts: np.ndarray, cum: np.ndarray, placed: FitResult, z: fl
     return cands[errors.index(min(errors))]
 
 
-def _fit_placed(counts: np.ndarray, cum: np.ndarray, where: Placement, normal_probs, low: float,
-                high: float, count: int, lo: float, bin_width: float, codec: PercentileCodec,
-                raw: list[float] | None = None):
-    """(snapped percentiles, model) for one histogram read at `where`."""
-    bins = counts.size
-    if where.fallback:
-        ends = _percentiles_one(counts, cum, normal_probs, lo, bin_width)
-        a = lo + bin_width * 0.5 if low > 0.0 else float(ends[0])
-        e = lo + bin_width * (bins - 1.5) if high > 0.0 else float(ends[1])
-        pct = codec.snap([a, a, e, e])
-    else:
-        if raw is None:
-            raw = _percentiles_one(counts, cum, _probs_at(where), lo, bin_width)
-        pct = codec.snap(raw)
-    return pct, model_from_percentiles(pct, where.z, count, shift=where.shift, normal_probs=normal_probs)
-
-
 def rebuild(result: FitResult, percentiles=None) -> Johnson:
     """The model from a result's (or the given, e.g. decoded) percentiles and its placement:
     what the receiver computes from a packet."""
@@ -326,4 +322,5 @@ def _exact_total(counts: np.ndarray, occupied: np.ndarray) -> int:
 
 
 def _probs_at(where: Placement) -> tuple[float, float, float, float]:
+    """Lower-tail probabilities of the four percentiles a placement reads."""
     return percentile_probs(where.z, where.shift)
