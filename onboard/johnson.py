@@ -271,9 +271,8 @@ class Johnson:
         out_dtype = np.uint8 if levels <= 256 else np.uint16
         z = np.asarray(z)
         if self.family is Family.CONST:
-            v = min(max(round(self.xi), 0), levels - 1)
             _check_levels(levels)
-            return np.full(z.shape, v, dtype=out_dtype)
+            return np.full(z.shape, min(max(round(self.xi), 0), levels - 1), dtype=out_dtype)
         t = self.thresholds(levels)
         # side="left": a z equal to t_k belongs to level k (x = k + 1/2 rounds down).
         return np.searchsorted(t, z, side="left").astype(out_dtype)
@@ -320,14 +319,16 @@ class Johnson:
     def pixel_table(self, levels: int = 256) -> np.ndarray:
         """2**16-entry lookup table: a uniform random uint16 index gives a level whose
         probability is within 2**-16 of the model's."""
-        c = normal_cdf(self.thresholds(levels)) if self.family is not Family.CONST else None
+        _check_levels(levels)
         size = 1 << _LUT_BITS
-        if c is None:
-            return np.full(size, min(max(round(self.xi), 0), levels - 1), dtype=np.uint8)
+        dtype = np.uint8 if levels <= 256 else np.uint16
+        if self.family is Family.CONST:
+            return np.full(size, min(max(round(self.xi), 0), levels - 1), dtype=dtype)
+        c = normal_cdf(self.thresholds(levels))
         # Entry j covers u in [j, j+1) / size; level k owns entries round(size*c_{k-1}) .. round(size*c_k).
         edges = np.rint(c * size).astype(np.int64)
         counts = np.diff(np.concatenate(([0], edges, [size])))
-        return np.repeat(np.arange(levels, dtype=np.uint8 if levels <= 256 else np.uint16), counts)
+        return np.repeat(np.arange(levels, dtype=dtype), counts)
 
     def sample_pixels(self, n: int, rng: np.random.Generator, levels: int = 256) -> np.ndarray:
         """n integer pixels in [0, levels-1]: uint8 for levels <= 256, else uint16."""

@@ -82,6 +82,14 @@ def test_lookup_table_cells_are_within_one_table_step():
         assert np.all(np.abs(share - model.level_probabilities()) <= 2.0**-16 + 1e-15)
 
 
+def test_a_constant_lookup_table_holds_its_level_at_any_depth():
+    table = Johnson.constant(300.2).pixel_table(levels=1024)
+    assert table.dtype == np.uint16 and (table == 300).all()
+    assert (Johnson.constant(300.2).pixel_table() == 255).all()  # clipped to the 8-bit range
+    with pytest.raises(ValueError, match="levels"):
+        Johnson.constant(3.0).pixel_table(levels=1)
+
+
 def test_sixteen_bit_pixels_are_uint16_in_range():
     m = Johnson(Family.SU, 0.0, 0.3, 30000.0, 500.0)
     px = m.sample_pixels(10000, np.random.default_rng(0), levels=65536)
