@@ -12,19 +12,25 @@ acquisition and says so. Nothing is ever dropped to make room.
 A small key-value `state` table lives in the same database, so the runtime can commit
 "these packets are queued" and "this pose is done" (sweep progress, the next capture
 sequence) as one transaction with `commit`: a kill leaves both or neither.
+
+A `replies` table remembers the answers to the last `REMEMBERED_REPLIES` commands, each
+committed with the packet carrying it and whatever the command produced; a command id
+seen again (the base retrying across a robot restart) is answered from here, not re-run.
 """
 from __future__ import annotations
 
 import sqlite3
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Mapping
 
 # Rough per-row cost of SQLite's record and index overhead, so many tiny rows count too.
 ROW_OVERHEAD = 64
 DEFAULT_QUOTA = 64 * 1024 * 1024
-SCHEMA_VERSION = 2  # 2 added the state table; a version-1 file gains it on open
+SCHEMA_VERSION = 3  # 2 added the state table, 3 the replies; older files gain them on open
+REMEMBERED_REPLIES = 256  # commands answered from memory; older ids are forgotten
 
 _SCHEMA = (
     """CREATE TABLE IF NOT EXISTS outbox (
@@ -34,7 +40,24 @@ _SCHEMA = (
     body BLOB NOT NULL
 )""",
     "CREATE TABLE IF NOT EXISTS state (key TEXT PRIMARY KEY, value TEXT NOT NULL)",
+    """CREATE TABLE IF NOT EXISTS replies (
+    n INTEGER PRIMARY KEY AUTOINCREMENT,
+    command_id INTEGER NOT NULL UNIQUE,
+    msg_id INTEGER NOT NULL,
+    kind INTEGER NOT NULL,
+    body BLOB NOT NULL
+)""",
 )
+
+
+@dataclass(frozen=True)
+class Reply:
+    """A command's answer: its packet, and (once committed) the outbox row carrying it."""
+
+    command_id: int
+    kind: int
+    body: bytes
+    msg_id: int = 0
 
 
 class OutboxError(RuntimeError):
@@ -64,7 +87,7 @@ class Outbox:
                 raise OutboxError(f"outbox {self.path}: WAL journal not available (got {mode!r})")
             self._conn.execute("PRAGMA synchronous=FULL")
             version = self._conn.execute("PRAGMA user_version").fetchone()[0]
-            if version not in (0, 1, SCHEMA_VERSION):
+            if version not in (0, 1, 2, SCHEMA_VERSION):
                 raise OutboxError(
                     f"outbox {self.path}: schema version {version}, expected {SCHEMA_VERSION}"
                 )
@@ -91,13 +114,20 @@ class Outbox:
         state: Mapping[str, str] | None = None,
         created: float | None = None,
         reserve: int = 0,
+        reply: Reply | None = None,
     ) -> list[int]:
         """Store packets and state entries in one durable transaction; their message ids.
 
-        All or nothing: past the quota less `reserve` bytes (`OutboxFull`) or on a write
-        error nothing is stored. Bulk data passes a reserve so replies still fit.
+        A `reply` is queued last and remembered for its command id (the oldest memory
+        past `REMEMBERED_REPLIES` is forgotten in the same transaction). All or nothing:
+        past the quota less `reserve` bytes (`OutboxFull`) or on a write error nothing
+        is stored. Bulk data passes a reserve so replies still fit.
         """
         rows = [_checked(kind, body) for kind, body in packets]
+        if reply is not None:
+            if not isinstance(reply.command_id, int) or reply.command_id < 0:
+                raise ValueError(f"reply command id must be a non-negative int, got {reply.command_id!r}")
+            rows.append(_checked(reply.kind, reply.body))
         entries = [(str(k), str(v)) for k, v in (state or {}).items()]
         stamp = time.time() if created is None else float(created)
         size = sum(len(b) for _, b in rows)
@@ -117,6 +147,8 @@ class Outbox:
                             "INSERT INTO outbox (kind, created, body) VALUES (?, ?, ?)", (kind, stamp, body)
                         )
                         ids.append(int(cur.lastrowid))
+                    if reply is not None:
+                        self._remember(reply.command_id, ids[-1], *rows[-1])
                     self._conn.executemany(
                         "INSERT INTO state (key, value) VALUES (?, ?) "
                         "ON CONFLICT(key) DO UPDATE SET value = excluded.value", entries
@@ -132,6 +164,23 @@ class Outbox:
             self._count += len(rows)
             self._payload += size
             return ids
+
+    def _remember(self, command_id: int, msg_id: int, kind: int, body: bytes) -> None:
+        self._conn.execute(
+            "INSERT OR REPLACE INTO replies (command_id, msg_id, kind, body) VALUES (?, ?, ?, ?)",
+            (command_id, msg_id, kind, body),
+        )
+        self._conn.execute(
+            "DELETE FROM replies WHERE n <= (SELECT MAX(n) FROM replies) - ?", (REMEMBERED_REPLIES,)
+        )
+
+    def remembered(self, command_id: int) -> Reply | None:
+        """The committed answer to command `command_id`, or None if never seen (or forgotten)."""
+        with self._lock:
+            row = self._conn.execute(
+                "SELECT kind, body, msg_id FROM replies WHERE command_id = ?", (command_id,)
+            ).fetchone()
+        return None if row is None else Reply(command_id, int(row[0]), bytes(row[1]), int(row[2]))
 
     def state(self, key: str) -> str | None:
         """A state entry stored by `commit`, or None when there is none."""

@@ -13,6 +13,11 @@ Before the base was ever heard, an autonomous sweep runs and its packets wait in
 Exactly once: a pose's packets, the sweep progress that marks it done and the next
 capture sequence are one outbox transaction (`Outbox.commit`), so a kill at any instant
 leaves the pose queued and done, or neither; the host drops re-sent rows by (robot, seq).
+A command's reply is committed with what it produced (a capture's packets, a new sweep)
+and remembered by command id in the same transaction, so a command the base re-sends
+after a restart is answered from memory and never run twice. (A hardware action cannot
+share the transaction: a kill between it and the commit repeats GOTO, ABORT and the like,
+which are harmless to repeat.)
 """
 from __future__ import annotations
 
@@ -22,7 +27,7 @@ import json
 import time
 from collections import deque
 from contextlib import contextmanager
-from dataclasses import replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -31,7 +36,7 @@ from onboard import config as config_mod
 from onboard import capture as wire
 from onboard.capture import Capture, Pipeline, PoseSkipped
 from onboard.config import Config, ConfigError
-from onboard.outbox import Outbox, OutboxFull
+from onboard.outbox import Outbox, OutboxFull, Reply
 from onboard.sweep import MAX_POSES as MAX_SWEEP_POSES, Boot, SweepPlan, SweepProgress, SweepStore
 from onboard.transport import Acked, LinkState, Received, Transport
 from onboard.watchdog import Notifier
@@ -58,6 +63,17 @@ SETTABLE = {
 
 class Interrupted(Exception):
     """ABORT, TORQUE_OFF, a new SWEEP or the failsafe took the arm while it was working."""
+
+
+@dataclass
+class Effect:
+    """What a command produced: committed with its reply, then `done` (or `undo` if it failed)."""
+
+    packets: list[tuple[int, bytes]] = field(default_factory=list)
+    state: dict[str, str] = field(default_factory=dict)
+    reserve: int = 0
+    done: Callable[[], None] = lambda: None
+    undo: Callable[[], None] = lambda: None
 
 
 ARM_COMMANDS = ("GOTO", "CAPTURE", "REBOOT_SERVO")  # refused while a pose is being measured
@@ -345,17 +361,6 @@ class Runtime:
         if not (cap.unchanged and key in self._last_models):
             wire.remember(self._last_models, key, seq)
 
-    def send_capture(self, cap: Capture) -> int:
-        """Queue one capture outside a sweep (the CAPTURE command); its sequence number."""
-        seq, packets, state = self.capture_packets(cap)
-        try:
-            self.outbox.commit(packets, state, reserve=self._reserve)
-        except OutboxFull:
-            self.pipeline.rollback(cap)
-            raise
-        self.captured(cap, seq)
-        return seq
-
     # -- commands --------------------------------------------------------------------
 
     def _on_body(self, body: bytes) -> None:
@@ -366,9 +371,15 @@ class Runtime:
             return
         if not isinstance(cmd, pk.CommandPacket):
             return  # not a command (e.g. the base's own status): nothing to answer
+        known = self.outbox.remembered(cmd.command_id)
+        if known is not None:  # run before: answer again, unless that answer is still queued
+            if self.outbox.kind_of(known.msg_id) is None:
+                self.queue(known.kind, known.body)
+            return
         reason = pk.Reason.INTERNAL
+        effect = Effect()
         try:
-            ok, result = self.handle(cmd.name.name, dict(cmd.args))
+            ok, result = self.handle(cmd.name.name, dict(cmd.args), effect)
         except PoseSkipped as exc:
             ok, result, reason = False, exc.reason, pk.Reason.HARDWARE
         except Interrupted as exc:
@@ -379,20 +390,45 @@ class Runtime:
             ok, result, reason = False, f"{type(exc).__name__}: {exc}", pk.Reason.BAD_ARGUMENT
         except Exception as exc:  # a command that fails is answered, never fatal
             ok, result = False, f"{type(exc).__name__}: {exc}"
-        if ok and self._busy and cmd.name.name in INTERRUPTING:
-            self._interrupt = cmd.name.name  # the pose being measured ends at the next link service
         if ok:
             extras = result if isinstance(result, dict) else {}
-            self.queue(*wire.reply_body(cmd.command_id, True, cmd.name.name, extras))
+            answer = wire.reply_body(cmd.command_id, True, cmd.name.name, extras)
         else:
+            effect = Effect()  # a refused command produced nothing
             if isinstance(result, str) and result.startswith("unknown command"):
                 reason = pk.Reason.UNKNOWN_COMMAND
             elif isinstance(result, str) and result.startswith(("failsafe", "busy")):
                 reason = pk.Reason.BUSY
-            self.queue(*wire.reply_body(cmd.command_id, False, str(result), reason=reason))
+            answer = wire.reply_body(cmd.command_id, False, str(result), reason=reason)
+        if self._answer(cmd.command_id, answer, effect) and ok and self._busy and cmd.name.name in INTERRUPTING:
+            self._interrupt = cmd.name.name  # the pose being measured ends at the next link service
 
-    def handle(self, name: str, args: dict) -> tuple[bool, Any]:
-        """Run one command; (True, result) or (False, reason)."""
+    def _answer(self, command_id: int, answer: tuple[int, bytes], effect: Effect) -> bool:
+        """Commit a reply with its command's effect, remembered by id; whether the effect stands."""
+        try:
+            self.outbox.commit(effect.packets, effect.state, reserve=effect.reserve,
+                               reply=Reply(command_id, *answer))
+        except OutboxFull as exc:
+            effect.undo()
+            self.paused_reason = str(exc)
+            if not (effect.packets or effect.state):
+                return False  # not even the reply fits: the base's retry finds room later
+            # What the command produced does not fit: refuse it instead, and say why.
+            nack = wire.reply_body(command_id, False, str(exc), reason=pk.Reason.OUTBOX_FULL)
+            try:
+                self.outbox.commit(reply=Reply(command_id, *nack))
+            except OutboxFull:
+                pass
+            return False
+        self.paused_reason = ""
+        effect.done()
+        return True
+
+    def handle(self, name: str, args: dict, effect: Effect | None = None) -> tuple[bool, Any]:
+        """Run one command; (True, result) or (False, reason).
+
+        What it produces goes into `effect`, for the caller to commit with the reply."""
+        effect = Effect() if effect is None else effect
         arm = self.hal.arm
         if name == "PING":
             return True, {"time": self.wall()}
@@ -412,7 +448,11 @@ class Runtime:
             with self._arm_work():
                 measured = self.pipeline.measure_view()
                 cap = self.pipeline.process(self.pipeline.frame(), measured, measured)
-            return True, {"seq": self.send_capture(cap), "models": len(cap.results)}
+            seq, effect.packets, effect.state = self.capture_packets(cap)
+            effect.reserve = self._reserve
+            effect.done = lambda: self.captured(cap, seq)
+            effect.undo = lambda: self.pipeline.rollback(cap)
+            return True, {"seq": seq, "models": len(cap.results)}
         if name == "SWEEP":
             # The packet decoder has checked every argument's type and range.
             azs = tuple(float(a) for a in args.get("azimuths", self.cfg.sweep.azimuths))
@@ -421,7 +461,13 @@ class Runtime:
                 plan = SweepPlan(els[0], els[-1], 1.0, azs, els)
             else:  # SweepPlan bounds the pose count before any list is built
                 plan = SweepPlan(float(args["start"]), float(args["stop"]), float(args["step"]), azs)
-            p = self.start_sweep(plan)
+            old = self.sweeps.load()
+            p = SweepProgress(sweep_id=(old.sweep_id + 1) if old else 1, plan=plan)
+            effect.state = self.sweeps.entry(p)  # saved with the reply (as `SweepStore.start` would)
+
+            def started() -> None:
+                self.progress, self.mode = p, Mode.SWEEPING
+            effect.done = started
             return True, {"sweep": p.sweep_id, "poses": p.plan.count}
         if name == "ABORT":
             self.stop_sweep()
@@ -442,8 +488,8 @@ class Runtime:
             if self._last_labels is None:  # none yet: the next capture sends its map
                 getattr(self.pipeline.segmenter, "force_send", lambda: None)()
                 return True, {"queued": False, "next_capture": True}
-            self.queue(*wire.mask_body(self.cfg.robot_id, int(args.get("seq", self._seq.last or 0)),
-                                       self._last_labels))
+            effect.packets = [wire.mask_body(self.cfg.robot_id, int(args.get("seq", self._seq.last or 0)),
+                                             self._last_labels)]
             return True, {"queued": True}
         return False, f"unknown command {name!r}"
 
