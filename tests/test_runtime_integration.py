@@ -120,7 +120,7 @@ def test_isodata_palette_survives_a_restart(tmp_path):
     rt2, tr2 = make(tmp_path, text)  # same state directory
     assert {**rt2.pipeline.segmenter.segmenter.palette.to_record(), "features": "rgb:"} == saved
     rt2.boot()
-    command(rt2, tr2, 1, pk.CommandName.CAPTURE)
+    command(rt2, tr2, 2, pk.CommandName.CAPTURE)
     assert (rt2._last_labels == first).mean() > 0.99  # the same view keeps its labels
     (rt.cfg.state_dir / "palette.json").write_text("{not json")
     with pytest.raises(ConfigError, match="palette file"):
@@ -138,7 +138,7 @@ def test_a_palette_saved_for_other_bands_is_replaced_not_matched(tmp_path):
     rt2, tr2 = make(tmp_path, gray)
     assert rt2.pipeline.segmenter.segmenter.palette.entries == []
     rt2.boot()
-    ack = command(rt2, tr2, 1, pk.CommandName.CAPTURE)
+    ack = command(rt2, tr2, 2, pk.CommandName.CAPTURE)
     assert isinstance(ack, pk.AckPacket) and ack.extras["models"] >= 1
     saved = json.loads((rt.cfg.state_dir / "palette.json").read_text())
     assert saved["features"] == "gray:" and all(len(e) == 1 for e in saved["entries"])
@@ -182,7 +182,7 @@ def test_pca_basis_goes_once_with_the_scene_and_survives_a_restart(tmp_path):
     rt2, tr2 = make(tmp_path, text)
     assert rt2.pipeline.pca == basis
     rt2.boot()
-    command(rt2, tr2, 1, pk.CommandName.CAPTURE)
+    command(rt2, tr2, 2, pk.CommandName.CAPTURE)
     assert all(PcaBasis.from_extras(p.extras) is None for p in decoded(tr2) if isinstance(p, pk.ModelsPacket))
 
 
@@ -216,5 +216,5 @@ def test_sixteen_bit_multispectral_bands_through_the_runtime(tmp_path):
         med = float(model.ppf(0.5))
         assert np.isfinite(med) and lo - 32 <= med <= hi + 32  # within a bin of the data
     rt_bad, tr_bad = make(tmp_path, text.replace("['B0', 'B3']", "['B9']"), hal_)
-    nack = command(rt_bad, tr_bad, 1, pk.CommandName.CAPTURE)
+    nack = command(rt_bad, tr_bad, 2, pk.CommandName.CAPTURE)
     assert isinstance(nack, pk.NackPacket) and "unknown band" in nack.text
