@@ -410,15 +410,15 @@ class Runtime:
                                reply=Reply(command_id, *answer))
         except OutboxFull as exc:
             effect.undo()
-            self.paused_reason = str(exc)
             if not (effect.packets or effect.state):
-                return False  # not even the reply fits: the base's retry finds room later
+                self.paused_reason = str(exc)  # not even the reply fits: a retry finds room later
+                return False
             # What the command produced does not fit: refuse it instead, and say why.
             nack = wire.reply_body(command_id, False, str(exc), reason=pk.Reason.OUTBOX_FULL)
             try:
                 self.outbox.commit(reply=Reply(command_id, *nack))
-            except OutboxFull:
-                pass
+            except OutboxFull as full:
+                self.paused_reason = str(full)
             return False
         self.paused_reason = ""
         effect.done()
