@@ -37,7 +37,7 @@ from onboard import capture as wire
 from onboard.capture import Capture, Pipeline, PoseSkipped
 from onboard.config import Config, ConfigError
 from onboard.outbox import Outbox, OutboxFull, Reply
-from onboard.sweep import MAX_POSES as MAX_SWEEP_POSES, Boot, SweepPlan, SweepProgress, SweepStore
+from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore
 from onboard.transport import Acked, LinkState, Received, Transport
 from onboard.watchdog import Notifier
 from radio import FrameError
@@ -461,9 +461,8 @@ class Runtime:
                 plan = SweepPlan(els[0], els[-1], 1.0, azs, els)
             else:  # SweepPlan bounds the pose count before any list is built
                 plan = SweepPlan(float(args["start"]), float(args["stop"]), float(args["step"]), azs)
-            old = self.sweeps.load()
-            p = SweepProgress(sweep_id=(old.sweep_id + 1) if old else 1, plan=plan)
-            effect.state = self.sweeps.entry(p)  # saved with the reply (as `SweepStore.start` would)
+            p = self.sweeps.next_sweep(plan)
+            effect.state = self.sweeps.entry(p)  # saved with the reply, in one commit
 
             def started() -> None:
                 self.progress, self.mode = p, Mode.SWEEPING

@@ -211,10 +211,14 @@ class SweepStore:
         """Store progress, with the packets it accounts for, in one transaction."""
         return self.db.commit(packets, self.entry(progress))
 
-    def start(self, plan: SweepPlan, autostart: bool = False) -> SweepProgress:
-        """A new sweep (the id follows the saved one), saved before it begins."""
+    def next_sweep(self, plan: SweepPlan) -> SweepProgress:
+        """A new sweep whose id follows the saved one, not yet saved (commit `entry` of it)."""
         old = self.load()
-        progress = SweepProgress(sweep_id=(old.sweep_id + 1) if old else 1, plan=plan)
+        return SweepProgress(sweep_id=(old.sweep_id + 1) if old else 1, plan=plan)
+
+    def start(self, plan: SweepPlan, autostart: bool = False) -> SweepProgress:
+        """A new sweep, saved before it begins."""
+        progress = self.next_sweep(plan)
         state = self.entry(progress)
         if autostart:
             state[self.AUTOSTART_KEY] = json.dumps(plan.to_record())
