@@ -24,7 +24,7 @@ from typing import Any, ClassVar
 
 from radio import FrameError
 from radio.packet_base import (
-    MAX_BODY, SCHEMA_VERSION, UINT32, Kind, angles_from_wire, angles_to_wire, check_extras,
+    MAX_ANGLES, MAX_BODY, SCHEMA_VERSION, UINT32, Kind, angles_from_wire, angles_to_wire, check_extras,
     pack_body, split_fields, unpack_body, want_enum, want_float, want_int, want_str,
 )
 from radio.packet_mask import MAX_SIDE, MaskPacket, downsample_labels, mask_packet
@@ -114,8 +114,8 @@ class StatusPacket:
 
 # Each command's arguments: name -> check. Exactly these keys, nothing else.
 def _angle_list(v: Any, name: str, lo: float, hi: float) -> tuple[float, ...]:
-    if type(v) is not list or not 1 <= len(v) <= 64:
-        raise FrameError(f"{name} must be a list of 1..64 angles")
+    if type(v) is not list or not 1 <= len(v) <= MAX_ANGLES:
+        raise FrameError(f"{name} must be a list of 1..{MAX_ANGLES} angles")
     return tuple(want_float(x, name, lo, hi, allow_int=True) for x in v)
 
 

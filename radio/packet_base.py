@@ -23,6 +23,19 @@ MAX_EXTRA_KEY = 32
 MAX_EXTRA_LIST = 64
 UINT32 = 2**32 - 1
 
+# -- sizes a real sensor cannot exceed ------------------------------------------------------
+# Every size a decoded field gives (a frame, a label map, a pixel count, label and band
+# counts) is checked against these before anything is allocated from it, so an authentic but
+# absurd packet (a 20-byte MASK claiming a 65535 x 65535 frame) is refused, not built.
+MAX_FRAME_SIDE = 16384  # a camera frame's height or width; the largest sensors sold are ~14200
+MAX_FRAME_PIXELS = MAX_FRAME_SIDE * MAX_FRAME_SIDE  # and so a region's pixel count
+MAX_MASK_SIDE = 64  # the MASK packet's mode-pooled label map
+MAX_LABELS = 256  # label ids 0..255 (labels travel as uint8)
+MAX_BANDS = 16
+MAX_NAME = 16  # a feature space or band name
+MIN_LEVELS, MAX_LEVELS = 2, 65536  # a sensor's levels (PercentileCodec.for_levels' range)
+MAX_ANGLES = 64  # angles in a SWEEP command's list
+
 
 class Kind(enum.IntEnum):
     MODELS = 1

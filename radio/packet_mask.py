@@ -13,10 +13,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from radio import FrameError
-from radio.packet_base import UINT32, Kind, want_bin, want_int
+from radio.packet_base import MAX_FRAME_SIDE, MAX_MASK_SIDE, UINT32, Kind, want_bin, want_int
 
-MAX_SIDE = 64
-MAX_FRAME = 65535
+MAX_SIDE = MAX_MASK_SIDE
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,7 +54,8 @@ class MaskPacket:
     def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> MaskPacket:
         robot = want_int(f[0], "robot id", 0, 0xFFFF)
         seq = want_int(f[1], "capture seq", 0, UINT32)
-        fh, fw = want_int(f[2], "frame height", 1, MAX_FRAME), want_int(f[3], "frame width", 1, MAX_FRAME)
+        fh = want_int(f[2], "frame height", 1, MAX_FRAME_SIDE)
+        fw = want_int(f[3], "frame width", 1, MAX_FRAME_SIDE)
         h, w = want_int(f[4], "mask height", 1, min(MAX_SIDE, fh)), want_int(f[5], "mask width", 1, min(MAX_SIDE, fw))
         values, raw_runs = want_bin(f[6], "mask values"), want_bin(f[7], "mask runs")
         if len(raw_runs) != 2 * len(values) or not values:

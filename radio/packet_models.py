@@ -50,15 +50,11 @@ from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percent
 from onboard.johnson import Johnson
 from radio import FrameError
 from radio.packet_base import (
-    UINT32, Kind, angles_from_wire, angles_to_wire, get_varint, put_varint, want_bin, want_float,
-    want_int, want_str,
+    MAX_BANDS, MAX_FRAME_PIXELS, MAX_LABELS, MAX_LEVELS, MAX_NAME, MIN_LEVELS, UINT32, Kind,
+    angles_from_wire, angles_to_wire, get_varint, put_varint, want_bin, want_float, want_int, want_str,
 )
 from radio.packet_dependence import decode_dependence, encode_dependence, quantized, section_size
 
-MAX_LABELS = 256
-MAX_BANDS = 16
-MAX_NAME = 16
-MIN_LEVELS, MAX_LEVELS = 2, 65536  # PercentileCodec.for_levels' range
 _HEAD = struct.Struct(">hHhHH")  # angles, levels - 1
 _U8, _I8, _U16 = struct.Struct(">B"), struct.Struct(">b"), struct.Struct(">H")
 _Z_BITS = 4  # z index in the low bits of a label's count varint
@@ -164,7 +160,7 @@ class ModelsPacket:
         out.append(len(bitmap) | (_HAS_DEPENDENCE if self.dependence else 0))
         out += bitmap
         for x in self.labels:
-            if not (0 <= x.count <= UINT32 and 0 <= x.z_index < len(Z_LADDER)):
+            if not (0 <= x.count <= MAX_FRAME_PIXELS and 0 <= x.z_index < len(Z_LADDER)):
                 raise ValueError(f"label {x.label}: count {x.count} or z index {x.z_index} out of range")
             put_varint(out, x.count << _Z_BITS | x.z_index)
         dtype = ">u2" if codec.bits <= 16 else ">u4"
@@ -210,7 +206,7 @@ class ModelsPacket:
         for label in ids:
             v, pos = get_varint(blob, pos, "label count", 6)
             count, z_index = v >> _Z_BITS, v & ((1 << _Z_BITS) - 1)
-            want_int(count, f"label {label} count", 0, UINT32)
+            want_int(count, f"label {label} pixel count", 0, MAX_FRAME_PIXELS)
             if z_index >= len(Z_LADDER):
                 raise FrameError(f"z ladder index {z_index} outside 0..{len(Z_LADDER) - 1}")
             heads.append((label, count, z_index))

@@ -17,7 +17,7 @@ from radio.packet import (
     UnchangedPacket, decode, downsample_labels, encode, encode_mask, encode_models, models_packet,
 )
 from onboard.dependence import Dependence
-from radio.packet_base import get_varint
+from radio.packet_base import MAX_FRAME_PIXELS, get_varint
 from radio.packet_dependence import record_size
 
 HEADER = dict(robot_id=3, seq=41, time=1_700_000_000.25, commanded=(45.0, 30.0),
@@ -354,7 +354,7 @@ def test_decoded_models_are_never_non_finite():
     codec = PercentileCodec.for_levels(256)
     top = (1 << codec.bits) - 1
     for codes in [(0, 0, 0, 1), (0, 1, 1, top), (top - 1, top, top, top), (0, 0, top, top)]:
-        rec = LabelModels(1, 10**9, len(Z_LADDER) - 1, (codes,))
+        rec = LabelModels(1, MAX_FRAME_PIXELS, len(Z_LADDER) - 1, (codes,))
         packet = decode(encode(ModelsPacket(1, 1, 1.0, (0.0, 0.0), (0.0, 0.0), "gray", ("Y",), 256, (rec,))))
         m = packet.models[(1, 0)]
         assert all(math.isfinite(v) for v in (m.gamma, m.delta, m.xi, m.lam))
