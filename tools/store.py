@@ -10,7 +10,6 @@ from __future__ import annotations
 import json
 import sqlite3
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable, Iterator, Mapping
 
@@ -18,8 +17,11 @@ import numpy as np
 
 from onboard.dependence import Dependence
 from onboard.features import PcaBasis
-from onboard.johnson import Family, Johnson
+from onboard.johnson import Johnson
 from tools.images import decode_png, encode_png
+from tools.store_rows import Capture, StoredModel, capture_from_row, mask_png, model_from_row
+
+__all__ = ["Store", "CorruptDatabase", "Capture", "StoredModel", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 4
 # PRAGMA application_id: marks the file as ours ("BTFS").
@@ -102,40 +104,6 @@ class CorruptDatabase(Exception):
 
 class _Undo(Exception):
     """Drops the current write (e.g. a capture that was already stored)."""
-
-
-@dataclass(frozen=True, slots=True)
-class Capture:
-    id: int
-    robot: str
-    sequence: int
-    time: float
-    commanded: tuple[float | None, float | None]
-    measured: tuple[float, float]
-    space: str
-    band_names: tuple[str, ...]
-    scene: str
-    illumination: tuple[float | None, float | None] = (None, None)
-    source: str | None = None
-
-    @property
-    def elevation(self) -> float:
-        return self.measured[0]
-
-
-@dataclass(frozen=True, slots=True)
-class StoredModel:
-    capture: int
-    label: int
-    band: int
-    model: Johnson
-    percentiles: tuple[float, float, float, float]
-    z: float
-    count: int
-    beta1: float
-    beta2: float
-    censored_low: float = 0.0  # fractions of the region's pixels piled at each sensor limit
-    censored_high: float = 0.0
 
 
 def _angles(value: Any) -> tuple[float | None, float | None]:
@@ -351,8 +319,9 @@ class Store:
         ).fetchone()
         if row is None:
             return None
-        arr = decode_png(row[2])
-        if arr.shape != (row[0], row[1]):
+        shape, png = self._checked(lambda r: mask_png(*r), row, f"mask {key!r}")
+        arr = self._checked(decode_png, png, f"mask {key!r}")
+        if arr.shape != shape:
             raise CorruptDatabase(f"database {self.path}: mask {key!r} does not match its stored size")
         return arr
 
@@ -376,8 +345,14 @@ class Store:
             " space, bands, scene, light_elevation, light_azimuth, source FROM captures"
             + where + " ORDER BY elevation, id", args
         ).fetchall()
-        return [Capture(r[0], r[1], r[2], r[3], (r[4], r[5]), (r[6], r[7]), r[8],
-                        tuple(json.loads(r[9])), r[10], (r[11], r[12]), r[13]) for r in rows]
+        return [self._checked(capture_from_row, r, f"capture row {r[0]!r}") for r in rows]
+
+    def _checked(self, build: Any, row: tuple, what: str) -> Any:
+        """build(row), or CorruptDatabase naming the row when a value in it is not one we write."""
+        try:
+            return build(row)
+        except ValueError as exc:  # ImageError too
+            raise CorruptDatabase(f"database {self.path}: {what}: {exc}; left untouched") from None
 
     def capture_by_seq(self, robot: str, sequence: int) -> Capture | None:
         """The capture (robot, sequence), or None when it is not stored."""
@@ -425,15 +400,8 @@ class Store:
         if band is not None:
             sql += " AND band = ?"
             args.append(band)
-        out = []
-        for r in self._conn.execute(sql + " ORDER BY label, band", args):
-            try:
-                family = Family[r[3]]
-            except KeyError:
-                raise CorruptDatabase(f"database {self.path}: unknown family {r[3]!r}") from None
-            out.append(StoredModel(r[0], r[1], r[2], Johnson(family, r[4], r[5], r[6], r[7]),
-                                   (r[8], r[9], r[10], r[11]), r[12], r[13], r[14], r[15], r[16], r[17]))
-        return out
+        return [self._checked(model_from_row, r, f"capture {r[0]!r}")
+                for r in self._conn.execute(sql + " ORDER BY label, band", args)]
 
     def _latest(self, robot: str | None, space: str | None, scene: str | None) -> dict[float, Capture]:
         latest: dict[float, Capture] = {}
