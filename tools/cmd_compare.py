@@ -28,7 +28,9 @@ def run(args: argparse.Namespace) -> int:
                              f"{args.ref}'s {ref.shape[1]}x{ref.shape[0]}")
         mask = read_mask(args.mask, ref.shape[:2]) if args.mask else None
         a, _ = feature_bands(ref, args.space)
+        del ref  # each image gives way to its bands: peak memory stays near the images themselves
         b, _ = feature_bands(test, args.space)
+        del test
     except (ImageError, ValueError) as exc:
         raise CliError(str(exc)) from None
     circular = ("H",) if args.space == "hsv" else ()

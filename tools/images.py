@@ -38,8 +38,9 @@ def read_image(path: str | Path) -> np.ndarray:
     if raw.ndim == 2:
         return np.repeat(raw[:, :, None], 3, axis=2)
     if raw.shape[2] == 4:
-        raw = raw[:, :, :3]
-    return np.ascontiguousarray(raw[:, :, ::-1])
+        return cv2.cvtColor(raw, cv2.COLOR_BGRA2RGB)
+    # In place: a copy would double the peak memory of a large image.
+    return cv2.cvtColor(raw, cv2.COLOR_BGR2RGB, dst=raw)
 
 
 def read_mask(path: str | Path, shape: tuple[int, int] | None = None) -> np.ndarray:

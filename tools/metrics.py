@@ -17,6 +17,7 @@ import numpy as np
 from scipy import stats
 
 METRICS = ("hist_diff", "chi2", "ks", "w1")
+TILE_PIXELS = 1 << 18  # pixels per row tile in compare_bands: temporaries of a few MB
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,7 +53,11 @@ def histogram(values: np.ndarray, levels: int) -> np.ndarray:
     v = np.asarray(values).ravel()
     if v.size and (v.min() < 0 or v.max() >= levels):
         raise ValueError(f"values outside 0..{levels - 1}")
-    counts = np.bincount(v.astype(np.int64), minlength=levels).astype(np.float64)
+    return _normalized(np.bincount(v.astype(np.int64), minlength=levels))
+
+
+def _normalized(counts: np.ndarray) -> np.ndarray:
+    counts = counts.astype(np.float64)
     total = counts.sum()
     return counts / total if total > 0 else counts
 
@@ -114,6 +119,75 @@ def circular_correlation(a: np.ndarray, b: np.ndarray, levels: int) -> float:
     return float(np.clip((sa * sb).sum() / den, -1.0, 1.0))
 
 
+def tiles(height: int, width: int, tile_pixels: int = TILE_PIXELS) -> list[slice]:
+    """Row blocks of about `tile_pixels` pixels covering an image of height x width."""
+    rows = max(1, tile_pixels // max(width, 1))
+    return [slice(r, min(r + rows, height)) for r in range(0, height, rows)]
+
+
+def _label_ids(mask: np.ndarray | None, blocks: list[slice]) -> np.ndarray:
+    """The sorted distinct labels of a mask, found tile by tile."""
+    if mask is None:
+        return np.zeros(1, np.int64)
+    if mask.dtype in (np.uint8, np.bool_):
+        seen = sum(np.bincount(mask[r].ravel(), minlength=256) for r in blocks)
+        return np.flatnonzero(seen).astype(np.int64)
+    found: set[int] = set()
+    for r in blocks:
+        found.update(np.unique(mask[r]).tolist())
+    return np.array(sorted(found), dtype=np.int64)
+
+
+def _region_index(mask: np.ndarray | None, r: slice, ids: np.ndarray, width: int) -> np.ndarray:
+    """Each pixel's position in `ids` for the rows r (flat, intp)."""
+    if mask is None:
+        return np.zeros((r.stop - r.start) * width, np.intp)
+    return np.searchsorted(ids, mask[r].ravel()).astype(np.intp, copy=False)
+
+
+class _Correlation:
+    """Pearson's (or the circular) correlation of two bands fed tile by tile in two passes:
+    means first, then centred sums, as the whole-array functions above compute them."""
+
+    def __init__(self, circular_levels: int | None) -> None:
+        self.levels = circular_levels
+        self.n = 0
+        self.first = np.zeros(4)  # sums of x, y (or sin, cos of each angle)
+        self.second = np.zeros(3)  # centred sums of x*y, x*x, y*y
+        self.equal = True
+
+    def _prepare(self, a: np.ndarray) -> np.ndarray:
+        x = np.asarray(a, dtype=np.float64).ravel()
+        return x if self.levels is None else x * (2 * np.pi / self.levels)
+
+    def add_first(self, a: np.ndarray, b: np.ndarray) -> None:
+        x, y = self._prepare(a), self._prepare(b)
+        self.n += x.size
+        if self.levels is None:
+            self.first[:2] += x.sum(), y.sum()
+        else:
+            self.first += np.sin(x).sum(), np.cos(x).sum(), np.sin(y).sum(), np.cos(y).sum()
+        self.equal = self.equal and np.array_equal(a, b)
+
+    def add_second(self, a: np.ndarray, b: np.ndarray) -> None:
+        x, y = self._prepare(a), self._prepare(b)
+        if self.levels is None:
+            x -= self.first[0] / self.n
+            y -= self.first[1] / self.n
+        else:
+            x = np.sin(x - np.arctan2(self.first[0], self.first[1]))
+            y = np.sin(y - np.arctan2(self.first[2], self.first[3]))
+        self.second += (x * y).sum(), (x * x).sum(), (y * y).sum()
+
+    def value(self) -> float:
+        if self.n < 2:
+            return 1.0 if self.equal else 0.0
+        den = np.sqrt(self.second[1] * self.second[2])
+        if den == 0 or not np.isfinite(den):
+            return 1.0 if self.equal else 0.0
+        return float(np.clip(self.second[0] / den, -1.0, 1.0))
+
+
 def compare_bands(
     ref: np.ndarray,
     test: np.ndarray,
@@ -122,28 +196,45 @@ def compare_bands(
     mask: np.ndarray | None = None,
     circular: tuple[str, ...] = (),
     circular_levels: int = 180,
+    tile_pixels: int = TILE_PIXELS,
 ) -> Comparison:
-    """Metrics between two H x W x B band stacks; regions come from `mask` (all label 0 without)."""
+    """Metrics between two H x W x B band stacks; regions come from `mask` (all label 0 without).
+    Works through row tiles of `tile_pixels`: memory beyond the inputs stays a few tiles."""
     if ref.shape != test.shape:
         raise ValueError(f"images differ in size: {ref.shape} and {test.shape}")
     if ref.ndim != 3 or ref.shape[2] != len(band_names):
         raise ValueError(f"expected H x W x {len(band_names)} bands, got {ref.shape}")
     if mask is not None and mask.shape != ref.shape[:2]:
         raise ValueError(f"mask size {mask.shape} differs from the images' {ref.shape[:2]}")
-    labels = np.zeros(ref.shape[:2], np.int64) if mask is None else mask.astype(np.int64)
-    corr: dict[str, float] = {}
+    height, width = ref.shape[:2]
+    blocks = tiles(height, width, tile_pixels)
+    ids = _label_ids(mask, blocks)
+    nlevs = [circular_levels if name in circular else levels for name in band_names]
+    counts = [np.zeros((2, len(ids) * n), np.int64) for n in nlevs]
+    corrs = [_Correlation(circular_levels if name in circular else None) for name in band_names]
+    for r in blocks:
+        region = _region_index(mask, r, ids, width)
+        for k, nlev in enumerate(nlevs):
+            a, b = ref[r, :, k], test[r, :, k]
+            corrs[k].add_first(a, b)
+            for side, v in enumerate((a, b)):
+                v = v.ravel()
+                if v.size and (v.min() < 0 or v.max() >= nlev):
+                    raise ValueError(f"values outside 0..{nlev - 1}")
+                counts[k][side] += np.bincount(region * nlev + v.astype(np.intp), minlength=len(ids) * nlev)
+    for r in blocks:
+        for k in range(len(band_names)):
+            corrs[k].add_second(ref[r, :, k], test[r, :, k])
     regions: list[RegionMetrics] = []
     for k, name in enumerate(band_names):
-        circ = name in circular
-        nlev = circular_levels if circ else levels
-        a, b = ref[:, :, k], test[:, :, k]
-        corr[name] = circular_correlation(a, b, nlev) if circ else correlation(a, b)
-        for label in np.unique(labels):
-            sel = labels == label
-            hr, ht = histogram(a[sel], nlev), histogram(b[sel], nlev)
+        circ, nlev = name in circular, nlevs[k]
+        per_label = counts[k].reshape(2, len(ids), nlev)
+        for i, label in enumerate(ids):
+            hr, ht = (_normalized(per_label[side, i]) for side in (0, 1))
+            n = int(per_label[0, i].sum())
             regions.append(RegionMetrics(
-                int(label), name, int(sel.sum()), int(sel.sum()),
-                hist_diff(hr, ht), chi2(hr, ht), ks(hr, ht, circ), w1(hr, ht, circ),
+                int(label), name, n, n, hist_diff(hr, ht), chi2(hr, ht), ks(hr, ht, circ), w1(hr, ht, circ),
             ))
     total = {m: float(sum(getattr(r, m) for r in regions)) for m in METRICS}
+    corr = {name: c.value() for name, c in zip(band_names, corrs)}
     return Comparison(tuple(band_names), corr, tuple(regions), total)
