@@ -116,7 +116,7 @@ def _run_direction(args: argparse.Namespace, direction) -> int:
     for w in caught:
         print(f"btf-host: warning: {w.message}", file=sys.stderr)
     try:
-        write_image(args.out, to_rgb(bands.astype(np.uint8), space))
+        write_image(args.out, to_rgb(bands.astype(np.uint8, copy=False), space))
     except ImageError as exc:
         raise CliError(str(exc)) from None
     return 0
@@ -162,7 +162,7 @@ def run(args: argparse.Namespace) -> int:
     for w in caught:
         print(f"btf-host: warning: {w.message}", file=sys.stderr)
     try:
-        write_image(args.out, to_rgb(bands.astype(np.uint8), space, pca))
+        write_image(args.out, to_rgb(bands.astype(np.uint8, copy=False), space, pca))
     except ImageError as exc:
         raise CliError(str(exc)) from None
     return 0

@@ -20,6 +20,7 @@ import scipy.fft as sfft
 
 from onboard.dependence import LAGS, Dependence
 from onboard.johnson import Family, Johnson
+from tools.tiles import Region, row_tiles
 
 _PROJECTIONS = 12
 _NODES = 48  # Gauss-Hermite nodes per axis for the pixel moments
@@ -157,32 +158,41 @@ def _fast(n: int) -> int:
 
 
 def gaussian_fields(shape: tuple[int, int], dep: Dependence, rng: np.random.Generator) -> np.ndarray:
-    """B x H x W float32 standard normal fields with the region's grain and band copula."""
+    """B x H x W float32 standard normal fields with the region's grain and band copula.
+    Beyond the B fields themselves it holds one band's spectrum and transform at a time."""
     h, w = shape
     ny, nx = _fast(h), _fast(w)
     k = np.arange(ny)
     full_y = np.sqrt(spectrum(dep.dy, ny))[np.minimum(k, ny - k)]  # all ny frequencies of the y axis
-    amp = (full_y[:, None] * np.sqrt(spectrum(dep.dx, nx))[None, :]).astype(np.float32)
+    sx = np.sqrt(spectrum(dep.dx, nx))
+    n_bands = dep.n_bands
+    out = np.empty((n_bands, h, w), dtype=np.float32)
+    for b in range(n_bands):
+        white = rng.standard_normal((ny, nx // 2 + 1, 2), dtype=np.float32).view(np.complex64)[..., 0]
+        for r in row_tiles(ny, nx // 2 + 1):
+            white[r] *= _amplitude(full_y[r], sx, nx, ny)
+        out[b] = sfft.irfft2(white, s=(ny, nx), workers=-1, overwrite_x=True)[:h, :w]
+        del white
+    if n_bands > 1:
+        low = cholesky(dep).astype(np.float32)
+        # Band b mixes fields 0..b (lower factor); updating from the last band reuses the originals.
+        for r in row_tiles(h, w):
+            for b in range(n_bands - 1, -1, -1):
+                out[b, r] *= low[b, b]
+                for j in range(b):
+                    out[b, r] += low[b, j] * out[j, r]
+    return out
+
+
+def _amplitude(fy: np.ndarray, sx: np.ndarray, nx: int, ny: int) -> np.ndarray:
+    """Rows `fy` of the spectrum's square root scaled for one inverse transform of white noise."""
+    amp = (fy[:, None] * sx[None, :]).astype(np.float32)
     # Columns 0 and Nyquist keep only their real part after the transform: twice the power.
     amp[:, 0] *= math.sqrt(2.0)
     if nx % 2 == 0:
         amp[:, -1] *= math.sqrt(2.0)
     amp *= np.float32(math.sqrt(ny * nx / 2.0))
-    n_bands = dep.n_bands
-    fields = []
-    for _ in range(n_bands):
-        white = rng.standard_normal((ny, nx // 2 + 1, 2), dtype=np.float32).view(np.complex64)[..., 0]
-        white *= amp
-        fields.append(sfft.irfft2(white, s=(ny, nx), workers=-1)[:h, :w])
-    out = np.stack(fields)
-    if n_bands > 1:
-        low = cholesky(dep).astype(np.float32)
-        # Band b mixes fields 0..b (lower factor); updating from the last band reuses the originals.
-        for b in range(n_bands - 1, -1, -1):
-            out[b] *= low[b, b]
-            for j in range(b):
-                out[b] += low[b, j] * out[j]
-    return out
+    return amp
 
 
 def empirical_autocorrelation(values: np.ndarray, mask: np.ndarray, lag: int, axis: int) -> float:
@@ -201,19 +211,9 @@ def empirical_autocorrelation(values: np.ndarray, mask: np.ndarray, lag: int, ax
     return float(np.corrcoef(x, y)[0, 1])
 
 
-def region_z(mask: np.ndarray, label: int, dep: Dependence,
-             rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """(selector of the region's pixels, B x n correlated z), drawn over the region's bounding box only."""
-    rows = np.flatnonzero(np.any(mask == label, axis=1))
-    if not rows.size:
-        return np.zeros(mask.shape, dtype=bool), np.zeros((dep.n_bands, 0), dtype=np.float32)
-    r0, r1 = rows[0], rows[-1] + 1
-    cols = np.flatnonzero(np.any(mask[r0:r1] == label, axis=0))
-    c0, c1 = cols[0], cols[-1] + 1
-    inner = mask[r0:r1, c0:c1] == label
-    fields = gaussian_fields(inner.shape, dep, rng)
-    sel = np.zeros(mask.shape, dtype=bool)
-    sel[r0:r1, c0:c1] = inner
-    if inner.all():  # the region fills its box: no gather needed
-        return sel, fields.reshape(dep.n_bands, -1)
-    return sel, fields[:, inner]
+def region_fields(where: Region, dep: Dependence, rng: np.random.Generator) -> np.ndarray:
+    """B x h x w correlated z over the region's bounding box (pixels outside the region unused)."""
+    h, w = where.rows.stop - where.rows.start, where.cols.stop - where.cols.start
+    if not where.count:
+        return np.zeros((dep.n_bands, 0, 0), dtype=np.float32)
+    return gaussian_fields((h, w), dep, rng)

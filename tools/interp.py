@@ -22,7 +22,8 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from onboard.johnson import Johnson
-from tools.synth import ExtrapolationWarning, MissingModels
+from tools.synth import ExtrapolationWarning, MissingModels, blend_pixels, fill
+from tools.tiles import Draws, label_counts, region
 
 Models = Mapping[tuple[int, int], Johnson]
 _SAME = 1e-9  # degrees: angles closer than this are one angle
@@ -198,22 +199,19 @@ def synthesize_blend(mask: np.ndarray, neighbours: Sequence[tuple[float, Models]
     n_bands = max(b for _, models in neighbours for _, b in models) + 1 if any(m for _, m in neighbours) else 0
     if n_bands == 0:
         raise MissingModels("no models to synthesize from")
-    labels = [int(v) for v in np.unique(mask)]
+    labels = list(label_counts(mask))
     for _, models in neighbours:
         missing = sorted({lab for lab in labels for b in range(n_bands) if (lab, b) not in models})
         if missing:
             raise MissingModels(f"mask label(s) {missing} have no models at a neighbouring direction "
                                 f"(models exist for labels {sorted({lab for lab, _ in models})})")
     out = np.zeros(mask.shape + (n_bands,), dtype=np.uint8 if levels <= 256 else np.uint16)
-    for label in labels:
-        sel = mask == label
-        n = int(sel.sum())
+    for label in labels:  # in row tiles, one random stream per region and band (tools.synth.fill)
+        where = region(mask, label)
         for b in range(n_bands):
-            z = rng.standard_normal(n)
-            x = np.zeros(n)
-            for w, models in neighbours:
-                x += w * models[(label, b)].x_of_z(z)
-            out[sel, b] = np.clip(np.rint(x), 0, levels - 1)
+            to_pixels = blend_pixels([(w, models[(label, b)]) for w, models in neighbours], levels)
+            draws = Draws(rng.standard_normal, where.count)
+            fill(out, b, mask, where, lambda r, sel, k: to_pixels(draws.take(k)))
     return out
 
 

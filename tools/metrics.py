@@ -16,8 +16,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
+from tools.tiles import TILE_PIXELS, label_counts, row_tiles
+
 METRICS = ("hist_diff", "chi2", "ks", "w1")
-TILE_PIXELS = 1 << 18  # pixels per row tile in compare_bands: temporaries of a few MB
 
 
 @dataclass(frozen=True, slots=True)
@@ -119,25 +120,6 @@ def circular_correlation(a: np.ndarray, b: np.ndarray, levels: int) -> float:
     return float(np.clip((sa * sb).sum() / den, -1.0, 1.0))
 
 
-def tiles(height: int, width: int, tile_pixels: int = TILE_PIXELS) -> list[slice]:
-    """Row blocks of about `tile_pixels` pixels covering an image of height x width."""
-    rows = max(1, tile_pixels // max(width, 1))
-    return [slice(r, min(r + rows, height)) for r in range(0, height, rows)]
-
-
-def _label_ids(mask: np.ndarray | None, blocks: list[slice]) -> np.ndarray:
-    """The sorted distinct labels of a mask, found tile by tile."""
-    if mask is None:
-        return np.zeros(1, np.int64)
-    if mask.dtype in (np.uint8, np.bool_):
-        seen = sum(np.bincount(mask[r].ravel(), minlength=256) for r in blocks)
-        return np.flatnonzero(seen).astype(np.int64)
-    found: set[int] = set()
-    for r in blocks:
-        found.update(np.unique(mask[r]).tolist())
-    return np.array(sorted(found), dtype=np.int64)
-
-
 def _region_index(mask: np.ndarray | None, r: slice, ids: np.ndarray, width: int) -> np.ndarray:
     """Each pixel's position in `ids` for the rows r (flat, intp)."""
     if mask is None:
@@ -207,8 +189,8 @@ def compare_bands(
     if mask is not None and mask.shape != ref.shape[:2]:
         raise ValueError(f"mask size {mask.shape} differs from the images' {ref.shape[:2]}")
     height, width = ref.shape[:2]
-    blocks = tiles(height, width, tile_pixels)
-    ids = _label_ids(mask, blocks)
+    blocks = row_tiles(height, width, tile_pixels)
+    ids = np.zeros(1, np.int64) if mask is None else np.array(list(label_counts(mask, tile_pixels)), np.int64)
     nlevs = [circular_levels if name in circular else levels for name in band_names]
     counts = [np.zeros((2, len(ids) * n), np.int64) for n in nlevs]
     corrs = [_Correlation(circular_levels if name in circular else None) for name in band_names]

@@ -9,13 +9,14 @@ family differs between the two angles, where blending raw parameters is not.
 from __future__ import annotations
 
 import warnings
-from typing import Mapping, Protocol
+from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
 from onboard.dependence import Dependence
 from onboard.johnson import Johnson
-from tools.field import blend, latent, region_z
+from tools.field import blend, latent, region_fields
+from tools.tiles import Draws, Region, label_counts, region
 
 Models = Mapping[tuple[int, int], Johnson]
 Dependences = Mapping[int, Dependence]  # per label; labels without one are drawn independently
@@ -39,8 +40,9 @@ def _bands(models: Models) -> int:
     return max(b for _, b in models) + 1
 
 
-def _check(mask: np.ndarray, models: Models, n_bands: int, where: str = "") -> list[int]:
-    labels = [int(v) for v in np.unique(mask)]
+def _check(mask: np.ndarray, models: Models, n_bands: int, where: str = "",
+           labels: list[int] | None = None) -> list[int]:
+    labels = list(label_counts(mask)) if labels is None else labels
     missing = sorted({lab for lab in labels for b in range(n_bands) if (lab, b) not in models})
     if missing:
         have = sorted({lab for lab, _ in models})
@@ -64,25 +66,65 @@ def _pixels(model: Johnson, z: np.ndarray, levels: int) -> np.ndarray:
     return np.clip(np.rint(model.x_of_z(z)), 0, levels - 1)
 
 
+PixelsOf = Callable[[slice, np.ndarray, int], np.ndarray]  # (rows, region pixels in them, count)
+
+
+def fill(out: np.ndarray, band: int, mask: np.ndarray, where: Region, pixels: PixelsOf) -> None:
+    """out[..., band] at the region's pixels, row tile by row tile in row-major order."""
+    for r in where.tiles:
+        sel = mask[r, where.cols] == where.label
+        k = int(np.count_nonzero(sel))
+        if k:
+            out[r, where.cols, band][sel] = pixels(r, sel, k)
+
+
+def _from_fields(fields: np.ndarray, where: Region, to_pixels: Callable[[np.ndarray], np.ndarray]) -> PixelsOf:
+    """Pixels from a band's correlated field over the region's box."""
+    r0 = where.rows.start
+    return lambda r, sel, k: to_pixels(fields[r.start - r0:r.stop - r0][sel])
+
+
+def _from_stream(draws: Draws, to_pixels: Callable[[np.ndarray], np.ndarray] | None = None) -> PixelsOf:
+    """Pixels from an independent random stream (drawn as pixels, or as z for `to_pixels`)."""
+    if to_pixels is None:
+        return lambda r, sel, k: draws.take(k)
+    return lambda r, sel, k: to_pixels(draws.take(k))
+
+
 def synthesize(mask: np.ndarray, models: Models, rng: np.random.Generator, levels: int = 256,
                dependence: Dependences | None = None) -> np.ndarray:
     """An H x W x B image: each region's pixels drawn from its models, with the region's grain
-    and band copula (a correlated field, `tools.field`) when `dependence` has it, else independently."""
+    and band copula (a correlated field, `tools.field`) when `dependence` has it, else independently.
+    Works region by region in row tiles: beyond the mask and the image it holds a region's
+    correlated fields (B float32 per pixel of its box) or a few tiles."""
     n_bands = _bands(models)
     out = _output(mask, n_bands, levels)
     for label in _check(mask, models, n_bands):
+        where = region(mask, label)
         dep = (dependence or {}).get(label)
         if _correlated(dep, n_bands):
             dep = latent(dep, tuple(models[(label, b)] for b in range(n_bands)), levels)
-            sel, z = region_z(mask, label, dep, rng)
+            fields = region_fields(where, dep, rng)
             for b in range(n_bands):
-                out[sel, b] = _pixels(models[(label, b)], z[b], levels)
+                fill(out, b, mask, where, _from_fields(
+                    fields[b], where, lambda z, m=models[(label, b)]: _pixels(m, z, levels)))
+            del fields
             continue
-        sel = mask == label
-        n = int(sel.sum())
         for b in range(n_bands):
-            out[sel, b] = models[(label, b)].sample_pixels(n, rng, levels)
+            model = models[(label, b)]
+            draws = Draws(lambda size, m=model: m.sample_pixels(size, rng, levels), where.count)
+            fill(out, b, mask, where, _from_stream(draws))
     return out
+
+
+def blend_pixels(weighted: list[tuple[float, Johnson]], levels: int) -> Callable[[np.ndarray], np.ndarray]:
+    """z -> sum_k w_k x_k(z), rounded and clipped to the levels (quantile-space blending)."""
+    def to_pixels(z: np.ndarray) -> np.ndarray:
+        x = np.zeros(len(z))
+        for w, m in weighted:
+            x += w * m.x_of_z(z)
+        return np.clip(np.rint(x), 0, levels - 1)
+    return to_pixels
 
 
 def interpolate(lo: Models, hi: Models, weight: float, mask: np.ndarray,
@@ -94,25 +136,26 @@ def interpolate(lo: Models, hi: Models, weight: float, mask: np.ndarray,
     if not 0.0 <= weight <= 1.0:
         raise ValueError(f"interpolation weight must lie in [0, 1], got {weight}")
     n_bands = max(_bands(lo), _bands(hi))
-    _check(mask, lo, n_bands, " at the lower neighbouring angle")
-    labels = _check(mask, hi, n_bands, " at the upper neighbouring angle")
+    labels = _check(mask, lo, n_bands, " at the lower neighbouring angle")
+    _check(mask, hi, n_bands, " at the upper neighbouring angle", labels)
     out = _output(mask, n_bands, levels)
     for label in labels:
+        where = region(mask, label)
         d_lo, d_hi = ((d or {}).get(label) for d in dependence)
         d_lo, d_hi = (latent(d, tuple(m[(label, b)] for b in range(n_bands)), levels)
                       if _correlated(d, n_bands) else None for d, m in ((d_lo, lo), (d_hi, hi)))
         dep = blend(d_lo, d_hi, weight) if d_lo and d_hi else (d_lo or d_hi)
-        if dep is not None:
-            sel, zs = region_z(mask, label, dep, rng)
-        else:
-            sel = mask == label
-            zs = None
-        n = int(sel.sum())
+        fields = None if dep is None else region_fields(where, dep, rng)
         for b in range(n_bands):
-            z = rng.standard_normal(n) if zs is None else zs[b]
-            x = (1.0 - weight) * lo[(label, b)].x_of_z(z) + weight * hi[(label, b)].x_of_z(z)
-            out[sel, b] = np.clip(np.rint(x), 0, levels - 1)
+            to_pixels = _blend2(lo[(label, b)], hi[(label, b)], weight, levels)
+            fill(out, b, mask, where, _from_stream(Draws(rng.standard_normal, where.count), to_pixels)
+                 if fields is None else _from_fields(fields[b], where, to_pixels))
     return out
+
+
+def _blend2(lo: Johnson, hi: Johnson, weight: float, levels: int) -> Callable[[np.ndarray], np.ndarray]:
+    # (1 - w) x_lo + w x_hi in this order: the same floating-point sum as before tiling
+    return lambda z: np.clip(np.rint((1.0 - weight) * lo.x_of_z(z) + weight * hi.x_of_z(z)), 0, levels - 1)
 
 
 def neighbours(angles: list[float], angle: float) -> tuple[float, float, float]:

@@ -1,0 +1,93 @@
+"""Row tiles for the host's image work: what `compare`, `synth`, `pdfs` and `mask` hold beyond
+their images is a few tiles of temporaries, whatever the image size.
+
+A tile is a block of whole rows of about `TILE_PIXELS` pixels, so pixels keep their row-major
+order from tile to tile: a random stream served tile by tile gives every pixel the number it
+would get in one whole-image pass, and results do not depend on the tile size.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+TILE_PIXELS = 1 << 18  # temporaries of a few MB per tile
+DRAW_CHUNK = 1 << 18  # random numbers drawn at a time; even (see Draws)
+
+
+def row_tiles(height: int, width: int, tile_pixels: int = TILE_PIXELS, start: int = 0) -> list[slice]:
+    """Row blocks of about `tile_pixels` pixels covering rows start..height of a width-wide image."""
+    if tile_pixels < 1:
+        raise ValueError(f"tile_pixels must be positive, got {tile_pixels}")
+    rows = max(1, tile_pixels // max(width, 1))
+    return [slice(r, min(r + rows, height)) for r in range(start, height, rows)]
+
+
+def label_counts(mask: np.ndarray, tile_pixels: int = TILE_PIXELS) -> dict[int, int]:
+    """{label: pixel count} of an integer mask, ascending, found tile by tile."""
+    blocks = row_tiles(mask.shape[0], mask.shape[1], tile_pixels)
+    if mask.dtype in (np.uint8, np.bool_):
+        seen = sum((np.bincount(mask[r].ravel(), minlength=256) for r in blocks), np.zeros(256, np.int64))
+        return {int(v): int(seen[v]) for v in np.flatnonzero(seen)}
+    counts: dict[int, int] = {}
+    for r in blocks:
+        values, n = np.unique(mask[r], return_counts=True)
+        for v, c in zip(values.tolist(), n.tolist()):
+            counts[v] = counts.get(v, 0) + c
+    return dict(sorted(counts.items()))
+
+
+@dataclass(frozen=True)
+class Region:
+    """Where one label lies: its bounding box, pixel count, and the row tiles of the box."""
+
+    label: int
+    rows: slice
+    cols: slice
+    count: int
+    tiles: tuple[slice, ...]
+
+
+def region(mask: np.ndarray, label: int, tile_pixels: int = TILE_PIXELS) -> Region:
+    """The bounding box of `label` in `mask` (empty slices when absent), in one tiled pass."""
+    height, width = mask.shape
+    row_hit = np.zeros(height, bool)
+    col_hit = np.zeros(width, bool)
+    count = 0
+    for r in row_tiles(height, width, tile_pixels):
+        sel = mask[r] == label
+        row_hit[r] = sel.any(axis=1)
+        col_hit |= sel.any(axis=0)
+        count += int(np.count_nonzero(sel))
+    if not count:
+        return Region(label, slice(0, 0), slice(0, 0), 0, ())
+    rows, cols = np.flatnonzero(row_hit), np.flatnonzero(col_hit)
+    r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    return Region(label, slice(r0, r1), slice(c0, c1), count, tuple(row_tiles(r1, c1 - c0, tile_pixels, r0)))
+
+
+class Draws:
+    """One random stream served in pieces of any size: the numbers `draw(n)` would give at once.
+
+    `draw(k)` is called with DRAW_CHUNK, ..., then the remainder. numpy's Generator continues
+    its stream across calls except that `bytes` rounds each call up to 4-byte words, so every
+    chunk but the last must be even for 2-byte draws (DRAW_CHUNK is)."""
+
+    def __init__(self, draw, n: int) -> None:
+        self.draw, self.left = draw, n
+        self.buffer: np.ndarray | None = None
+
+    def take(self, k: int) -> np.ndarray:
+        parts: list[np.ndarray] = []
+        if k <= 0:
+            return self.draw(0)
+        while k:
+            if self.buffer is None or not len(self.buffer):
+                size = min(DRAW_CHUNK, self.left)
+                if size <= 0:
+                    raise ValueError("random stream exhausted")
+                self.buffer, self.left = self.draw(size), self.left - size
+            part, self.buffer = self.buffer[:k], self.buffer[k:]
+            parts.append(part)
+            k -= len(part)
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
