@@ -4,10 +4,6 @@ from __future__ import annotations
 import argparse
 import json
 
-import numpy as np
-
-from onboard.fit import fit_histogram
-from onboard.johnson import Johnson
 from tools.cli import CliError
 from tools.images import SPACES, ImageError, feature_bands, read_image, read_mask
 from tools.pdfs import PEERS, table
@@ -23,10 +19,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def _johnson(values: np.ndarray, levels: int) -> Johnson:
-    return fit_histogram(np.bincount(values, minlength=levels)).model
-
-
 def run(args: argparse.Namespace) -> int:
     try:
         image = read_image(args.image)
@@ -34,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
         feats, _ = feature_bands(image, args.space)
     except (ImageError, ValueError) as exc:
         raise CliError(str(exc)) from None
-    t = table(feats.data, mask, feats.band_names, _johnson, feats.levels, args.seed)
+    t = table(feats.data, mask, feats.band_names, levels=feats.levels, seed=args.seed)
     if args.json:
         doc = t.to_json()
         doc["space"] = args.space

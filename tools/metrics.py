@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
-from tools.tiles import TILE_PIXELS, label_counts, row_tiles
+from tools.tiles import TILE_PIXELS, label_counts, region_histograms, row_tiles
 
 METRICS = ("hist_diff", "chi2", "ks", "w1")
 
@@ -54,10 +54,10 @@ def histogram(values: np.ndarray, levels: int) -> np.ndarray:
     v = np.asarray(values).ravel()
     if v.size and (v.min() < 0 or v.max() >= levels):
         raise ValueError(f"values outside 0..{levels - 1}")
-    return _normalized(np.bincount(v.astype(np.int64), minlength=levels))
+    return normalized(np.bincount(v.astype(np.int64), minlength=levels))
 
 
-def _normalized(counts: np.ndarray) -> np.ndarray:
+def normalized(counts: np.ndarray) -> np.ndarray:
     counts = counts.astype(np.float64)
     total = counts.sum()
     return counts / total if total > 0 else counts
@@ -118,13 +118,6 @@ def circular_correlation(a: np.ndarray, b: np.ndarray, levels: int) -> float:
     if den == 0 or not np.isfinite(den):
         return 1.0 if np.array_equal(ta, tb) else 0.0
     return float(np.clip((sa * sb).sum() / den, -1.0, 1.0))
-
-
-def _region_index(mask: np.ndarray | None, r: slice, ids: np.ndarray, width: int) -> np.ndarray:
-    """Each pixel's position in `ids` for the rows r (flat, intp)."""
-    if mask is None:
-        return np.zeros((r.stop - r.start) * width, np.intp)
-    return np.searchsorted(ids, mask[r].ravel()).astype(np.intp, copy=False)
 
 
 class _Correlation:
@@ -188,32 +181,21 @@ def compare_bands(
         raise ValueError(f"expected H x W x {len(band_names)} bands, got {ref.shape}")
     if mask is not None and mask.shape != ref.shape[:2]:
         raise ValueError(f"mask size {mask.shape} differs from the images' {ref.shape[:2]}")
-    height, width = ref.shape[:2]
-    blocks = row_tiles(height, width, tile_pixels)
+    blocks = row_tiles(ref.shape[0], ref.shape[1], tile_pixels)
     ids = np.zeros(1, np.int64) if mask is None else np.array(list(label_counts(mask, tile_pixels)), np.int64)
     nlevs = [circular_levels if name in circular else levels for name in band_names]
-    counts = [np.zeros((2, len(ids) * n), np.int64) for n in nlevs]
+    counts = [region_histograms(side, mask, ids, nlevs, tile_pixels) for side in (ref, test)]
     corrs = [_Correlation(circular_levels if name in circular else None) for name in band_names]
-    for r in blocks:
-        region = _region_index(mask, r, ids, width)
-        for k, nlev in enumerate(nlevs):
-            a, b = ref[r, :, k], test[r, :, k]
-            corrs[k].add_first(a, b)
-            for side, v in enumerate((a, b)):
-                v = v.ravel()
-                if v.size and (v.min() < 0 or v.max() >= nlev):
-                    raise ValueError(f"values outside 0..{nlev - 1}")
-                counts[k][side] += np.bincount(region * nlev + v.astype(np.intp), minlength=len(ids) * nlev)
-    for r in blocks:
-        for k in range(len(band_names)):
-            corrs[k].add_second(ref[r, :, k], test[r, :, k])
+    for step in ("add_first", "add_second"):
+        for r in blocks:
+            for k, c in enumerate(corrs):
+                getattr(c, step)(ref[r, :, k], test[r, :, k])
     regions: list[RegionMetrics] = []
     for k, name in enumerate(band_names):
-        circ, nlev = name in circular, nlevs[k]
-        per_label = counts[k].reshape(2, len(ids), nlev)
+        circ = name in circular
         for i, label in enumerate(ids):
-            hr, ht = (_normalized(per_label[side, i]) for side in (0, 1))
-            n = int(per_label[0, i].sum())
+            hr, ht = (normalized(side[k][i]) for side in counts)
+            n = int(counts[0][k][i].sum())
             regions.append(RegionMetrics(
                 int(label), name, n, n, hist_diff(hr, ht), chi2(hr, ht), ks(hr, ht, circ), w1(hr, ht, circ),
             ))

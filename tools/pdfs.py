@@ -20,8 +20,10 @@ from typing import Callable
 import numpy as np
 from scipy import stats
 
+from onboard.fit import fit_histogram
 from onboard.johnson import Johnson
-from tools.metrics import histogram
+from tools.metrics import normalized
+from tools.tiles import Region, label_counts, region, region_histograms
 
 PEERS = ("johnson", "gaussian", "uniform", "weibull", "lognormal")
 # MLE fits see at most this many values; enough for a stable fit, bounded time.
@@ -56,8 +58,11 @@ def binned(dist, levels: int) -> np.ndarray:
     return np.diff(np.concatenate(([0.0], c, [1.0])))
 
 
-def _peer_probabilities(values: np.ndarray, levels: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
-    v = values if len(values) <= FIT_SAMPLE else rng.choice(values, FIT_SAMPLE, replace=False)
+Values = Callable[[np.ndarray], np.ndarray]  # positions among a region's pixels -> their values
+
+
+def _peer_probabilities(values: Values, n: int, levels: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    v = values(np.arange(n) if n <= FIT_SAMPLE else rng.choice(n, FIT_SAMPLE, replace=False))
     x = v.astype(np.float64) + rng.uniform(-0.5, 0.5, len(v))
     floor = float(v.min()) - 0.5 - 1e-3
     out: dict[str, np.ndarray] = {}
@@ -73,30 +78,53 @@ def _peer_probabilities(values: np.ndarray, levels: int, rng: np.random.Generato
     return out
 
 
+def gather(bands: np.ndarray, band: int, mask: np.ndarray, where: Region, positions: np.ndarray) -> np.ndarray:
+    """The values of band `band` at `positions` (any order) among the region's pixels in
+    row-major order, read tile by tile: memory for the positions only."""
+    order = np.argsort(positions, kind="stable")
+    wanted = positions[order]
+    out = np.empty(len(positions), dtype=bands.dtype)
+    start = done = 0
+    for r in where.tiles:
+        vals = bands[r, where.cols, band][mask[r, where.cols] == where.label]
+        stop = int(np.searchsorted(wanted, start + len(vals)))
+        out[order[done:stop]] = vals[wanted[done:stop] - start]
+        start, done = start + len(vals), stop
+    return out
+
+
 def table(bands: np.ndarray, mask: np.ndarray, band_names: tuple[str, ...],
-          fit: Callable[[np.ndarray, int], Johnson], levels: int = 256, seed: int = 0) -> PdfTable:
-    """Table 2 for an H x W x B band stack under a label mask; `fit(values, levels)` gives Johnson."""
+          fit: Callable[[np.ndarray, int], Johnson] | None = None, levels: int = 256,
+          seed: int = 0) -> PdfTable:
+    """Table 2 for an H x W x B band stack under a label mask. Johnson is the robot's percentile
+    fit from each region's histogram, or `fit(values, levels)` when given (which needs the
+    region's values gathered). Histograms and samples are read in row tiles (tools.tiles)."""
     if bands.shape[:2] != mask.shape:
         raise ValueError(f"mask size {mask.shape} differs from the image's {bands.shape[:2]}")
     rng = np.random.default_rng(seed)
+    ids = np.array(list(label_counts(mask)), np.int64)
+    counts = region_histograms(bands, mask, ids, [levels] * len(band_names))
     rows = []
-    for label in np.unique(mask):
-        sel = mask == label
+    for i, label in enumerate(ids):
+        where = region(mask, int(label))
         for k, name in enumerate(band_names):
-            values = bands[:, :, k][sel].astype(np.int64)
-            h = histogram(values, levels)
-            if values.min() == values.max():
+            c = counts[k][i]
+            h = normalized(c)
+            if np.count_nonzero(c) == 1:
                 # A constant region: every model degenerates to the one level, exactly.
                 probs = {p: h for p in PEERS}
             else:
-                probs = {"johnson": fit(values, levels).level_probabilities(levels)}
-                probs.update(_peer_probabilities(values, levels, rng))
+                values = lambda positions, k=k: gather(bands, k, mask, where, positions)  # noqa: E731
+                model = (fit_histogram(c).model if fit is None
+                         else fit(values(np.arange(where.count)).astype(np.int64), levels))
+                probs = {"johnson": model.level_probabilities(levels)}
+                probs.update(_peer_probabilities(values, where.count, levels, rng))
             errors, failed = {}, []
             for p in PEERS:
                 e = float(np.abs(h - probs[p]).sum())
                 if not np.isfinite(e):
                     e, failed = 2.0, failed + [p]  # a failed fit scores the worst possible error
                 errors[p] = e
-            rows.append(PdfRow(int(label), name, int(sel.sum()), errors, tuple(failed)))
+            rows.append(PdfRow(int(label), name, where.count, errors, tuple(failed)))
     total = {p: float(sum(r.errors[p] for r in rows)) for p in PEERS}
     return PdfTable(tuple(rows), total)

@@ -91,3 +91,20 @@ class Draws:
             parts.append(part)
             k -= len(part)
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+
+def region_histograms(stack: np.ndarray, mask: np.ndarray | None, ids: np.ndarray, levels: list[int],
+                      tile_pixels: int = TILE_PIXELS) -> list[np.ndarray]:
+    """Per band k of an H x W x B stack of integer levels, the (len(ids), levels[k]) counts of
+    each region (label ids[i] of `mask`; one region without a mask), tile by tile."""
+    height, width = stack.shape[:2]
+    counts = [np.zeros(len(ids) * n, np.int64) for n in levels]
+    for r in row_tiles(height, width, tile_pixels):
+        index = (np.zeros((r.stop - r.start) * width, np.intp) if mask is None
+                 else np.searchsorted(ids, mask[r].ravel()).astype(np.intp, copy=False))
+        for k, n in enumerate(levels):
+            v = stack[r, :, k].ravel()
+            if v.size and (v.min() < 0 or v.max() >= n):
+                raise ValueError(f"values outside 0..{n - 1}")
+            counts[k] += np.bincount(index * n + v.astype(np.intp), minlength=len(ids) * n)
+    return [c.reshape(len(ids), n) for c, n in zip(counts, levels)]
