@@ -357,12 +357,20 @@ def spread(sample: np.ndarray, centres: np.ndarray) -> float:
     return float(np.sqrt(np.maximum(d2.min(axis=1), 0.0)).mean())
 
 
+def _label_counts(labels: np.ndarray, n: int) -> np.ndarray:
+    """Pixels per label, in chunks: bincount of the whole map would copy it as intp."""
+    counts = np.zeros(n, np.int64)
+    for a in range(0, len(labels), CHUNK_PIXELS):
+        counts += np.bincount(labels[a:a + CHUNK_PIXELS], minlength=n)
+    return counts
+
+
 def isodata(data: np.ndarray, params: IsodataParams = IsodataParams()) -> IsodataResult:
     """Cluster `data` (..., bands) and label every pixel; no empty cluster is returned."""
     x = _pixels(data)
     c = fit_centres(subsample(x, params.subsample, params.seed), params)
     labels = assign(data, c)
-    counts = np.bincount(labels.ravel(), minlength=len(c))
+    counts = _label_counts(labels.reshape(-1), len(c))
     if (counts == 0).any():  # a centre may lose its last member in the full assignment
         c = c[counts > 0]
         labels = assign(data, c)

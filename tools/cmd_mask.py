@@ -3,16 +3,9 @@ from __future__ import annotations
 
 import argparse
 
-import cv2
-import numpy as np
-from scipy.cluster.vq import kmeans2
-from skimage.segmentation import felzenszwalb, slic
-
-from onboard.isodata import IsodataParams, isodata
 from tools.cli import CliError
 from tools.images import ImageError, read_image, write_mask
-
-METHODS = ("isodata", "kmeans", "felzenszwalb", "slic")
+from tools.masks import METHODS, segment
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -25,54 +18,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--segments", type=int, default=400, help="slic superpixels")
     p.add_argument("--out", required=True, help="output mask .png")
     return p
-
-
-def _ordered(labels: np.ndarray, centres: np.ndarray) -> np.ndarray:
-    """Relabel so class 0 is the darkest: stable masks across runs and methods."""
-    order = np.argsort(centres.sum(axis=1), kind="stable")
-    rank = np.empty(len(order), np.int64)
-    rank[order] = np.arange(len(order))
-    return rank[labels].astype(np.uint8)
-
-
-def _compact(labels: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    used = np.unique(labels)
-    remap = np.zeros(len(centres), np.int64)
-    remap[used] = np.arange(len(used))
-    return remap[labels], centres[used]
-
-
-def _merge_segments(image: np.ndarray, segments: np.ndarray, k: int, seed: int) -> np.ndarray:
-    """Merge bottom-up segments into k classes by clustering their mean colours."""
-    seg = segments.ravel()
-    n = int(seg.max()) + 1
-    counts = np.bincount(seg, minlength=n).astype(np.float64)
-    px = image.reshape(-1, 3).astype(np.float64)
-    means = np.stack([np.bincount(seg, px[:, c], n) for c in range(3)], axis=1) / np.maximum(counts, 1)[:, None]
-    present = counts > 0
-    if present.sum() <= k:
-        cls = np.cumsum(present) - 1
-        return _ordered(*_compact(cls[segments], means[present]))
-    centres, cls = kmeans2(means[present], k, minit="++", seed=seed)
-    full = np.zeros(n, np.int64)
-    full[present] = cls
-    return _ordered(*_compact(full[segments], centres))
-
-
-def segment(image: np.ndarray, method: str, k: int, seed: int = 0, scale: float = 100.0,
-            segments: int = 400) -> np.ndarray:
-    if method == "isodata":
-        res = isodata(image, IsodataParams(k=k, seed=seed))
-        return _ordered(res.labels.astype(np.int64), res.centres)
-    if method == "kmeans":
-        cv2.setRNGSeed(seed)
-        px = image.reshape(-1, 3).astype(np.float32)
-        crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.5)
-        _, lab, centres = cv2.kmeans(px, k, None, crit, 3, cv2.KMEANS_PP_CENTERS)
-        return _ordered(*_compact(lab.reshape(image.shape[:2]), centres.astype(np.float64)))
-    if method == "felzenszwalb":
-        return _merge_segments(image, felzenszwalb(image, scale=scale, sigma=0.8, min_size=20), k, seed)
-    return _merge_segments(image, slic(image, n_segments=segments, compactness=10, start_label=0), k, seed)
 
 
 def run(args: argparse.Namespace) -> int:

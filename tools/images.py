@@ -98,7 +98,7 @@ def write_mask(path: str | Path, labels: np.ndarray) -> None:
     p = Path(path)
     if p.suffix.lower() != ".png":
         raise ImageError(f"mask {p}: masks are written as .png so labels stay exact")
-    _write(p, lab.astype(np.uint8), "mask")
+    _write(p, lab.astype(np.uint8, copy=False), "mask")
 
 
 def encode_png(labels: np.ndarray) -> bytes:
