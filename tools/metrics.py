@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
-from tools.tiles import TILE_PIXELS, label_counts, region_histograms, row_tiles
+from tools.tiles import label_counts, region_histograms, row_tiles
 
 METRICS = ("hist_diff", "chi2", "ks", "w1")
 
@@ -171,10 +171,11 @@ def compare_bands(
     mask: np.ndarray | None = None,
     circular: tuple[str, ...] = (),
     circular_levels: int = 180,
-    tile_pixels: int = TILE_PIXELS,
+    tile_pixels: int | None = None,
 ) -> Comparison:
     """Metrics between two H x W x B band stacks; regions come from `mask` (all label 0 without).
-    Works through row tiles of `tile_pixels`: memory beyond the inputs stays a few tiles."""
+    Works through row tiles of `tile_pixels` (default tools.tiles.TILE_PIXELS): memory beyond
+    the inputs stays a few tiles."""
     if ref.shape != test.shape:
         raise ValueError(f"images differ in size: {ref.shape} and {test.shape}")
     if ref.ndim != 3 or ref.shape[2] != len(band_names):

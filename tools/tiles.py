@@ -15,15 +15,17 @@ TILE_PIXELS = 1 << 18  # temporaries of a few MB per tile
 DRAW_CHUNK = 1 << 18  # random numbers drawn at a time; even (see Draws)
 
 
-def row_tiles(height: int, width: int, tile_pixels: int = TILE_PIXELS, start: int = 0) -> list[slice]:
-    """Row blocks of about `tile_pixels` pixels covering rows start..height of a width-wide image."""
+def row_tiles(height: int, width: int, tile_pixels: int | None = None, start: int = 0) -> list[slice]:
+    """Row blocks of about `tile_pixels` (default TILE_PIXELS) pixels covering rows
+    start..height of a width-wide image."""
+    tile_pixels = TILE_PIXELS if tile_pixels is None else tile_pixels
     if tile_pixels < 1:
         raise ValueError(f"tile_pixels must be positive, got {tile_pixels}")
     rows = max(1, tile_pixels // max(width, 1))
     return [slice(r, min(r + rows, height)) for r in range(start, height, rows)]
 
 
-def label_counts(mask: np.ndarray, tile_pixels: int = TILE_PIXELS) -> dict[int, int]:
+def label_counts(mask: np.ndarray, tile_pixels: int | None = None) -> dict[int, int]:
     """{label: pixel count} of an integer mask, ascending, found tile by tile."""
     blocks = row_tiles(mask.shape[0], mask.shape[1], tile_pixels)
     if mask.dtype in (np.uint8, np.bool_):
@@ -48,7 +50,7 @@ class Region:
     tiles: tuple[slice, ...]
 
 
-def region(mask: np.ndarray, label: int, tile_pixels: int = TILE_PIXELS) -> Region:
+def region(mask: np.ndarray, label: int, tile_pixels: int | None = None) -> Region:
     """The bounding box of `label` in `mask` (empty slices when absent), in one tiled pass."""
     height, width = mask.shape
     row_hit = np.zeros(height, bool)
@@ -94,7 +96,7 @@ class Draws:
 
 
 def region_histograms(stack: np.ndarray, mask: np.ndarray | None, ids: np.ndarray, levels: list[int],
-                      tile_pixels: int = TILE_PIXELS) -> list[np.ndarray]:
+                      tile_pixels: int | None = None) -> list[np.ndarray]:
     """Per band k of an H x W x B stack of integer levels, the (len(ids), levels[k]) counts of
     each region (label ids[i] of `mask`; one region without a mask), tile by tile."""
     height, width = stack.shape[:2]

@@ -1,0 +1,161 @@
+"""Tiling changes memory, not results: compare, synth, pdfs and mask in tiles of a few pixels
+give what one whole-image pass gives (bit for bit; correlation to float tolerance)."""
+import numpy as np
+import pytest
+
+from benchmarks.scenes import field, voronoi_labels
+from onboard.dependence import Dependence
+from onboard.fit import FrameFitter, fit_histogram
+from tools import masks, metrics, pdfs, synth, tiles
+from tools.field import gaussian_fields, latent
+from tools.interp import synthesize_blend
+
+DEP = Dependence((0.5, 0.3, 0.6), (0.8, 0.6, 0.4, 0.2), (0.7, 0.5, 0.3, 0.1))
+
+
+@pytest.fixture
+def tiny_tiles(monkeypatch):
+    """Tiles of 7 pixels and random draws 6 at a time: every tile and chunk boundary is hit."""
+    monkeypatch.setattr(tiles, "TILE_PIXELS", 7)
+    monkeypatch.setattr(tiles, "DRAW_CHUNK", 6)
+
+
+def _scene(h=41, w=57, n=4, seed=3):
+    mask = voronoi_labels(h, w, n, seed=seed)
+    frame, _ = field(h, w)
+    f = FrameFitter(n, 3)
+    f.add(frame, mask)
+    return frame, mask, {k: r.model for k, r in f.fit().items()}
+
+
+def test_row_tiles_cover_every_row_once_in_order():
+    blocks = tiles.row_tiles(10, 3, 7)
+    assert [(b.start, b.stop) for b in blocks] == [(0, 2), (2, 4), (4, 6), (6, 8), (8, 10)]
+    assert tiles.row_tiles(5, 100, 7) == [slice(r, r + 1) for r in range(5)]  # at least one row
+    with pytest.raises(ValueError, match="positive"):
+        tiles.row_tiles(5, 5, 0)
+
+
+def test_a_stream_served_in_pieces_is_the_stream_drawn_at_once(tiny_tiles):
+    for n, pieces in ((13, (1, 5, 2, 5)), (12, (12,)), (7, (3, 3, 1))):
+        draws = tiles.Draws(lambda k, g=np.random.default_rng(1): np.frombuffer(g.bytes(2 * k), np.uint16), n)
+        got = np.concatenate([draws.take(k) for k in pieces])
+        want = np.frombuffer(np.random.default_rng(1).bytes(2 * n), np.uint16)
+        assert np.array_equal(got, want)
+
+
+def test_compare_in_tiles_equals_the_whole_image_metrics(tiny_tiles):
+    rng = np.random.default_rng(2)
+    a = rng.integers(0, 180, (23, 31, 3)).astype(np.uint8)
+    b = np.clip(a.astype(int) + rng.integers(-30, 30, a.shape), 0, 179).astype(np.uint8)
+    mask = rng.integers(0, 3, (23, 31)).astype(np.uint8) * 2
+    got = metrics.compare_bands(a, b, ("H", "S", "V"), 256, mask, circular=("H",))
+    for r in got.regions:
+        k = "HSV".index(r.band)
+        sel = mask == r.label
+        nlev = 180 if r.band == "H" else 256
+        hr, ht = metrics.histogram(a[sel, k], nlev), metrics.histogram(b[sel, k], nlev)
+        assert (r.count_ref, r.hist_diff, r.chi2, r.ks, r.w1) == (
+            sel.sum(), metrics.hist_diff(hr, ht), metrics.chi2(hr, ht),
+            metrics.ks(hr, ht, r.band == "H"), metrics.w1(hr, ht, r.band == "H"))
+    assert [r.label for r in got.regions] == [0, 2, 4] * 3
+    assert got.correlation["H"] == pytest.approx(metrics.circular_correlation(a[..., 0], b[..., 0], 180), abs=1e-12)
+    for k, name in ((1, "S"), (2, "V")):
+        assert got.correlation[name] == pytest.approx(metrics.correlation(a[..., k], b[..., k]), abs=1e-12)
+
+
+def _whole_synthesize(mask, models, rng, dependence=None, levels=256):
+    """Synthesis the way it ran before tiling: whole regions, one draw per region and band."""
+    out = np.zeros(mask.shape + (3,), np.uint8 if levels <= 256 else np.uint16)
+    for label in np.unique(mask):
+        sel = mask == label
+        if dependence and label in dependence:
+            dep = latent(dependence[label], tuple(models[(label, b)] for b in range(3)), levels)
+            rows, cols = np.flatnonzero(sel.any(axis=1)), np.flatnonzero(sel.any(axis=0))
+            box = sel[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
+            z = gaussian_fields(box.shape, dep, rng)[:, box]
+            for b in range(3):
+                out[sel, b] = np.clip(np.rint(models[(label, b)].x_of_z(z[b])), 0, levels - 1)
+            continue
+        for b in range(3):
+            out[sel, b] = models[(label, b)].sample_pixels(int(sel.sum()), rng, levels)
+    return out
+
+
+@pytest.mark.parametrize("levels", [256, 1024])
+def test_synthesis_in_tiles_equals_whole_regions(tiny_tiles, levels):
+    _, mask, models = _scene()
+    got = synth.synthesize(mask, models, np.random.default_rng(5), levels)
+    assert np.array_equal(got, _whole_synthesize(mask, models, np.random.default_rng(5), levels=levels))
+
+
+def test_correlated_synthesis_in_tiles_equals_whole_regions(tiny_tiles):
+    _, mask, models = _scene()
+    deps = {1: DEP, 3: DEP}
+    got = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
+    assert np.array_equal(got, _whole_synthesize(mask, models, np.random.default_rng(5), deps))
+
+
+def test_interpolation_and_direction_blending_do_not_depend_on_the_tile_size(monkeypatch):
+    _, mask, lo = _scene()
+    _, _, hi = _scene(seed=3)
+    hi = {k: type(m)(m.family, m.gamma, m.delta, m.xi + 20, m.lam) for k, m in hi.items()}
+    runs = []
+    for tile, chunk in ((7, 6), (1 << 18, 1 << 18)):
+        monkeypatch.setattr(tiles, "TILE_PIXELS", tile)
+        monkeypatch.setattr(tiles, "DRAW_CHUNK", chunk)
+        runs.append((synth.interpolate(lo, hi, 0.3, mask, np.random.default_rng(6)),
+                     synth.interpolate(lo, hi, 0.3, mask, np.random.default_rng(6), dependence=({1: DEP}, {1: DEP})),
+                     synthesize_blend(mask, [(0.25, lo), (0.75, hi)], np.random.default_rng(7))))
+    for small, whole in zip(*runs):
+        assert np.array_equal(small, whole)
+
+
+def test_pdfs_in_tiles_equals_one_pass(monkeypatch):
+    frame, mask, _ = _scene(150, 160, 3)
+    monkeypatch.setattr(pdfs, "FIT_SAMPLE", 900)  # so the sample is drawn and gathered by position
+
+    def johnson(values, levels):
+        return fit_histogram(np.bincount(values, minlength=levels)).model
+
+    tables = []
+    for tile in (7, 1 << 18):
+        monkeypatch.setattr(tiles, "TILE_PIXELS", tile)
+        tables += [pdfs.table(frame, mask, ("R", "G", "B"), None, 256, 4),
+                   pdfs.table(frame, mask, ("R", "G", "B"), johnson, 256, 4)]
+    rows = [[(r.label, r.band, r.count, r.errors, r.failed) for r in t.rows] for t in tables]
+    assert rows[0] == rows[1] == rows[2] == rows[3]
+    assert all(r[2] > 900 for r in rows[0])
+
+
+def test_gather_reads_the_values_at_positions_in_row_major_order(tiny_tiles):
+    frame, mask, _ = _scene()
+    where = tiles.region(mask, 2)
+    values = frame[..., 1][mask == 2]
+    positions = np.random.default_rng(0).permutation(where.count)[:50]
+    assert np.array_equal(pdfs.gather(frame, 1, mask, where, positions), values[positions])
+
+
+def test_masks_below_one_segment_tile_are_segmented_whole():
+    image, _ = field(90, 120, seed=1)
+    for method in ("felzenszwalb", "slic"):
+        a = masks.segment(image, method, 4, 3, tile=120)
+        b = masks.segment(image, method, 4, 3, tile=masks.SEGMENT_TILE)
+        assert np.array_equal(a, b)
+
+
+@pytest.mark.parametrize("method", masks.METHODS)
+def test_mask_classes_are_ordered_darkest_first_in_tiles(method):
+    image, _ = field(96, 128, seed=1)
+    labels = masks.segment(image, method, 4, 0, tile=32)
+    assert labels.dtype == np.uint8 and labels.shape == image.shape[:2]
+    present = np.unique(labels)
+    assert np.array_equal(present, np.arange(len(present))) and 2 <= len(present) <= 8
+    brightness = [image[labels == c].sum(axis=1).mean() for c in present]
+    assert brightness == sorted(brightness)
+
+
+def test_relabel_maps_through_the_table_in_tiles(tiny_tiles):
+    labels = np.random.default_rng(0).integers(0, 5, (19, 23)).astype(np.int32)
+    table = np.array([4, 3, 2, 1, 0])
+    assert np.array_equal(masks.relabel(labels, table), table[labels].astype(np.uint8))
