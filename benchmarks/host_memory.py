@@ -16,16 +16,26 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-# The driver prints VmHWM (kB) on its last stderr line, whatever the command printed before.
+# Runs `btf-host` on a warm-up argv (libraries loaded), restarts VmHWM from the resident set
+# (/proc/self/clear_refs), runs the measured argv and prints "before peak" in bytes last.
 _DRIVER = """
-import sys
+import json, sys
 from tools.cli import main
-try:
-    rc = main(sys.argv[1:])
-finally:
+
+def status(key):
     with open("/proc/self/status") as f:
-        hwm = next(line.split()[1] for line in f if line.startswith("VmHWM:"))
-    sys.stderr.write(f"\\nVmHWM {hwm}\\n")
+        return int(next(line.split()[1] for line in f if line.startswith(key + ":"))) * 1024
+
+warm, argv = json.loads(sys.argv[1]), json.loads(sys.argv[2])
+if warm and main(warm):
+    sys.exit("warm-up run failed")
+with open("/proc/self/clear_refs", "w") as f:
+    f.write("5")
+before = status("VmRSS")
+try:
+    rc = main(argv)
+finally:
+    sys.stderr.write(f"\\nPEAK {before} {status('VmHWM')}\\n")
 sys.exit(rc)
 """
 
@@ -70,12 +80,13 @@ def make_scene(directory: Path, height: int, width: int, labels: int = 6, seed: 
         paths.append(directory / name)
         del img
     cv2.imwrite(str(directory / "mask.png"), mask)
+    from tools.images import fit_image
+    from tools.synth import models_document
+
+    fitted = fit_image(paths[0], directory / "mask.png", "rgb")
     models = directory / "models.json"
-    out = subprocess.run([sys.executable, "-m", "tools.cli", "fit", str(paths[0]), "--mask",
-                          str(directory / "mask.png"), "--json"], capture_output=True, text=True, check=True)
-    doc = json.loads(out.stdout)
-    doc["angle"] = None
-    models.write_text(json.dumps(doc))
+    models.write_text(json.dumps(models_document("rgb", fitted.feats.band_names, fitted.feats.levels,
+                                                 None, fitted.results)))
     return Scene(paths[0], paths[1], directory / "mask.png", models, height, width)
 
 
@@ -95,24 +106,33 @@ def commands(scene: Scene, out: Path) -> dict[str, list[str]]:
     }
 
 
-def peak_rss(argv: list[str], timeout: float = 3600) -> tuple[int, int, str]:
-    """(exit status, peak RSS in bytes, stderr without the measurement line) of `btf-host argv`."""
-    env = dict(os.environ, OMP_NUM_THREADS=os.environ.get("OMP_NUM_THREADS", "2"))
-    p = subprocess.run([sys.executable, "-c", _DRIVER, *argv], capture_output=True, text=True,
-                       timeout=timeout, env=env)
+def measuring_env() -> dict[str, str]:
+    """The environment of a measured process: glibc's malloc with a fixed mmap threshold, so
+    every array of 128 kB or more is returned to the system when freed and the resident set
+    follows what the program holds (by default the threshold grows to 32 MB after the first
+    large free, and freed blocks below it stay resident, blurring small measurements)."""
+    return dict(os.environ, MALLOC_MMAP_THRESHOLD_="131072", MALLOC_TRIM_THRESHOLD_="131072")
+
+
+def peak_rss(argv: list[str], warm: list[str] | None = None, timeout: float = 3600) -> tuple[int, int, int, str]:
+    """(exit status, resident set before, peak resident set, stderr without the measurement
+    line) of `btf-host argv` in a fresh interpreter, after a `warm` run in the same process."""
+    p = subprocess.run([sys.executable, "-c", _DRIVER, json.dumps(warm or []), json.dumps(argv)],
+                       capture_output=True, text=True, timeout=timeout, env=measuring_env())
     err, _, last = p.stderr.rstrip().rpartition("\n")
-    if not last.startswith("VmHWM "):
+    if not last.startswith("PEAK "):
         raise RuntimeError(f"btf-host {' '.join(argv)} ended without a measurement: {p.stderr[-500:]}")
-    return p.returncode, int(last.split()[1]) * 1024, err
+    _, before, peak = last.split()
+    return p.returncode, int(before), int(peak), err
 
 
 def per_pixel(big: Scene, tiny: Scene, out: Path, names: list[str]) -> dict[str, tuple[float, float]]:
-    """For each command: (peak RSS / pixel, (peak - the tiny scene's peak) / extra pixel)."""
+    """For each command: (peak RSS / pixel, (peak - the resident set after the same command
+    on the tiny scene) / pixel): the whole process, and what grew with the image."""
     result = {}
     for name in names:
-        rc_small, small, err_small = peak_rss(commands(tiny, out)[name])
-        rc, peak, err = peak_rss(commands(big, out)[name])
-        if rc or rc_small:
-            raise RuntimeError(f"{name} failed: {err or err_small}")
-        result[name] = (peak / big.pixels, (peak - small) / (big.pixels - tiny.pixels))
+        rc, before, peak, err = peak_rss(commands(big, out)[name], warm=commands(tiny, out)[name])
+        if rc:
+            raise RuntimeError(f"{name} failed: {err}")
+        result[name] = (peak / big.pixels, (peak - before) / big.pixels)
     return result
