@@ -93,16 +93,15 @@ def make_scene(directory: Path, height: int, width: int, labels: int = 6, seed: 
 def commands(scene: Scene, out: Path) -> dict[str, list[str]]:
     """The host commands whose memory is bounded, on a scene."""
     im, mask = str(scene.image), str(scene.mask)
+    tag = f"{scene.width}x{scene.height}"  # outputs named per scene: commands refuse to overwrite
     return {
         "compare": ["compare", im, str(scene.other), "--mask", mask, "--json"],
         "compare hsv": ["compare", im, str(scene.other), "--mask", mask, "--space", "hsv", "--json"],
         "synth": ["synth", "--model", str(scene.models), "--mask", mask, "--angle", "0", "--out",
-                  str(out / "synth.png")],
+                  str(out / f"synth-{tag}.png")],
         "pdfs": ["pdfs", im, "--mask", mask, "--json"],
-        "mask isodata": ["mask", im, "--method", "isodata", "--k", "5", "--out", str(out / "iso.png")],
-        "mask kmeans": ["mask", im, "--method", "kmeans", "--k", "5", "--out", str(out / "km.png")],
-        "mask felzenszwalb": ["mask", im, "--method", "felzenszwalb", "--k", "5", "--out", str(out / "fz.png")],
-        "mask slic": ["mask", im, "--method", "slic", "--k", "5", "--out", str(out / "slic.png")],
+        **{f"mask {m}": ["mask", im, "--method", m, "--k", "5", "--out", str(out / f"{m}-{tag}.png")]
+           for m in ("isodata", "kmeans", "felzenszwalb", "slic")},
     }
 
 

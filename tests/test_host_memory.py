@@ -61,7 +61,7 @@ _LIBRARY = textwrap.dedent("""
     def run(image, mask):
         if what == "correlated synth":
             return synth.synthesize(mask, models, np.random.default_rng(0), dependence={0: dep, 1: dep})
-        return masks.segment(image, what, 4, segments=400, tile=128)
+        return masks.segment(image, what, 4, segments=400, tile=64)
 
     run(*inputs(128))  # libraries loaded, caches filled, on a small input
     image, mask = inputs(side)
