@@ -192,7 +192,10 @@ def test_censoring_recovers_a_saturated_normal_that_the_uncensored_fit_misses():
     for sat in SATURATIONS[1:]:
         cen, unc = res[("percentile", sizes[1], sat)], res[("uncensored", sizes[1], sat)]
         assert cen.worst < 0.5 and cen.l1 < 0.01  # shifted or the (exact) fallback normal
-        assert unc.worst > 5.0 and unc.l1 > 0.1
+        # up to 25% the off-centre reads keep clear of the pile even without censoring; at 40%
+        # only the censored placement or the fallback does
+        if sat.fraction >= 0.4:
+            assert unc.worst > 5.0 and unc.l1 > 0.1
 
 
 def test_quick_stability_map_has_the_saturation_axis_and_no_percentile_failure(quick):
