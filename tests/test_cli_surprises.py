@@ -268,3 +268,11 @@ def test_help_and_resolve_load_no_heavy_library(argv):
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
     rc, *heavy = out.stdout.split()
     assert rc in ("0", "None") and heavy == [], out.stdout + out.stderr
+
+
+def test_report_synthesizes_captures_whose_mask_fit_stored(run, files):
+    db = files / "x.db"
+    assert run("fit", files / "a.png", "--mask", files / "m.png", "--angle", 30, "--db", db)[0] == 0
+    assert run("report", "--db", db, "--out", files / "rep", "--quiet")[0] == 0
+    assert len(list((files / "rep").glob("*_synthetic.png"))) == 1
+    assert "no capture has a label mask" not in (files / "rep" / "index.html").read_text()
