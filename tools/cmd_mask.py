@@ -3,10 +3,12 @@ from __future__ import annotations
 
 import argparse
 import math
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from tools.cli import CliError, add_force, check_out
+
+if TYPE_CHECKING:  # numpy and the segmenters load where used: --help builds this parser too
+    import numpy as np
 
 METHODS = ("isodata", "kmeans", "felzenszwalb", "slic")
 
@@ -26,6 +28,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 def _ordered(labels: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """Relabel so class 0 is the darkest: stable masks across runs and methods."""
+    import numpy as np
+
     order = np.argsort(centres.sum(axis=1), kind="stable")
     rank = np.empty(len(order), np.int64)
     rank[order] = np.arange(len(order))
@@ -33,6 +37,8 @@ def _ordered(labels: np.ndarray, centres: np.ndarray) -> np.ndarray:
 
 
 def _compact(labels: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    import numpy as np
+
     used = np.unique(labels)
     remap = np.zeros(len(centres), np.int64)
     remap[used] = np.arange(len(used))
@@ -41,6 +47,8 @@ def _compact(labels: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.nd
 
 def _merge_segments(image: np.ndarray, segments: np.ndarray, k: int, seed: int) -> np.ndarray:
     """Merge bottom-up segments into k classes by clustering their mean colours."""
+    import numpy as np
+
     seg = segments.ravel()
     n = int(seg.max()) + 1
     counts = np.bincount(seg, minlength=n).astype(np.float64)
@@ -60,6 +68,8 @@ def _merge_segments(image: np.ndarray, segments: np.ndarray, k: int, seed: int) 
 
 def segment(image: np.ndarray, method: str, k: int, seed: int = 0, scale: float = 100.0,
             segments: int = 400) -> np.ndarray:
+    import numpy as np
+
     if method == "isodata":
         from onboard.isodata import IsodataParams, isodata
 

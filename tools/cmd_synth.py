@@ -6,11 +6,13 @@ import json
 import sys
 import warnings
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from tools.cli import (FEATURE_SPACES, CliError, add_force, add_source_filters, check_out, choose_source,
                        elevation)
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -110,6 +112,8 @@ def _read_mask(path: str) -> np.ndarray:
 
 
 def _write(args: argparse.Namespace, bands: np.ndarray, space: str, pca=None) -> int:
+    import numpy as np
+
     from tools.images import ImageError, to_rgb, write_image
 
     try:
@@ -121,6 +125,8 @@ def _write(args: argparse.Namespace, bands: np.ndarray, space: str, pca=None) ->
 
 def _run_direction(args: argparse.Namespace, direction) -> int:
     """Several angles: barycentric quantile blending over the stored directions (tools.interp)."""
+    import numpy as np
+
     from tools.interp import models_by_direction, synthesize_at_direction
     from tools.synth import ExtrapolationWarning, MissingModels
 
@@ -158,6 +164,8 @@ def run(args: argparse.Namespace) -> int:
     if direction is not None:
         return _run_direction(args, direction)
     args.angle = elevation(float(args.angle))
+    import numpy as np
+
     from onboard.features import PcaBasis
     from tools.synth import ExtrapolationWarning, MissingModels, synthesize_at
 

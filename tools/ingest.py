@@ -13,17 +13,18 @@ from __future__ import annotations
 import collections
 import os
 import time
-from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterator
 
-import numpy as np
-
-from onboard.fit import FitResult
 from tools.datasets import Angles, DatasetImage, Layout, scan
 
-if TYPE_CHECKING:
+if TYPE_CHECKING:  # numpy and the fitter load with the first image, not with the command line
+    from concurrent.futures import Executor
+
+    import numpy as np
+
+    from onboard.fit import FitResult
     from tools.store import Store
 
 # Images per database commit, and the longest a fitted image waits for its commit.
@@ -129,6 +130,8 @@ def _ordered(executor: Executor, fn: Callable[[Job], Fitted], jobs: list[Job],
 def _executor(workers: int, scheduler: str | None):
     """(executor, closer, worker count) for a process pool or a Dask cluster."""
     if scheduler is None:
+        from concurrent.futures import ProcessPoolExecutor
+
         pool = ProcessPoolExecutor(max_workers=workers)
         return pool, lambda: pool.shutdown(cancel_futures=True), workers
     from distributed import Client
