@@ -34,8 +34,12 @@ BROKEN_PIPE = 141
 
 
 def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None) -> int:
-    args = parser.parse_args(argv)
     try:
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit:  # --help or a usage error: its text too may meet a closed pipe
+            sys.stdout.flush()
+            raise
         code = int(args._run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
         return code
