@@ -276,3 +276,10 @@ def test_report_synthesizes_captures_whose_mask_fit_stored(run, files):
     assert run("report", "--db", db, "--out", files / "rep", "--quiet")[0] == 0
     assert len(list((files / "rep").glob("*_synthetic.png"))) == 1
     assert "no capture has a label mask" not in (files / "rep" / "index.html").read_text()
+
+
+def test_the_parsers_feature_spaces_are_the_images_module_s():
+    from tools.cli import FEATURE_SPACES
+    from tools.images import SPACES
+
+    assert FEATURE_SPACES == SPACES
