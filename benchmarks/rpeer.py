@@ -28,7 +28,9 @@ for (i in seq_len(nrow(h))) {
   x <- rep(0:(levels - 1), h[i, ])
   if (jitter) { set.seed(i); x <- x + runif(length(x), -0.5, 0.5) }
   line <- tryCatch({
+    t0 <- proc.time()[["elapsed"]]
     p <- JohnsonFit(x, moment = "quant")
+    seconds <- proc.time()[["elapsed"]] - t0
     cdf <- numeric(length(edges))
     if (p$type == "SB") {
       # pJohnson raises outside an SB's support; there the cdf is 0 or 1
@@ -37,7 +39,7 @@ for (i in seq_len(nrow(h))) {
       if (any(inside)) cdf[inside] <- pJohnson(edges[inside], p)
     } else cdf <- pJohnson(edges, p)
     probs <- diff(c(0, cdf, 1))
-    paste(c(p$type, format(c(p$gamma, p$delta, p$xi, p$lambda, probs), digits = 17)), collapse = " ")
+    paste(c(p$type, format(c(seconds, p$gamma, p$delta, p$xi, p$lambda, probs), digits = 17)), collapse = " ")
   }, error = function(e) paste("ERROR", gsub("[\r\n ]+", "_", conditionMessage(e))))
   writeLines(line, out)
 }
@@ -51,6 +53,7 @@ class RFit:
     params: tuple[float, float, float, float] | None  # gamma, delta, xi, lambda
     probs: np.ndarray | None  # level probabilities
     error: str = ""
+    seconds: float = 0.0  # JohnsonFit's own time in R (proc.time, 1 ms resolution)
 
 
 def available() -> bool:
@@ -79,14 +82,15 @@ def _parse(line: str) -> RFit:
     if fields[0] == "ERROR":
         return RFit(None, None, None, " ".join(fields[1:]).replace("_", " ") or "error")
     family = fields[0]
-    values = np.array([float(v) for v in fields[1:]])
+    seconds = float(fields[1])
+    values = np.array([float(v) for v in fields[2:]])
     gamma, delta, xi, lam = values[:4]
     probs = values[4:]
     params = (float(gamma), float(delta), float(xi), float(lam))
     if not np.isfinite(values[:4]).all() or delta <= 0 or (family == "SB" and lam <= 0) or lam == 0:
-        return RFit(family, params, None, f"out-of-range parameters {params}")
+        return RFit(family, params, None, f"out-of-range parameters {params}", seconds)
     if not np.isfinite(probs).all():
-        return RFit(family, params, None, "non-finite probabilities")
+        return RFit(family, params, None, "non-finite probabilities", seconds)
     if abs(probs.sum() - 1.0) > 1e-6 or probs.min() < -1e-12:
-        return RFit(family, params, None, "probabilities do not sum to 1")
-    return RFit(family, params, np.clip(probs, 0.0, None))
+        return RFit(family, params, None, "probabilities do not sum to 1", seconds)
+    return RFit(family, params, np.clip(probs, 0.0, None), "", seconds)

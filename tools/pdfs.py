@@ -56,7 +56,7 @@ def binned(dist, levels: int) -> np.ndarray:
     return np.diff(np.concatenate(([0.0], c, [1.0])))
 
 
-def _peer_probabilities(values: np.ndarray, levels: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+def peer_probabilities(values: np.ndarray, levels: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
     v = values if len(values) <= FIT_SAMPLE else rng.choice(values, FIT_SAMPLE, replace=False)
     x = v.astype(np.float64) + rng.uniform(-0.5, 0.5, len(v))
     floor = float(v.min()) - 0.5 - 1e-3
@@ -90,7 +90,7 @@ def table(bands: np.ndarray, mask: np.ndarray, band_names: tuple[str, ...],
                 probs = {p: h for p in PEERS}
             else:
                 probs = {"johnson": fit(values, levels).level_probabilities(levels)}
-                probs.update(_peer_probabilities(values, levels, rng))
+                probs.update(peer_probabilities(values, levels, rng))
             errors, failed = {}, []
             for p in PEERS:
                 e = float(np.abs(h - probs[p]).sum())
