@@ -137,7 +137,8 @@ def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
 
     tracker = FakeTracker(true_view, faults=_faults(options), seed=seed)
     camera = FakeCamera(str(options.get("scene", "black")), true_view, seed=seed, size=size,
-                        faults=_faults(options))
+                        faults=_faults(options), reference=bool(options.get("reference", False)),
+                        honours_lock=bool(options.get("camera_honours_lock", True)))
     return Hal(Body.FAKE, bus, arm, tracker, camera, size)
 
 
@@ -145,7 +146,7 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
     from hal.bno055 import BNO055Tracker
     from hal.dynamixel import DynamixelServoBus
     from hal.emulators.bno055 import EmulatedSMBus
-    from hal.emulators.camera import SequenceCamera
+    from hal.emulators.camera import SequenceCamera, V4L2Controls
     from hal.emulators.dxl import DxlEmulator
 
     emulator = DxlEmulator(tuple(cal.servo_ids), faults=_faults(options, frozenset({"drop", "corrupt"})))
@@ -165,8 +166,10 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
                                               nack_rate=float(options.get("fault_rate", 0.0))))
         frames = Path(tempfile.mkdtemp(prefix="btf-frames-"))
         cleanup.append(lambda: shutil.rmtree(frames, ignore_errors=True))
-        _write_sequence(frames, str(options.get("scene", "black")), size, int(options.get("seed", 0)))
-        camera = SequenceCamera(str(frames))
+        _write_sequence(frames, str(options.get("scene", "black")), size, int(options.get("seed", 0)),
+                        bool(options.get("reference", False)))
+        camera = SequenceCamera(str(frames),
+                                controls=V4L2Controls(honours_lock=bool(options.get("camera_honours_lock", True))))
     except BaseException:
         for closer in reversed(cleanup):
             closer()
@@ -174,12 +177,13 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
     return Hal(Body.EMULATED, bus, arm, tracker, camera, size, tuple(cleanup))
 
 
-def _write_sequence(directory: Path, scene: str, size: tuple[int, int], seed: int) -> None:
+def _write_sequence(directory: Path, scene: str, size: tuple[int, int], seed: int, reference: bool) -> None:
     """Frames the scene renderer draws, saved as an image sequence for OpenCV to replay."""
     from hal.emulators.camera import write_sequence
     from hal.scene import render
 
-    write_sequence(directory, (render(scene, view, size=size, seed=seed).image for view in SEQUENCE_VIEWS))
+    write_sequence(directory, (render(scene, view, size=size, seed=seed, reference=reference).image
+                               for view in SEQUENCE_VIEWS))
 
 
 def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]) -> Hal:

@@ -97,7 +97,8 @@ class CameraControls:
     def __post_init__(self) -> None:
         for name in ("exposure_us", "gain", "white_balance_kelvin"):
             value = getattr(self, name)
-            if value is not None and not (math.isfinite(value) and value > 0):
+            least = 0.0 if name == "gain" else math.ulp(0.0)  # a V4L2 gain of 0 is the driver's lowest
+            if value is not None and not (math.isfinite(value) and value >= least):
                 raise ValueError(f"camera {name} must be a positive number or auto, got {value!r}")
         if self.white_balance_gains is not None:
             gains = tuple(self.white_balance_gains)
