@@ -30,8 +30,8 @@ class Shape(Enum):
 
 BAND_NAMES: tuple[str, ...] = ("blue", "green", "red", "red_edge", "nir")
 REFERENCE_SIZE = 640
-# The grey reference card: a flat, spectrally neutral diffuse target (like a 50% grey card).
-GREY_REFERENCE_REFLECTANCE = 0.5
+# The grey reference card: a flat, spectrally neutral diffuse target (an 18% grey card: it stays unclipped where auto exposure brightens black sand six times).
+GREY_REFERENCE_REFLECTANCE = 0.18
 GREY_REFERENCE_SIDE = 0.12  # side of the square card, share of the plate's side
 GREY_REFERENCE_EMISSIVITY = 0.95
 GREY_REFERENCE_HEAT_GAIN = 20.0
