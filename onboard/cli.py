@@ -11,7 +11,7 @@ import importlib
 import sys
 
 PROG = "btf-robot"
-COMMANDS: tuple[str, ...] = ("selftest", "run")
+COMMANDS: tuple[str, ...] = ("selftest", "run", "calibrate")
 
 
 class CliError(Exception):

@@ -45,6 +45,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def _hal_options(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The [hal] section of --config (if given), its body overridden by --hal."""
     options: dict[str, Any] | None = None
     if args.config:
         from onboard.config import ConfigError, load
@@ -63,8 +64,13 @@ def run(args: argparse.Namespace) -> int:
     from hal.factory import HalConfigError, build_hal
 
     options = _hal_options(args)
+    state_dir = None
+    if args.config:  # the robot's own state: its arm calibration applies
+        from onboard.config import load
+
+        state_dir = load(args.config).state_dir
     try:
-        hal = build_hal(options)
+        hal = build_hal(options, state_dir=state_dir)
     except HalConfigError as exc:
         raise CliError(str(exc)) from None
     except Exception as exc:  # noqa: BLE001 - a device that cannot even be built fails the test

@@ -32,6 +32,7 @@ class HalConfig:
     tracker_bus: int = 1
     camera: str = ""  # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0
     seed: int = 0
+    tracker_remap: str = ""  # BNO055 axis remap, P0..P7 or "0x24/0x03"; `btf-robot calibrate tracker` names it
 
 
 @dataclass(frozen=True, slots=True)

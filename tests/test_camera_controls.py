@@ -206,7 +206,7 @@ def test_selftest_fails_loudly_for_a_camera_that_keeps_its_automatics(body, caps
     import hal.factory
 
     build = hal.factory.build_hal
-    monkeypatch.setattr(hal.factory, "build_hal", lambda options: build({**options, "camera_honours_lock": False}))
+    monkeypatch.setattr(hal.factory, "build_hal", lambda options, **kw: build({**options, "camera_honours_lock": False}, **kw))
     monkeypatch.delenv("BTF_HAL", raising=False)
     code = main(["selftest", "--hal", body])
     out, err = capsys.readouterr()
