@@ -117,7 +117,8 @@ _SECTIONS: dict[str, type] = {
 _TOP = {"robot_id": int, "state_dir": Path, "outbox_quota_bytes": int}
 _TYPES: dict[type, dict[str, Any]] = {
     HalConfig: {"body": str, "scene": str, "size": (int, 2), "fault_rate": float, "fault_seed": int,
-                "servo_port": str, "servo_baud": int, "tracker_bus": int, "camera": str, "seed": int},
+                "servo_port": str, "servo_baud": int, "tracker_bus": int, "camera": str, "seed": int,
+                "tracker_remap": str},
     LinkConfig: {"url": str, "key_file": Path, "baud": int, "node_id": int, "peer_id": int,
                  "link_id": int, "mtu": int, "heartbeat_s": float, "failsafe_s": float, "window": int},
     SweepConfig: {"start": float, "stop": float, "step": float, "azimuths": (float, None),
