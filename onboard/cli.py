@@ -12,7 +12,7 @@ import os
 import sys
 
 PROG = "btf-robot"
-COMMANDS: tuple[str, ...] = ("selftest", "run")
+COMMANDS: tuple[str, ...] = ("selftest", "run", "calibrate")
 
 
 class CliError(Exception):
