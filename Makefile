@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
 
-.PHONY: setup demo test bench stress fuzz clean
+.PHONY: setup demo test bench bench-peers stress fuzz clean
 
 setup: $(STAMP)
 
@@ -23,6 +23,11 @@ test: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks
+
+# The accuracy peer of `python -m benchmarks photos`: R SuppDists from Debian (needs root or sudo).
+bench-peers:
+	command -v Rscript >/dev/null && Rscript -e 'library(SuppDists)' >/dev/null 2>&1 || \
+	  { $$(command -v sudo) apt-get update -qq && $$(command -v sudo) apt-get install -y -qq --no-install-recommends r-base-core r-cran-suppdists; }
 
 stress: $(STAMP)
 	BTF_STRESS=1 $(BIN)/python -m pytest -q -m slow --hypothesis-profile=stress tests

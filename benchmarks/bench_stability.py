@@ -91,13 +91,13 @@ def _diagnosis(points, sizes, res, k: int) -> list[str]:
            "curve's own 8-bit histogram read as the fitter reads percentiles (each level's mass spread across "
            "it), the best a reading of 8-bit data can do. Exact: the percentile formulas fed the true "
            "quantiles. Remedies, each from the same counts: the occupied levels cut out, so a pile at the "
-           "first or last occupied level reads as censored (what the fitter does at the sensor limits); the "
-           "support left unwidened; our fit refined to a local minimum of histogram L1 (Nelder-Mead). Cause: "
+           "first or last occupied level reads as censored (what the fitter does at the sensor limits); "
+           "our fit refined to a local minimum of histogram L1 (Nelder-Mead). Cause: "
            "(a) within a level of the floor; (b) a remedy reaches the floor, so the counts pin the curve and "
            "the fitter misses it; (c) the scaling folds over 1% into the end levels, or even the exact "
-           "quantiles miss.", "",
+           "quantiles miss. Plain read: the plain percentile fit of the same counts, for reference.", "",
            "| region | beta1 | beta2 | true curve | levels with 90% | fullest level | outside 0..255 | floor | "
-           "exact | fit: sampled (map) / counts / W1 / L1 | pile censored | unwidened | L1-refined | cause |",
+           "exact | fit: sampled (map) / counts / W1 / L1 | pile censored | plain read | L1-refined | cause |",
            "|---|---:|---:|---|---:|---|---:|---:|---:|---|---:|---:|---:|---|"]
     for i, d in zip(order, ds):
         p, f = d.point, d.fit
@@ -105,7 +105,7 @@ def _diagnosis(points, sizes, res, k: int) -> list[str]:
                    f"{d.levels90} | {d.peak[0]}: {d.peak[1]:.0%}{' (bound)' if d.at_bound else ''} | "
                    f"{d.outside:.0e}".replace("0e+00", "0") + f" | {d.floor:.2f} | {d.exact:.1f} | "
                    f"{res[i][('percentile', size, none)].worst:.1f} / {f.worst:.1f} / {f.w1:.2f} / {f.l1:.3f} | "
-                   f"{d.piles:.1f} | {d.unwidened:.1f} | {d.refined:.1f} | {d.cause.value}: {d.why} |")
+                   f"{d.piles:.1f} | {d.plain:.1f} | {d.refined:.1f} | {d.cause.value}: {d.why} |")
     return out + ["", *_diagnosis_text(ds), ""]
 
 

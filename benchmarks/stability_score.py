@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from enum import Enum
 
 import numpy as np
@@ -22,7 +22,7 @@ from scipy.optimize import minimize
 from benchmarks import moments_johnson
 from benchmarks.stability_grid import SATURATIONS, Point, Saturation
 from onboard.censor import expected_histogram, histogram_l1
-from onboard.fit import fit_histogram, histogram_percentiles, rebuild, z_for_count
+from onboard.fit import fit_histogram, histogram_percentiles, plain_fit, z_for_count
 from onboard.johnson import Family, Johnson, normal_cdf
 from onboard.percentile import model_from_percentiles
 
@@ -137,7 +137,7 @@ class Diagnosis:
     exact: float  # worst quantile error of the percentile formulas fed the true quantiles
     fit: Score  # our fit of the counts
     piles: float  # our fit of the counts cut to the occupied levels (end piles read as censored)
-    unwidened: float  # our fit without widening its support to the occupied levels
+    plain: float  # the plain percentile fit (the count's z, unshifted, no rule) of the counts
     refined: float  # our fits refined by histogram L1 (Nelder-Mead, their own families)
     remedy: float  # the error of the remedy `why` names (the first of the three to reach the floor)
     cause: Cause
@@ -158,15 +158,14 @@ def diagnose(point: Point, n: int) -> Diagnosis:
         exact = score(model_from_percentiles(tuple(true_pct), z, n), truth).worst
         fit = fit_histogram(counts)
         piled = fit_histogram(counts[f0:f1 + 1], lo=float(f0)).model
-        unwidened = score(rebuild(replace(fit, support=None)), truth).worst
+        plain = score(plain_fit(counts), truth).worst
         refined = score(min((_refined(m, counts) for m in (fit.model, piled)),
                             key=lambda m: histogram_l1(m, counts)), truth).worst
     got, piles = score(fit.model, truth, fit.fallback), score(piled, truth).worst
     outside = float(c.cdf(-0.5) + (1.0 - c.cdf(255.5)))
     gap = float(np.diff(true_pct).min())
     # the cheapest remedy (for the fitter) that reaches the floor, else the best of them
-    remedies = [(piles, f"the pile at level {peak} read as censored"),
-                (unwidened, "the support is not widened to the occupied levels"), (refined, "refined by histogram L1")]
+    remedies = [(piles, f"the pile at level {peak} read as censored"), (refined, "refined by histogram L1")]
     best, how = next((r for r in remedies if r[0] <= floor + 1.0), min(remedies, key=lambda r: r[0]))
     if outside > 0.01:
         cause, why = Cause.GRID, f"the scaling folds {outside:.1%} of the mass into the end levels"
@@ -182,7 +181,7 @@ def diagnose(point: Point, n: int) -> Diagnosis:
     levels90 = int(np.searchsorted(np.cumsum(np.sort(truth.p)[::-1]), 0.9) + 1)
     return Diagnosis(point, n, levels90, (peak, float(truth.p[peak])), peak in (f0, f1), outside,
                      tuple(float(x) for x in true_pct), tuple(fit.percentiles), gap, floor, exact, got, piles,
-                     unwidened, refined, best, cause, why)
+                     plain, refined, best, cause, why)
 
 
 def _refined(model: Johnson, counts: np.ndarray) -> Johnson:

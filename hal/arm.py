@@ -5,12 +5,19 @@ Kinematics: a yaw joint turns the arm about the vertical axis through the sample
 arc over the sample (joint angle 0° = straight down = elevation 90°, so tilt = 90° -
 elevation). Each joint's calibration maps the joint angle to the servo angle:
 servo = sign · joint + offset + correction(joint), the correction interpolated from a
-table of measured errors.
+table of measured errors. The yaw servo turns a full circle, so its angle is wrapped
+into its travel. `btf-robot calibrate arm` measures each joint's offset and sign against
+the tracker (`ArmFit`, stored in the state dir); `ArmCalibration.with_fit` applies it.
 """
 from __future__ import annotations
 
+import dataclasses
+import json
+import math
+import os
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -64,6 +71,62 @@ class ArmCalibration:
     def servo_ids(self) -> list[int]:
         return [self.yaw.servo_id, self.tilt.servo_id]
 
+    def with_fit(self, fit: ArmFit) -> ArmCalibration:
+        """This calibration with each joint's offset and sign as measured by `fit`."""
+        return dataclasses.replace(
+            self, yaw=dataclasses.replace(self.yaw, offset_deg=fit.yaw.offset_deg, sign=fit.yaw.sign),
+            tilt=dataclasses.replace(self.tilt, offset_deg=fit.tilt.offset_deg, sign=fit.tilt.sign))
+
+
+@dataclass(frozen=True, slots=True)
+class JointFit:
+    """One joint measured against the tracker: servo = sign · joint + offset, and how well it fits."""
+
+    offset_deg: float
+    sign: float
+    residual_deg: float  # root mean square of what the fit leaves
+    poses: int
+
+    def __post_init__(self) -> None:
+        if self.sign not in (1.0, -1.0) or not all(math.isfinite(v) for v in (self.offset_deg, self.residual_deg)):
+            raise ValueError(f"joint fit needs a finite offset and residual and a sign of +1 or -1, got {self}")
+
+
+@dataclass(frozen=True, slots=True)
+class ArmFit:
+    yaw: JointFit
+    tilt: JointFit
+
+
+ARM_FIT_FILE = "arm_calibration.json"
+
+
+def save_arm_fit(state_dir: str | Path, fit: ArmFit) -> Path:
+    """Write `fit` to `state_dir/arm_calibration.json` (whole or not at all)."""
+    path = Path(state_dir) / ARM_FIT_FILE
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"version": 1, "yaw": dataclasses.asdict(fit.yaw), "tilt": dataclasses.asdict(fit.tilt)},
+                              indent=2) + "\n")
+    os.replace(tmp, path)
+    return path
+
+
+def load_arm_fit(state_dir: str | Path) -> ArmFit | None:
+    """The stored fit, None when the arm was never calibrated; HalError naming the file when it is damaged."""
+    path = Path(state_dir) / ARM_FIT_FILE
+    if not path.is_file():
+        return None
+    try:
+        raw = json.loads(path.read_text())
+        if raw.get("version") != 1:
+            raise ValueError(f"unknown version {raw.get('version')!r}")
+        return ArmFit(**{name: JointFit(**{k: (int if k == "poses" else float)(raw[name][k])
+                                            for k in ("offset_deg", "sign", "residual_deg", "poses")})
+                         for name in ("yaw", "tilt")})
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        raise HalError(f"arm calibration {path}: {exc}; run `btf-robot calibrate arm` again or remove the file") from None
+
 
 def _wrap(deg: float) -> float:
     return (deg + 180.0) % 360.0 - 180.0
@@ -96,6 +159,8 @@ class Arm:
                     f"outside its limits [{cal.min_deg}°, {cal.max_deg}°]"
                 )
             servo = cal.servo_deg(angle)
+            if cal is self.joints.yaw:
+                servo = _wrap(servo)  # a full-turn joint: an offset never costs azimuths
             if not -180.0 <= servo < 180.0:
                 raise LimitError(f"{name} of {view} needs servo {cal.servo_id} at {servo:.1f}°, beyond its travel")
             out[cal.servo_id] = servo

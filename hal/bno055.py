@@ -6,10 +6,14 @@ little-endian int16 in 1/16 degree; conversion to degrees happens here and nowhe
 from __future__ import annotations
 
 import errno
+import re
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from enum import IntEnum
 from typing import Any, Protocol
+
+import numpy as np
 
 from hal.interfaces import Calibration, HalError, Orientation
 
@@ -27,6 +31,8 @@ class Reg(IntEnum):
     OPR_MODE = 0x3D
     PWR_MODE = 0x3E
     SYS_TRIGGER = 0x3F
+    AXIS_MAP_CONFIG = 0x41  # which chip axis each reported axis takes (2 bits per axis: X, Y, Z)
+    AXIS_MAP_SIGN = 0x42  # bit 2: X negated, bit 1: Y, bit 0: Z
 
 
 class Mode(IntEnum):
@@ -40,6 +46,64 @@ TO_CONFIG_S = 0.019
 FROM_CONFIG_S = 0.007
 EULER_RADIANS = 0x04  # UNIT_SEL bit 2: Euler in 1/900 rad instead of 1/16 degree
 RETRYABLE = frozenset({errno.EREMOTEIO, errno.EIO, errno.EBUSY})  # 121 NACK, 5, 16
+
+
+# Datasheet section 3.4: the eight placements of the chip, as (AXIS_MAP_CONFIG, AXIS_MAP_SIGN).
+PLACEMENTS: dict[str, tuple[int, int]] = {
+    "P0": (0x21, 0x04), "P1": (0x24, 0x00), "P2": (0x24, 0x06), "P3": (0x21, 0x02),
+    "P4": (0x24, 0x03), "P5": (0x21, 0x01), "P6": (0x21, 0x07), "P7": (0x24, 0x05),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class AxisRemap:
+    """The BNO055's axis remap registers; the default P1 reports the chip's own axes."""
+
+    config: int = 0x24
+    sign: int = 0x00
+
+    def __post_init__(self) -> None:
+        sources = sorted((self.config >> (2 * i)) & 3 for i in range(3))
+        if not 0 <= self.config <= 0x3F or sources != [0, 1, 2] or not 0 <= self.sign <= 0x07:
+            raise ValueError(f"axis remap 0x{self.config:02X}/0x{self.sign:02X} is not a remap: AXIS_MAP_CONFIG "
+                             "must give each of X, Y, Z one chip axis, AXIS_MAP_SIGN uses bits 0..2")
+
+    @classmethod
+    def parse(cls, text: str) -> AxisRemap:
+        """'P0'..'P7' (the datasheet's placements) or 'CONFIG/SIGN' register values, e.g. '0x24/0x03'."""
+        t = text.strip().upper()
+        if t in PLACEMENTS:
+            return cls(*PLACEMENTS[t])
+        m = re.fullmatch(r"(0X[0-9A-F]+|\d+)\s*/\s*(0X[0-9A-F]+|\d+)", t)
+        if not m:
+            raise ValueError(f"axis remap {text!r}: give a placement P0..P7 or registers CONFIG/SIGN like 0x24/0x03")
+        return cls(int(m.group(1), 0), int(m.group(2), 0))
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """P with reported = P · chip: row i has the sign of reported axis i at its chip axis."""
+        p = np.zeros((3, 3))
+        for axis in range(3):
+            negated = (self.sign >> (2 - axis)) & 1
+            p[axis, (self.config >> (2 * axis)) & 3] = -1.0 if negated else 1.0
+        return p
+
+    @classmethod
+    def from_matrix(cls, p: np.ndarray) -> AxisRemap:
+        config = sign = 0
+        for axis in range(3):
+            source = int(np.argmax(np.abs(p[axis])))
+            config |= source << (2 * axis)
+            sign |= (1 if p[axis, source] < 0 else 0) << (2 - axis)
+        return cls(config, sign)
+
+    @property
+    def placement(self) -> str | None:
+        return next((name for name, regs in PLACEMENTS.items() if regs == (self.config, self.sign)), None)
+
+    def __str__(self) -> str:
+        regs = f"AXIS_MAP_CONFIG 0x{self.config:02X}, AXIS_MAP_SIGN 0x{self.sign:02X}"
+        return f"{self.placement} ({regs})" if self.placement else regs
 
 
 class SMBusLike(Protocol):
@@ -57,7 +121,8 @@ class BNO055Tracker:
     """OrientationTracker on a BNO055. The bus is passed in; `open` makes an smbus2.SMBus."""
 
     def __init__(self, bus: SMBusLike, address: int = DEFAULT_ADDRESS, bus_number: int = 1,
-                 retries: int = 3, sleep: Callable[[float], None] = time.sleep) -> None:
+                 retries: int = 3, sleep: Callable[[float], None] = time.sleep,
+                 remap: AxisRemap | None = None) -> None:
         if retries < 0:
             raise ValueError(f"retries must be >= 0, got {retries}")
         self._bus = bus
@@ -73,6 +138,7 @@ class BNO055Tracker:
         self._set_mode(Mode.CONFIG)
         self._io(bus.write_byte_data, address, Reg.PAGE_ID, 0)
         self._use_degrees()
+        self.remap = self._axis_remap(remap)
         self._set_mode(Mode.NDOF)
 
     @classmethod
@@ -113,6 +179,21 @@ class BNO055Tracker:
             self._io(self._bus.write_byte_data, self.address, Reg.UNIT_SEL, units & ~EULER_RADIANS)
             if self._io(self._bus.read_byte_data, self.address, Reg.UNIT_SEL) & EULER_RADIANS:
                 raise HalError(f"{self._where()}: Euler unit stays radians (UNIT_SEL 0x{units:02X})")
+
+    def _axis_remap(self, wanted: AxisRemap | None) -> AxisRemap:
+        """Write `wanted` (in CONFIG mode; the chip forgets it at power-off) and return what the chip holds."""
+        if wanted is not None:
+            self._io(self._bus.write_byte_data, self.address, Reg.AXIS_MAP_CONFIG, wanted.config)
+            self._io(self._bus.write_byte_data, self.address, Reg.AXIS_MAP_SIGN, wanted.sign)
+        config = self._io(self._bus.read_byte_data, self.address, Reg.AXIS_MAP_CONFIG) & 0x3F
+        sign = self._io(self._bus.read_byte_data, self.address, Reg.AXIS_MAP_SIGN) & 0x07
+        try:
+            held = AxisRemap(config, sign)
+        except ValueError as exc:
+            raise HalError(f"{self._where()}: {exc}") from None
+        if wanted is not None and held != wanted:
+            raise HalError(f"{self._where()}: asked for axis remap {wanted}, chip holds {held}")
+        return held
 
     def _set_mode(self, mode: Mode) -> None:
         self._io(self._bus.write_byte_data, self.address, Reg.OPR_MODE, int(mode))

@@ -16,7 +16,8 @@ from enum import Enum
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from hal.arm import Arm, ArmCalibration, JointCalibration
+from hal.arm import Arm, ArmCalibration, JointCalibration, load_arm_fit
+from hal.bno055 import AxisRemap
 from hal.fakes import Faults
 from hal.interfaces import Camera, HalError, Orientation, OrientationTracker, ServoBus, ViewAngles
 
@@ -92,16 +93,89 @@ def arm_calibration(options: Mapping[str, Any]) -> ArmCalibration:
         raise HalConfigError(f"bad arm calibration in the HAL config: {exc}") from None
 
 
-def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, str] | None = None) -> Hal:
+JOINTS = ("yaw", "tilt")
+# Options that build a deliberately faulty fake world; a real robot has its faults already.
+FAKE_WORLD = ("fake_joint_offsets", "fake_joint_reversed", "fake_tracker_mount", "fake_tracker_bias_deg",
+              "camera_honours_lock")
+
+
+def tracker_remap(options: Mapping[str, Any]) -> AxisRemap | None:
+    """`tracker_remap = "P4"` or `"0x24/0x03"`: the BNO055 axis remap to write at start."""
+    text = str(options.get("tracker_remap") or "")
+    try:
+        return AxisRemap.parse(text) if text else None
+    except ValueError as exc:
+        raise HalConfigError(f"hal tracker_remap: {exc}") from None
+
+
+def world_calibration(cal: ArmCalibration, options: Mapping[str, Any]) -> ArmCalibration:
+    """How the fake or emulated arm is really built: the configured joints with the
+    deliberate faults `fake_joint_offsets` ({joint: degrees}) and `fake_joint_reversed` ([joint])."""
+    offsets = dict(options.get("fake_joint_offsets") or {})
+    reversed_ = set(options.get("fake_joint_reversed") or ())
+    unknown = (set(offsets) | reversed_) - set(JOINTS)
+    if unknown:
+        raise HalConfigError(f"unknown joint {sorted(unknown)[0]!r} in the fake world; the joints are yaw and tilt")
+    joints = {}
+    for name in JOINTS:
+        j = getattr(cal, name)
+        try:
+            extra = float(offsets.get(name, 0.0))
+        except (TypeError, ValueError):
+            raise HalConfigError(f"fake_joint_offsets.{name} must be degrees, got {offsets[name]!r}") from None
+        joints[name] = dataclasses.replace(j, offset_deg=j.offset_deg + extra,
+                                           sign=-j.sign if name in reversed_ else j.sign)
+    return dataclasses.replace(cal, **joints)
+
+
+def world_view(world: ArmCalibration, servo_deg: Mapping[int, float]) -> ViewAngles:
+    """Where the camera really looks with the servos at these angles; a tilt past straight
+    down looks from the other side."""
+    yaw = world.yaw.joint_deg(servo_deg[world.yaw.servo_id])
+    tilt = world.tilt.joint_deg(servo_deg[world.tilt.servo_id])
+    if tilt < 0.0:
+        return ViewAngles(elevation=90.0 + tilt, azimuth=(yaw + 180.0) % 360.0)
+    return ViewAngles(elevation=90.0 - tilt, azimuth=yaw % 360.0)
+
+
+def _tracker_mount(options: Mapping[str, Any]) -> Any:
+    from hal.orientation import MOUNTS
+
+    name = str(options.get("fake_tracker_mount") or "upright")
+    if name in MOUNTS:
+        return None if name == "upright" else MOUNTS[name]
+    try:  # a placement name: mounted the way that placement would correct
+        return AxisRemap.parse(name).matrix
+    except ValueError:
+        raise HalConfigError(f"unknown fake_tracker_mount {name!r}; choose from {', '.join(MOUNTS)} "
+                             "or a placement P0..P7") from None
+
+
+def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, str] | None = None,
+              state_dir: str | Path | None = None) -> Hal:
     """Build every device for the chosen body. Keys (all optional except the body):
     body, scene, size, fault_rate, fault_seed, servo_port, servo_baud, tracker_bus,
-    camera, seed, arm, servo_latency_ms."""
+    camera, seed, arm, servo_latency_ms, tracker_remap, reference (the fake scenes hold the
+    grey reference card), and for fake and emulated bodies the deliberate faults in
+    `FAKE_WORLD`. With `state_dir`, the arm calibration stored there is applied."""
     options = _options(config)
     body = choose_body(options, os.environ if env is None else env)
     size = tuple(int(v) for v in options.get("size", (120, 160)))
     if len(size) != 2 or min(size) < 8:
         raise HalConfigError(f"hal size must be (height, width), each at least 8, got {size}")
     calibration = arm_calibration(options)
+    world = world_calibration(calibration, options)  # the arm as built: a calibration does not move it
+    if state_dir is not None:
+        try:
+            fit = load_arm_fit(state_dir)
+        except HalError as exc:
+            raise HalConfigError(str(exc)) from None
+        if fit is not None:
+            calibration = calibration.with_fit(fit)
+    tracker_remap(options)
+    if body is Body.REAL and any(options.get(k) is not None for k in FAKE_WORLD):
+        raise HalConfigError(f"{', '.join(k for k in FAKE_WORLD if options.get(k) is not None)}: "
+                             "only fake and emulated bodies take deliberate faults")
     if body is not Body.REAL:
         from hal.scene import SCENES
 
@@ -109,7 +183,7 @@ def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, s
             raise HalConfigError(f"unknown scene {options['scene']!r}; choose from {', '.join(SCENES)}")
     builder = {Body.FAKE: _fake, Body.EMULATED: _emulated, Body.REAL: _real}[body]
     try:
-        return builder(options, calibration, size)
+        return builder(options, calibration, size, world)
     except (TypeError, ValueError) as exc:  # a device constructor refused an option
         raise HalConfigError(f"{body.value} HAL: {exc}") from None
 
@@ -121,7 +195,7 @@ def _faults(options: Mapping[str, Any], kinds: frozenset[str] = frozenset()) -> 
         raise HalConfigError(f"hal fault_rate: {exc}") from None
 
 
-def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]) -> Hal:
+def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int], world: ArmCalibration) -> Hal:
     from hal.fakes.camera import FakeCamera
     from hal.fakes.servo import FakeServoBus
     from hal.fakes.tracker import FakeTracker
@@ -133,21 +207,29 @@ def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
     arm = Arm(bus, cal)
 
     def true_view() -> ViewAngles:
-        return arm.view_for(bus.true_positions())
+        return world_view(world, bus.true_positions())
 
-    tracker = FakeTracker(true_view, faults=_faults(options), seed=seed)
+    try:
+        bias = float(options.get("fake_tracker_bias_deg", 0.5))
+    except (TypeError, ValueError):
+        raise HalConfigError(f"fake_tracker_bias_deg must be degrees, got {options['fake_tracker_bias_deg']!r}") from None
+    tracker = FakeTracker(true_view, faults=_faults(options), seed=seed, bias_deg=bias,
+                          mount=_tracker_mount(options), remap=tracker_remap(options))
     camera = FakeCamera(str(options.get("scene", "black")), true_view, seed=seed, size=size,
-                        faults=_faults(options))
+                        faults=_faults(options), reference=bool(options.get("reference", False)),
+                        honours_lock=bool(options.get("camera_honours_lock", True)))
     return Hal(Body.FAKE, bus, arm, tracker, camera, size)
 
 
-def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]) -> Hal:
+def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int],
+              world: ArmCalibration) -> Hal:
     from hal.bno055 import BNO055Tracker
     from hal.dynamixel import DynamixelServoBus
     from hal.emulators.bno055 import EmulatedSMBus
-    from hal.emulators.camera import SequenceCamera
+    from hal.emulators.camera import SequenceCamera, V4L2Controls
     from hal.emulators.dxl import DxlEmulator
 
+    mount = _tracker_mount(options)
     emulator = DxlEmulator(tuple(cal.servo_ids), faults=_faults(options, frozenset({"drop", "corrupt"})))
     for sid in cal.servo_ids:  # park as the fake does: straight down
         joint = cal.tilt if sid == cal.tilt.servo_id else cal.yaw
@@ -158,15 +240,18 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
         arm = Arm(bus, cal)
 
         def orientation() -> Orientation:
-            view = arm.view_for({sid: emulator.position_deg(sid) for sid in cal.servo_ids})
+            view = world_view(world, {sid: emulator.position_deg(sid) for sid in cal.servo_ids})
             return Orientation(heading=view.azimuth, roll=0.0, pitch=-view.elevation)
 
         tracker = BNO055Tracker(EmulatedSMBus(orientation_source=orientation, seed=int(options.get("fault_seed", 0)),
-                                              nack_rate=float(options.get("fault_rate", 0.0))))
+                                              nack_rate=float(options.get("fault_rate", 0.0)), mount=mount),
+                                remap=tracker_remap(options))
         frames = Path(tempfile.mkdtemp(prefix="btf-frames-"))
         cleanup.append(lambda: shutil.rmtree(frames, ignore_errors=True))
-        _write_sequence(frames, str(options.get("scene", "black")), size, int(options.get("seed", 0)))
-        camera = SequenceCamera(str(frames))
+        _write_sequence(frames, str(options.get("scene", "black")), size, int(options.get("seed", 0)),
+                        bool(options.get("reference", False)))
+        camera = SequenceCamera(str(frames),
+                                controls=V4L2Controls(honours_lock=bool(options.get("camera_honours_lock", True))))
     except BaseException:
         for closer in reversed(cleanup):
             closer()
@@ -174,15 +259,16 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
     return Hal(Body.EMULATED, bus, arm, tracker, camera, size, tuple(cleanup))
 
 
-def _write_sequence(directory: Path, scene: str, size: tuple[int, int], seed: int) -> None:
+def _write_sequence(directory: Path, scene: str, size: tuple[int, int], seed: int, reference: bool) -> None:
     """Frames the scene renderer draws, saved as an image sequence for OpenCV to replay."""
     from hal.emulators.camera import write_sequence
     from hal.scene import render
 
-    write_sequence(directory, (render(scene, view, size=size, seed=seed).image for view in SEQUENCE_VIEWS))
+    write_sequence(directory, (render(scene, view, size=size, seed=seed, reference=reference).image
+                               for view in SEQUENCE_VIEWS))
 
 
-def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]) -> Hal:
+def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int], world: ArmCalibration) -> Hal:
     from hal.bno055 import BNO055Tracker
     from hal.dynamixel import DynamixelServoBus
 
@@ -192,7 +278,7 @@ def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
     bus = DynamixelServoBus(port, int(options.get("servo_baud", 1_000_000)),
                             latency_ms=float(options.get("servo_latency_ms", 16.0)))
     try:
-        tracker = BNO055Tracker.open(int(options.get("tracker_bus", 1)), 0x28)
+        tracker = BNO055Tracker.open(int(options.get("tracker_bus", 1)), 0x28, remap=tracker_remap(options))
         camera = _real_camera(str(options.get("camera", "")))
     except BaseException:
         bus.close()

@@ -5,7 +5,8 @@ registers) stay inside the drivers.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -79,10 +80,75 @@ class OrientationTracker(Protocol):
     def close(self) -> None: ...
 
 
+@dataclass(frozen=True, slots=True)
+class CameraControls:
+    """What a camera is asked for; None is `auto` for that control.
+
+    Exposure in microseconds; analogue gain as a multiple (picamera2 and the fakes) or in the
+    V4L2 driver's own units (`v4l2-ctl --list-ctrls` shows its range); white balance either
+    as a colour temperature in kelvin or as (red, blue) gains, never both.
+    """
+
+    exposure_us: float | None = None
+    gain: float | None = None
+    white_balance_kelvin: float | None = None
+    white_balance_gains: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("exposure_us", "gain", "white_balance_kelvin"):
+            value = getattr(self, name)
+            least = 0.0 if name == "gain" else math.ulp(0.0)  # a V4L2 gain of 0 is the driver's lowest
+            if value is not None and not (math.isfinite(value) and value >= least):
+                raise ValueError(f"camera {name} must be a positive number or auto, got {value!r}")
+        if self.white_balance_gains is not None:
+            gains = tuple(self.white_balance_gains)
+            if len(gains) != 2 or not all(math.isfinite(g) and g > 0 for g in gains):
+                raise ValueError(f"camera white balance gains must be two positive numbers (red, blue), got {gains!r}")
+            object.__setattr__(self, "white_balance_gains", (float(gains[0]), float(gains[1])))
+            if self.white_balance_kelvin is not None:
+                raise ValueError("camera white balance is a colour temperature or (red, blue) gains, not both")
+
+    @property
+    def manual_white_balance(self) -> bool:
+        return self.white_balance_kelvin is not None or self.white_balance_gains is not None
+
+    @property
+    def locked(self) -> bool:
+        """Every control manual: nothing the camera decides changes between views."""
+        return self.exposure_us is not None and self.gain is not None and self.manual_white_balance
+
+
+@dataclass(frozen=True, slots=True)
+class CameraSettings:
+    """What the camera reports it captures with, read back from the device (None: not reported).
+
+    `lock_held` is False when a manual control asked for was not granted, or the device
+    still reports the automatic mode for it; `problems` says which, one line each.
+    """
+
+    exposure_us: float | None
+    gain: float | None
+    white_balance_kelvin: float | None = None
+    white_balance_gains: tuple[float, float] | None = None
+    sensor_temperature_c: float | None = None
+    auto_exposure: bool = False
+    auto_gain: bool = False
+    auto_white_balance: bool = False
+    lock_held: bool = True
+    problems: tuple[str, ...] = field(default=())
+
+    @property
+    def locked(self) -> bool:
+        """The lock held and nothing is left to the camera's automatics."""
+        return self.lock_held and not (self.auto_exposure or self.auto_gain or self.auto_white_balance)
+
+
 @runtime_checkable
 class Camera(Protocol):
     def open(self, width: int, height: int, pixel_format: str = "BGR3") -> None: ...
     def capture(self) -> np.ndarray: ...
+    def set_controls(self, controls: CameraControls) -> CameraSettings: ...
+    def settings(self) -> CameraSettings: ...
     def close(self) -> None: ...
 
 

@@ -53,11 +53,13 @@ MIN_REPORTED = 0.005
 
 @dataclass(frozen=True, slots=True)
 class Placement:
-    """Where the four percentiles are read: s + (-3z, -z, z, 3z), or the normal fallback."""
+    """Where the four percentiles are read: s + (-3z, -z, z, 3z), or the normal fallback;
+    `exact`: the family from the sign of ln d alone (no SL band, onboard.percentile)."""
 
     z: float
     shift_code: int = 0
     fallback: bool = False
+    exact: bool = False
 
     @property
     def shift(self) -> float:

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 PROG = "btf-robot"
-COMMANDS: tuple[str, ...] = ("selftest", "run")
+COMMANDS: tuple[str, ...] = ("selftest", "run", "calibrate")
 
 
 class CliError(Exception):
@@ -28,15 +29,38 @@ def build_parser(prog: str, package: str, commands: tuple[str, ...], description
     return parser
 
 
+# Exit status of a command whose reader went away (`... | head`): 128 + SIGPIPE, as the shell's tools.
+BROKEN_PIPE = 141
+
+
 def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None) -> int:
-    args = parser.parse_args(argv)
     try:
-        return int(args._run(args) or 0)
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit:  # --help or a usage error: its text too may meet a closed pipe
+            sys.stdout.flush()
+            raise
+        code = int(args._run(args) or 0)
+        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+        return code
     except CliError as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:
+        _silence_stdout()
+        return BROKEN_PIPE
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null so the interpreter's last flush does not hit the closed pipe."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, ValueError, AttributeError):  # stdout replaced by something without a descriptor
+        pass
 
 
 def main(argv: list[str] | None = None) -> int:

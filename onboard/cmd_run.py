@@ -67,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
 
     cfg.state_dir.mkdir(parents=True, exist_ok=True)
     try:
-        hal = build_hal(cfg.hal)
+        hal = build_hal(cfg.hal, state_dir=cfg.state_dir)  # with the arm calibration stored there
     except HalError as exc:
         raise CliError(f"hal: {exc}") from None
     try:

@@ -7,12 +7,14 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from dataclasses import dataclass
 from typing import Any, Callable
 
 import numpy as np
 
-from hal.interfaces import ViewAngles, view_from_orientation
+from hal.controls import describe
+from hal.interfaces import CameraControls, ViewAngles, view_from_orientation
 from onboard.cli import CliError
 
 POSES = (ViewAngles(60.0, 0.0), ViewAngles(90.0, 0.0))
@@ -20,6 +22,9 @@ POSE_TOLERANCE_DEG = 2.0
 SERVO_NUDGE_DEG = 5.0
 TRACKER_TOLERANCE_DEG = 3.0
 SETTLE_TIMEOUT_S = 10.0
+LOCK_FRAMES = 3  # frames the exposure lock must survive
+# Where a camera that does not report a control is asked to lock it.
+FALLBACK_LOCK = CameraControls(exposure_us=10_000.0, gain=1.0, white_balance_kelvin=5000.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,6 +45,7 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
 
 
 def _hal_options(args: argparse.Namespace) -> dict[str, Any] | None:
+    """The [hal] section of --config (if given), its body overridden by --hal."""
     options: dict[str, Any] | None = None
     if args.config:
         from onboard.config import ConfigError, load
@@ -58,8 +64,13 @@ def run(args: argparse.Namespace) -> int:
     from hal.factory import HalConfigError, build_hal
 
     options = _hal_options(args)
+    state_dir = None
+    if args.config:  # the robot's own state: its arm calibration applies
+        from onboard.config import load
+
+        state_dir = load(args.config).state_dir
     try:
-        hal = build_hal(options)
+        hal = build_hal(options, state_dir=state_dir)
     except HalConfigError as exc:
         raise CliError(str(exc)) from None
     except Exception as exc:  # noqa: BLE001 - a device that cannot even be built fails the test
@@ -71,6 +82,9 @@ def run(args: argparse.Namespace) -> int:
         hal.close()
     for r in results:
         print(r.json(), flush=True)
+    for r in results:
+        if not r.ok:
+            print(f"btf-robot selftest: FAILED {r.device}: {r.detail}", file=sys.stderr)
     return 0 if all(r.ok for r in results) else 1
 
 
@@ -138,18 +152,32 @@ def _tracker(hal: Any) -> str:
 
 
 def _camera(hal: Any) -> str:
+    """A frame of the right shape, and a manual lock of exposure, gain and white balance at
+    the values the camera stands at that holds for a few frames: a camera that keeps its
+    automatics running would flatten the change with the view that a sweep measures."""
     cam = hal.camera
     h, w = hal.size
     cam.open(w, h)
     try:
-        frame = cam.capture()
+        now = cam.settings()
+        lock = CameraControls(now.exposure_us or FALLBACK_LOCK.exposure_us,
+                              FALLBACK_LOCK.gain if now.gain is None else now.gain,
+                              now.white_balance_kelvin or FALLBACK_LOCK.white_balance_kelvin)
+        granted = cam.set_controls(lock)
+        frames = [cam.capture() for _ in range(LOCK_FRAMES)]
+        held = cam.settings()
     finally:
         cam.close()
+    frame = frames[-1]
     if not isinstance(frame, np.ndarray) or frame.ndim != 3 or frame.shape[:2] != (h, w):
         raise RuntimeError(f"frame shape {getattr(frame, 'shape', None)}, expected ({h}, {w}, C)")
     if frame.dtype not in (np.uint8, np.uint16):
         raise RuntimeError(f"frame dtype {frame.dtype}, expected uint8 or uint16")
-    return f"frame {frame.shape} {frame.dtype}"
+    if not (granted.locked and held.locked):
+        problems = dict.fromkeys(granted.problems + held.problems) or ("the device reports its automatics on",)
+        raise RuntimeError("the camera does not honour a manual exposure/gain/white balance lock: "
+                           + "; ".join(problems) + " (captures would follow its automatics, not the view)")
+    return f"frame {frame.shape} {frame.dtype}; {describe(held)}"
 
 
 CHECKS: tuple[tuple[str, Callable[[Any], str]], ...] = (

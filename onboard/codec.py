@@ -1,15 +1,19 @@
 """The z ladder and the percentile codec: what the robot's fit and the receiver share.
 
 The packet sends a fit's z as its ladder index and its four percentiles as fixed-point codes;
-the receiver decodes them with the same codec and widens supports to the same points.
+the receiver decodes them with the same codec and solves the same model.
 """
 from __future__ import annotations
 
 import functools
 import math
 
-# z values tried from the top; the packet sends the index of the one used.
-Z_LADDER: tuple[float, ...] = (0.524, 0.5, 0.45, 0.4, 0.35, 0.3, 0.25, 0.2, 0.15, 0.1)
+import numpy as np
+
+# z values; the packet sends the index of the one used. z_for_count tries the first ten from
+# the top; 0.7, after them, is a wider read the fitter may choose (onboard.reads).
+Z_LADDER: tuple[float, ...] = (0.524, 0.5, 0.45, 0.4, 0.35, 0.3, 0.25, 0.2, 0.15, 0.1, 0.7)
+COUNT_LADDER = Z_LADDER[:10]
 # The tail percentile x(3z) should rest on at least this many pixels.
 MIN_TAIL_PIXELS = 8
 
@@ -26,10 +30,10 @@ _PROBS: dict[float, tuple[float, float, float, float]] = {
 
 def z_for_count(count: int) -> float:
     """The largest ladder step whose outer tail holds MIN_TAIL_PIXELS of `count` pixels."""
-    for z in Z_LADDER:
+    for z in COUNT_LADDER:
         if count * _PROBS[z][0] >= MIN_TAIL_PIXELS:
             return z
-    return Z_LADDER[-1]
+    return COUNT_LADDER[-1]
 
 
 def percentile_probs(z: float, shift: float = 0.0) -> tuple[float, float, float, float]:
@@ -79,6 +83,11 @@ class PercentileCodec:
     def snap(self, percentiles) -> tuple[float, float, float, float]:
         return self.decode(self.encode(percentiles))
 
+    def snap_array(self, x: np.ndarray) -> np.ndarray:
+        """`snap` of every element of a finite float array (the same steps, element-wise)."""
+        codes = np.minimum(np.maximum(np.rint((x - self.lo) / self.step), 0), self._top)
+        return self.lo + codes * self.step
+
     def snap_one(self, x: float) -> float:
         """One value through the fixed point (as `snap` does each of four)."""
         x = float(x)
@@ -101,15 +110,3 @@ class PercentileCodec:
 def default_codec(lo: float, bin_width: float, bins: int) -> PercentileCodec:
     """The range of bins centred on lo + k * bin_width, at 16 bits (32 above 256 bins)."""
     return PercentileCodec(lo - 0.5 * bin_width, lo + (bins - 0.5) * bin_width, 16 if bins <= 256 else 32)
-
-
-def support_point(level: int, side: int, codec: PercentileCodec, lo: float = 0.0,
-                  bin_width: float = 1.0) -> float:
-    """The point a bounded support must reach when `level` is the lowest (side 0) or highest
-    (side 1) occupied bin: a quarter level into that bin from its inner edge, snapped through
-    the codec, so the level has positive probability while the bound moves as little as it can
-    (widening to the bin's outer edge moved a pole-at-bound SB's quantiles by up to 3.6 gray).
-    The receiver calls it on the transmitted level."""
-    if side not in (0, 1):
-        raise ValueError(f"side must be 0 (low) or 1 (high), got {side}")
-    return codec.snap_one(lo + bin_width * (level + (0.25 if side == 0 else -0.25)))

@@ -32,6 +32,7 @@ class HalConfig:
     tracker_bus: int = 1
     camera: str = ""  # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0
     seed: int = 0
+    tracker_remap: str = ""  # BNO055 axis remap, P0..P7 or "0x24/0x03"; `btf-robot calibrate tracker` names it
 
 
 @dataclass(frozen=True, slots=True)
@@ -116,7 +117,8 @@ _SECTIONS: dict[str, type] = {
 _TOP = {"robot_id": int, "state_dir": Path, "outbox_quota_bytes": int}
 _TYPES: dict[type, dict[str, Any]] = {
     HalConfig: {"body": str, "scene": str, "size": (int, 2), "fault_rate": float, "fault_seed": int,
-                "servo_port": str, "servo_baud": int, "tracker_bus": int, "camera": str, "seed": int},
+                "servo_port": str, "servo_baud": int, "tracker_bus": int, "camera": str, "seed": int,
+                "tracker_remap": str},
     LinkConfig: {"url": str, "key_file": Path, "baud": int, "node_id": int, "peer_id": int,
                  "link_id": int, "mtu": int, "heartbeat_s": float, "failsafe_s": float, "window": int},
     SweepConfig: {"start": float, "stop": float, "step": float, "azimuths": (float, None),

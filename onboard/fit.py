@@ -11,14 +11,14 @@ import math
 
 import numpy as np
 
-from onboard.codec import Z_LADDER, PercentileCodec, support_point, z_for_count
+from onboard.codec import Z_LADDER, PercentileCodec, z_for_count
 from onboard.histfit import (FitResult, fit_counts, fit_histogram, fit_rows, histogram_percentiles,
-                             rebuild)
+                             plain_fit, rebuild)
 from onboard.percentile import model_from_percentiles
 
 __all__ = [
     "Z_LADDER", "FitResult", "FrameFitter", "PercentileCodec", "fit_histogram", "fit_values",
-    "histogram_percentiles", "model_from_percentiles", "rebuild", "support_point", "z_for_count",
+    "histogram_percentiles", "model_from_percentiles", "plain_fit", "rebuild", "z_for_count",
 ]
 
 

@@ -17,11 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.censor import (MIN_REPORTED, SHIFT_SCALE, Placement, censored_counts, censored_end_one,
-                            fallback_probs, l1_grid, l1_on_grid, piled_counts, place, quantize)
-from onboard.codec import Z_LADDER, PercentileCodec, default_codec, percentile_probs, support_point, z_for_count
+from onboard.censor import (MIN_REPORTED, SHIFT_SCALE, Placement, censored_counts, censored_end_one, fallback_probs,
+                            piled_counts, place, quantize)
+from onboard.codec import COUNT_LADDER, PercentileCodec, default_codec, percentile_probs, z_for_count
 from onboard.johnson import Johnson
-from onboard.percentile import model_from_percentiles, support_of, widen
+from onboard.percentile import model_from_percentiles
+from onboard.reads import SN, TEMPLATE, WIDTH, in_band, l1, rank_grid, sl_bands, solve, template
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,8 +41,8 @@ class FitResult:
     censored_low: float = 0.0
     censored_high: float = 0.0
     fallback: bool = False  # the normal through the censor limits (onboard.censor)
-    # Points the support was widened to reach, low and high (None: that side held the data).
-    support: tuple[float | None, float | None] | None = None
+    # The family from the sign of ln d alone (the SL band would have chosen another).
+    exact_family: bool = False
 
 
 def histogram_percentiles(counts: np.ndarray, probs, lo: float = 0.0, bin_width: float = 1.0,
@@ -157,7 +158,8 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
              occupied: np.ndarray | None = None) -> list[FitResult]:
     """Fit each row of (rows, bins) counts; every row has pixels. Shared by fit_histogram and
     FrameFitter.fit, so both give the same model for the same histogram. A single row may come
-    with its occupied bins (flatnonzero) already found."""
+    with its occupied bins (flatnonzero) already found. Each row is read several ways
+    (onboard.reads) and the model nearest its histogram kept."""
     rows, bins = counts.shape
     cum = np.cumsum(counts, axis=1, dtype=np.float64)
     beta1, beta2 = _betas(counts, lo, bin_width)
@@ -167,42 +169,128 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
         first, last, low_n, high_n, pile_lo, pile_hi = _ends_one(counts[0], occupied, censor)
     else:
         first, last, low_n, high_n, pile_lo, pile_hi = _ends_rows(counts, censor)
-    plans: list[tuple[Placement, float, float] | None] = []
+    out: list[FitResult | None] = [None] * rows
+    plans: dict[int, tuple[Placement, float, float]] = {}
     for i in range(rows):
         count, z = totals[i], zs[i]
         if first[i] == last[i]:
-            plans.append(None)
+            # One occupied bin: a constant region, sent as four equal percentiles.
+            pct = codec.snap([lo + bin_width * int(first[i])] * 4)
+            out[i] = FitResult(Johnson.constant(pct[0]), count, z, pct, float(beta1[i]), float(beta2[i]))
             continue
         low = quantize(float(low_n[i]) / count) if censor else 0.0
         high = quantize(float(high_n[i]) / count) if censor else 0.0
         where = _placement(z, low, high, count, pile_lo[i], pile_hi[i]) if censor else Placement(z)
         if where == Placement(z) and max(low, high) < MIN_REPORTED:
             low = high = 0.0
-        plans.append((where, low, high))
-    # Every row's four percentiles in one array pass (fallbacks read two of their own); a single
-    # row reads its own in _fit_one, by scalar steps.
-    raw = {}
-    if rows > 1:
-        batch = [i for i, p in enumerate(plans) if p is not None and not p[0].fallback]
-        raw = dict(zip(batch, _percentile_rows(
-            counts[batch], cum[batch], np.array([_probs_at(plans[i][0]) for i in batch]).reshape(-1, 4),
-            lo, bin_width)))
-    out = []
-    for i in range(rows):
-        count, z = totals[i], zs[i]
-        f0, f1 = int(first[i]), int(last[i])
-        if plans[i] is None:
-            # One occupied bin: a constant region, sent as four equal percentiles.
-            pct = codec.snap([lo + bin_width * f0] * 4)
-            out.append(FitResult(Johnson.constant(pct[0]), count, z, pct, float(beta1[i]), float(beta2[i])))
-            continue
+        plans[i] = (where, low, high)
+    if plans:
+        live = list(plans)
+        reads = _read_all(counts, cum, live, plans, zs, totals, lo, bin_width, codec)
+        chosen = _choose(counts[live], reads, plans, live, totals, lo, bin_width)
+        for j, i in enumerate(live):
+            k = int(chosen[j])
+            z, code = float(reads.z[j, k]), int(reads.code[j, k])
+            exact, fallback = bool(reads.exact[j, k]), bool(reads.fallback[j, k])
+            _, low, high = plans[i]
+            p = tuple(float(v) for v in reads.pct[j, k])
+            model = model_from_percentiles(p, z, totals[i], shift=code / SHIFT_SCALE,
+                                           normal_probs=fallback_probs(low, high) if fallback else None,
+                                           exact_family=exact)
+            # the exact family travels only where the SL band would have chosen another
+            out[i] = FitResult(model, totals[i], z, p, float(beta1[i]), float(beta2[i]), code / SHIFT_SCALE,
+                               low, high, fallback, exact and bool(reads.ok[j, 1]))
+    return out  # type: ignore[return-value]
+
+
+@dataclass
+class _Reads:
+    """Every live row's reads (rows x WIDTH columns, onboard.reads.Template) and their snapped
+    percentiles (rows x WIDTH x 4); `ok`: the reads that apply."""
+
+    z: np.ndarray
+    code: np.ndarray
+    exact: np.ndarray
+    fallback: np.ndarray
+    ok: np.ndarray
+    pct: np.ndarray
+
+
+def _read_all(counts: np.ndarray, cum: np.ndarray, live: list[int], plans: dict, zs: list[float],
+              totals: list[int], lo: float, bin_width: float, codec: PercentileCodec) -> _Reads:
+    """The template's reads of every live row, a censored or piled row's placement and (censored
+    at a sensor limit) its normal fallback, with their percentiles: each row's found by one
+    searchsorted over its cumulative counts, then the float steps of _percentiles_one for all
+    at once (so a row alone or in a batch reads the same numbers)."""
+    n = len(live)
+    z0 = np.array([zs[i] for i in live])
+    total = np.array([totals[i] for i in live], dtype=np.int64)
+    z, code = np.empty((n, WIDTH)), np.empty((n, WIDTH), dtype=np.int64)
+    exact, fallback = np.empty((n, WIDTH), dtype=bool), np.empty((n, WIDTH), dtype=bool)
+    probs, ok = np.empty((n, WIDTH, 4)), np.empty((n, WIDTH), dtype=bool)
+    for value in set(z0.tolist()):
+        rows = np.flatnonzero(z0 == value)
+        t = template(value)
+        z[rows], code[rows], exact[rows], fallback[rows], probs[rows] = t.z, t.code, t.exact, t.fallback, t.probs
+        ok[rows] = total[rows, None] >= t.need
+    for j, i in enumerate(live):
         where, low, high = plans[i]
-        fit = _fit_one(counts[i], cum[i], where, low, high, count, f0, f1, lo, bin_width, codec, raw.get(i))
-        if low or high or where.shift_code or where.fallback or where.z != z:
-            fit = _best_censored(counts[i], cum[i], fit, z, count, f0, f1, lo, bin_width, codec)
-        out.append(FitResult(fit.model, count, fit.z, fit.percentiles, float(beta1[i]), float(beta2[i]),
-                             fit.shift, low, high, fit.fallback, fit.support))
-    return out
+        if where.shift_code or where.z != zs[i] or where.fallback:
+            z[j, TEMPLATE], code[j, TEMPLATE], fallback[j, TEMPLATE] = where.z, where.shift_code, where.fallback
+            ok[j, TEMPLATE] = True
+            if not where.fallback:
+                probs[j, TEMPLATE] = percentile_probs(where.z, where.shift)
+        if (low or high) and not where.fallback:
+            z[j, TEMPLATE + 1] = where.z
+            ok[j, TEMPLATE + 1] = True
+    c, cm = counts[live], cum[live]
+    targets = probs.reshape(n, -1) * cm[:, -1:]
+    at = np.empty(targets.shape, dtype=np.intp)
+    for j in range(n):
+        at[j] = np.searchsorted(cm[j], targets[j], side="left")
+    np.minimum(at, counts.shape[1] - 1, out=at)
+    r = np.arange(n)[:, None]
+    here = c[r, at].astype(np.float64)
+    below = cm[r, at] - here
+    frac = np.minimum(np.maximum((targets - below) / np.maximum(here, 1.0), 0.0), 1.0)
+    pct = codec.snap_array(lo + bin_width * (at - 0.5 + frac)).reshape(n, WIDTH, 4)
+    for j, k in zip(*np.nonzero(ok & fallback)):
+        i = live[j]
+        pct[j, k] = _fallback_points(counts[i], cum[i], *plans[i][1:], lo, bin_width, codec)
+    # the banded plain read only where the band decides its family (elsewhere it is column 0)
+    ok[:, 1] = in_band(pct[:, 0], sl_bands(total.astype(np.float64)))
+    return _Reads(z, code, exact, fallback, ok, pct)
+
+
+def _fallback_points(counts: np.ndarray, cum: np.ndarray, low: float, high: float, lo: float,
+                     bin_width: float, codec: PercentileCodec) -> tuple[float, float, float, float]:
+    """The fallback's four points a, a, e, e: the censor limits, or where a side is uncensored
+    the middle of the uncensored mass (onboard.censor)."""
+    mid = _percentiles_one(counts, cum, fallback_probs(low, high), lo, bin_width)
+    a = lo + bin_width * 0.5 if low > 0.0 else mid[0]
+    e = lo + bin_width * (counts.size - 1.5) if high > 0.0 else mid[1]
+    return codec.snap([a, a, e, e])
+
+
+def _choose(counts: np.ndarray, reads: _Reads, plans: dict, live: list[int], totals: list[int],
+            lo: float, bin_width: float) -> np.ndarray:
+    """Per live row, the column of its read whose model is nearest its histogram (L1, the first
+    of equals). Fallbacks are solved one by one (rare); the rest in one array pass."""
+    n = len(live)
+    flat = np.flatnonzero(reads.ok)
+    row = flat // WIDTH
+    total = np.array([totals[i] for i in live], dtype=np.float64)[row]
+    band = np.where(reads.exact.ravel()[flat], 0.0, sl_bands(total))
+    fam, gamma, delta, xi, lam = solve(reads.pct.reshape(-1, 4)[flat], reads.z.ravel()[flat],
+                                       reads.code.ravel()[flat] / SHIFT_SCALE, band)
+    for m in np.flatnonzero(reads.fallback.ravel()[flat]).tolist():
+        j, k = divmod(int(flat[m]), WIDTH)
+        model = model_from_percentiles(tuple(reads.pct[j, k]), float(reads.z[j, k]), totals[live[j]],
+                                       normal_probs=fallback_probs(*plans[live[j]][1:]))
+        fam[m], gamma[m], delta[m], xi[m], lam[m] = SN, model.gamma, model.delta, model.xi, model.lam
+    errors = np.full(n * WIDTH, np.inf)
+    errors[flat] = l1(fam, gamma, delta, xi, lam, row, rank_grid(counts, lo, bin_width))
+    return np.argmin(errors.reshape(n, WIDTH), axis=1)
 
 
 def _ends_rows(counts: np.ndarray, censor: bool):
@@ -249,67 +337,33 @@ def _placement(z: float, low: float, high: float, count: int, pile_lo: int, pile
     density (an SB's pole at its bound): the model must hold it, not clip it, so it never takes
     the fallback, whose normal only reproduces piles at the sensor limits."""
     if pile_lo or pile_hi:
-        where = place(z, low + quantize(pile_lo / count), high + quantize(pile_hi / count), count, Z_LADDER)
+        where = place(z, low + quantize(pile_lo / count), high + quantize(pile_hi / count), count, COUNT_LADDER)
         if not where.fallback:
             return where
-    return place(z, low, high, count, Z_LADDER)
+    return place(z, low, high, count, COUNT_LADDER)
 
 
-def _fit_one(counts: np.ndarray, cum: np.ndarray, where: Placement, low: float, high: float, count: int,
-             f0: int, f1: int, lo: float, bin_width: float, codec: PercentileCodec,
-             raw: np.ndarray | None = None) -> FitResult:
-    """One histogram read at `where` (`raw`: its percentiles, when already read), its support
-    widened to the occupied bins f0..f1 if short (betas left at zero: the caller has them)."""
-    normal_probs = None
-    if where.fallback:
-        # four points a, a, e, e: the censor limits, or where a side is uncensored the middle of
-        # the uncensored mass (onboard.censor)
-        normal_probs = fallback_probs(low, high)
-        mid = _percentiles_one(counts, cum, normal_probs, lo, bin_width)
-        a = lo + bin_width * 0.5 if low > 0.0 else mid[0]
-        e = lo + bin_width * (counts.size - 1.5) if high > 0.0 else mid[1]
-        pct = codec.snap([a, a, e, e])
-    else:
-        pct = codec.snap(_percentiles_one(counts, cum, _probs_at(where), lo, bin_width) if raw is None else raw)
-    model = model_from_percentiles(pct, where.z, count, shift=where.shift, normal_probs=normal_probs)
-    support = None
-    # Bounded supports must reach into every occupied bin (support_point), so each has mass;
-    # only the side that falls short is recorded (it travels).
-    ends = (support_point(f0, 0, codec, lo, bin_width), support_point(f1, 1, codec, lo, bin_width))
-    s_lo, s_hi = support_of(model)
-    if s_lo > ends[0] or s_hi < ends[1]:
-        support = (ends[0] if s_lo > ends[0] else None, ends[1] if s_hi < ends[1] else None)
-        model = widen(model, support, pct)  # what model_from_percentiles(..., support) gives
-    return FitResult(model, count, where.z, pct, 0.0, 0.0, where.shift, low, high, where.fallback, support)
-
-
-def _best_censored(counts: np.ndarray, cum: np.ndarray, placed: FitResult, z: float, count: int,
-                   f0: int, f1: int, lo: float, bin_width: float, codec: PercentileCodec) -> FitResult:
-    """Of the censored placement, the normal fallback (only when a sensor limit is censored) and
-    the plain symmetric read at the label's z (censored fractions still recorded), the model
-    whose bin probabilities are nearest the histogram (L1; the first of equals). A shifted fit
-    extrapolates the pile-up from what the uncensored part shows, and a U- or J-shaped histogram
-    can mislead it where the plain read would not; the comparison keeps censoring from ever
-    fitting the histogram worse. Only censored or piled models pay for it. The choice travels
-    as shift, z and fallback flag."""
-    low, high = placed.censored_low, placed.censored_high
-    cands = [placed]
-    done = Placement(placed.z, round(placed.shift * SHIFT_SCALE), placed.fallback)
-    for where in (Placement(placed.z, 0, True), Placement(z)):
-        if where != done and (low or high or not where.fallback):
-            cands.append(_fit_one(counts, cum, where, low, high, count, f0, f1, lo, bin_width, codec))
-    grid = l1_grid(counts, lo, bin_width)
-    errors = [l1_on_grid(c.model, grid) for c in cands]
-    return cands[errors.index(min(errors))]
+def plain_fit(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
+              codec: PercentileCodec | None = None) -> Johnson:
+    """The plain Slifker-Shapiro fit of a histogram: read at the count's ladder z, unshifted,
+    the family by the sign of ln d, nothing censored. Every rule of the fitter is held to fit
+    no worse than this (onboard.reads)."""
+    counts = np.asarray(counts)
+    count = _exact_total(counts, np.flatnonzero(counts))
+    if codec is None:
+        codec = default_codec(lo, bin_width, counts.size)
+    z = z_for_count(count)
+    pct = codec.snap(histogram_percentiles(counts, percentile_probs(z), lo, bin_width))
+    return model_from_percentiles(pct, z, count, exact_family=True)
 
 
 def rebuild(result: FitResult, percentiles=None) -> Johnson:
-    """The model from a result's (or the given, e.g. decoded) percentiles and its placement:
-    what the receiver computes from a packet."""
+    """The model from a result's (or the given, e.g. decoded) percentiles and its read: what
+    the receiver computes from a packet."""
     normal_probs = fallback_probs(result.censored_low, result.censored_high) if result.fallback else None
     return model_from_percentiles(result.percentiles if percentiles is None else percentiles,
                                   result.z, result.count, shift=result.shift,
-                                  normal_probs=normal_probs, support=result.support)
+                                  normal_probs=normal_probs, exact_family=result.exact_family)
 
 
 def _exact_total(counts: np.ndarray, occupied: np.ndarray) -> int:

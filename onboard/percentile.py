@@ -9,16 +9,14 @@ from __future__ import annotations
 
 import math
 
-from onboard.johnson import Z_CLIP, Family, Johnson, normal_ppf_one
+from onboard.johnson import Family, Johnson, normal_ppf_one
 
 # ln d has a sampling sd of roughly 4 / sqrt(count); the SL band is one such sd wide on each
 # side, never narrower than the floor that keeps the SU/SB forms well conditioned.
 _BAND_SD = 4.0
 _BAND_FLOOR = 1e-6
 # Gaps below this fraction of the span are lifted to it: no ratio can overflow.
-_GAP_FLOOR = 1e-9
-# Points a support must reach, low and high; None where nothing is asked.
-Support = tuple[float | None, float | None]
+GAP_FLOOR = 1e-9
 # The censored fallback's two normal deviates are kept at least this far apart.
 _MIN_DZ = 0.01
 
@@ -30,16 +28,17 @@ def sl_band(count: int) -> float:
 
 def model_from_percentiles(percentiles, z: float, count: int, *, shift: float = 0.0,
                            normal_probs: tuple[float, float] | None = None,
-                           support: Support | None = None) -> Johnson:
+                           exact_family: bool = False) -> Johnson:
     """The Johnson model through the four percentiles x(s-3z), x(s-z), x(s+z), x(s+3z).
 
     `shift` s moves the four points along the normal scale (censored data: keep them out of
     the pile-up); the symmetric forms still apply with gamma lowered by s. `normal_probs`
     (pa, pe) instead asks for the normal with P(X < a) = pa and P(X < e) = pe (the censored
-    fallback, see onboard.censor). `support` (lo, hi): points a bounded support must contain,
-    None for a side without a requirement (see `widen`). Deterministic: the host calls it on
-    the transmitted values to recompute the robot's model bit for bit. All four equal means a
-    constant region.
+    fallback, see onboard.censor). The family follows ln d = ln(mn / p^2), with a band around
+    0 (`sl_band`) read as lognormal or normal; `exact_family` drops the band (the family from
+    the sign of ln d alone, the plain Slifker-Shapiro rule). Deterministic: the host calls it
+    on the transmitted values to recompute the robot's model bit for bit. All four equal
+    means a constant region.
     """
     if len(percentiles) != 4:
         raise ValueError(f"need four percentiles, got {len(percentiles)}")
@@ -58,16 +57,15 @@ def model_from_percentiles(percentiles, z: float, count: int, *, shift: float = 
     if normal_probs is not None:
         model = _normal_through(a, e, *normal_probs)
     else:
-        model = _shifted(_symmetric(a, b, c, e, z, count), shift)
-    return model if support is None else widen(model, support, (a, b, c, e))
+        model = _shifted(_symmetric(a, b, c, e, z, 0.0 if exact_family else sl_band(count)), shift)
+    return model
 
 
-def _symmetric(a: float, b: float, c: float, e: float, z: float, count: int) -> Johnson:
+def _symmetric(a: float, b: float, c: float, e: float, z: float, band: float) -> Johnson:
     span = e - a
-    floor = _GAP_FLOOR * span
+    floor = GAP_FLOOR * span
     m, n, p = max(e - c, floor), max(b - a, floor), max(c - b, floor)
     mid = 0.5 * (b + c)
-    band = sl_band(count)
     ln_d = math.log(m) + math.log(n) - 2.0 * math.log(p)
     try:
         if abs(ln_d) <= band:
@@ -102,113 +100,14 @@ def _normal_through(a: float, e: float, pa: float, pe: float) -> Johnson:
     if not ze - za >= _MIN_DZ:  # all the mass at the limits: a wide normal between them
         mid = 0.5 * (za + ze)
         za, ze = mid - 0.5 * _MIN_DZ, mid + 0.5 * _MIN_DZ
-    sd = max((e - a) / (ze - za), _GAP_FLOOR * (abs(a) + abs(e) + 1.0))
+    sd = max((e - a) / (ze - za), GAP_FLOOR * (abs(a) + abs(e) + 1.0))
     return Johnson.normal(a - sd * za, sd)
-
-
-def support_of(model: Johnson) -> tuple[float, float]:
-    """(lowest, highest) value of the support; infinite ends for unbounded families."""
-    if model.family is Family.SB:
-        return model.xi, model.xi + model.lam
-    if model.family is Family.SL:
-        return (model.xi, math.inf) if model.lam > 0 else (-math.inf, model.xi)
-    if model.family is Family.CONST:
-        return model.xi, model.xi
-    return -math.inf, math.inf
-
-
-def contains(model: Johnson, support: Support) -> bool:
-    """True if the model's support reaches both points (a None side asks nothing)."""
-    lo, hi = support_of(model)
-    return model.family is Family.CONST or (
-        (support[0] is None or lo <= support[0]) and (support[1] is None or hi >= support[1]))
-
-
-def widen(model: Johnson, support: Support, pct: tuple[float, float, float, float]) -> Johnson:
-    """A bounded model whose support misses a point of the data, with the short bound(s) moved
-    out to the point(s) and gamma and delta re-solved so that z stays at the inner percentiles
-    b and c: the bulk stays where the data put it, only the tail changes. (Stretching the
-    whole model, or keeping the outer percentiles, moves the bulk: measured on gamma-tailed
-    clutter the inner pin adds 0.007 histogram L1, the outer 0.017, a stretch 0.19.)
-    Deterministic, so the receiver repeats it."""
-    if contains(model, support):
-        return model
-    lo, hi = support
-    old_lo, old_hi = support_of(model)
-    new_lo = lo if lo is not None and old_lo > lo else old_lo
-    new_hi = hi if hi is not None and old_hi < hi else old_hi
-    out = None
-    for p, q in ((pct[1], pct[2]), (pct[0], pct[3])):
-        try:
-            zp, zq = _z_at(model, p), _z_at(model, q)
-            out = _pinned(model, new_lo, new_hi, p, q, zp, zq)
-        except (OverflowError, ValueError, ZeroDivisionError):
-            out = None
-        if out is not None and contains(out, support):
-            return out
-    try:
-        out = _stretched(model, new_lo, new_hi, pct[0], pct[3])
-    except (OverflowError, ValueError, ZeroDivisionError):
-        out = None
-    if out is None or not contains(out, support):
-        # Only for degenerate points (a percentile on a bound): the normal through the same
-        # centre and spread contains every value.
-        centre, spread = float(model.x_of_z(0.0)), float(model.x_of_z(1.0) - model.x_of_z(-1.0))
-        out = Johnson.normal(centre, max(0.5 * spread, _GAP_FLOOR * (abs(centre) + 1.0)))
-    return out
-
-
-def _z_at(model: Johnson, x: float) -> float:
-    """model.z_of_x(x) for one point of a bounded (SB, SL) model, without array overhead."""
-    g, d, xi, lam = model.gamma, model.delta, model.xi, model.lam
-    if model.family is Family.SB:
-        lo, hi = x - xi, (xi + lam) - x
-        z = -math.inf if lo <= 0.0 else math.inf if hi <= 0.0 else g + d * (math.log(lo) - math.log(hi))
-    else:
-        u = (x - xi) / lam
-        if u <= 0.0:
-            z = -math.inf if lam > 0 else math.inf
-        else:
-            z = g + d * math.log(u) if lam > 0 else g - d * math.log(u)
-    return min(max(z, -Z_CLIP), Z_CLIP)
-
-
-def _stretched(model: Johnson, new_lo: float, new_hi: float, a: float, e: float) -> Johnson | None:
-    if model.family is Family.SB:
-        return _checked(Family.SB, model.gamma, model.delta, new_lo, new_hi - new_lo)
-    if model.family is Family.SL and model.lam > 0:
-        return _checked(Family.SL, model.gamma, model.delta, new_lo, model.lam * (e - new_lo) / (e - model.xi))
-    if model.family is Family.SL:
-        return _checked(Family.SL, model.gamma, model.delta, new_hi, model.lam * (new_hi - a) / (model.xi - a))
-    return None
-
-
-def _pinned(model: Johnson, new_lo: float, new_hi: float, p: float, q: float,
-            zp: float, zq: float) -> Johnson | None:
-    if model.family is Family.SB:
-        lam = new_hi - new_lo
-        gp = math.log(p - new_lo) - math.log(new_hi - p)
-        gq = math.log(q - new_lo) - math.log(new_hi - q)
-        delta = (zq - zp) / (gq - gp)
-        return _checked(Family.SB, zp - delta * gp, delta, new_lo, lam)
-    if model.family is Family.SL:
-        xi = new_lo if model.lam > 0 else new_hi
-        return _sl_through(xi, model.lam, p, q, zp, zq)
-    return None
-
-
-def _sl_through(xi: float, lam: float, p: float, q: float, zp: float, zq: float) -> Johnson | None:
-    """The SL with threshold xi (lam's sign: its side) and z = zp at p, zq at q."""
-    sign = 1.0 if lam > 0 else -1.0
-    gp, gq = math.log((p - xi) / lam), math.log((q - xi) / lam)
-    delta = (zq - zp) / (sign * (gq - gp))
-    return _checked(Family.SL, zp - sign * delta * gp, delta, xi, lam)
 
 
 def _normal(a: float, b: float, c: float, e: float, z: float) -> Johnson:
     # The mean of the four and the full span: exact for normal quantiles. Halves and quarters
     # first, so percentiles near the float limit cannot overflow the sums.
-    sd = max((0.5 * e - 0.5 * a) / (3.0 * z), _GAP_FLOOR * (abs(0.5 * a) + abs(0.5 * e)), 1e-300)
+    sd = max((0.5 * e - 0.5 * a) / (3.0 * z), GAP_FLOOR * (abs(0.5 * a) + abs(0.5 * e)), 1e-300)
     mean = 0.25 * a + 0.25 * b + 0.25 * c + 0.25 * e
     return Johnson.normal(mean, min(sd, 1e300))
 

@@ -6,13 +6,13 @@ strictly. `decode` takes untrusted bytes: bounded unpacking, then the type and r
 field is checked; anything wrong raises `radio.FrameError` with the reason. `encode` checks
 its own output the same way, so a packet that encodes always decodes.
 
-MODELS (schema 2, layout in `radio.packet_models`) carry each model as four percentiles in
+MODELS (schema 3, layout in `radio.packet_models`) carry each model as four percentiles in
 fixed point: for 8-bit sensors 16-bit codes with a step of 2**-8 gray level, so each is within
 2**-9 < 0.01 gray level of the fitted value, and the host recomputes the robot's models bit for
 bit. An ordinary model costs 8 bytes; a label one bitmap bit and a varint of its pixel count and
 z index; models that are not plain 2 bits in a records bitmap plus their record (1 byte for a
-support widened on one side to the occupied level's outer edge, 8-bit sensors). The benchmark
-frame of 8 labels x 3 bands with a maximal header is 291 bytes of body.
+model read at another spread or centre than its label's). The benchmark frame of 8 labels x 3
+bands with a maximal header is 279 bytes of body.
 """
 from __future__ import annotations
 

@@ -14,7 +14,7 @@ import msgpack
 
 from radio import FrameError
 
-SCHEMA_VERSION = 2  # 2: MODELS packs angles, labels, codes and records into one blob
+SCHEMA_VERSION = 3  # 2: MODELS packs angles, labels, codes and records into one blob; 3: the read records
 MAX_BODY = 96 * 1024  # 256 labels x 16 bands x 4 codes x 4 bytes, with room to spare
 MAX_STR = 512
 MAX_ARRAY = 256

@@ -23,15 +23,17 @@ The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
   dependence  when flagged: per label, its grain and band correlation in int8
            (`radio.packet_dependence`, 11 bytes per RGB label); never flagged empty
   records  absent when every model is plain; else 2 bits per model (model i at bits 2(i%4) of
-           byte i//4): 0 plain, 1 support widened high, 2 widened low, 3 a flagged record; then,
-           for each non-plain model in order, the occupied extreme level (B up to 256 levels,
-           else H) for 1 and 2, or for 3 a flag byte (TailFlag) and its fields in flag order:
-           z index B, shift b (1/32), censored low H, censored high H, support low, high.
-Only the rare models that are not plain (label's z, no shift, nothing censored, support as
-fitted) cost more than their 8 bytes: a model widened on one side 1 byte and 2 bits.
-Dependence costs its section and no header beyond the flag bit (the section's length follows
-from the labels and bands), so a packet grows by 11 bytes per RGB label, plus one byte of the
-blob's msgpack header when the section pushes it past 255 bytes.
+           byte i//4): 0 plain, 1 a read byte, 2 never, 3 a flagged record; then, for each
+           non-plain model in order, for 1 the read byte (bits 0-3 z index, bits 4-5 the
+           shift: 0, -1/2, +1/2, bit 6 the exact family rule, bit 7 zero), for 3 a flag byte
+           (TailFlag) and its fields in flag order: z index B, shift b (1/32), censored low H,
+           censored high H.
+A model is plain when it was read at its label's z, unshifted, with the SL band and nothing
+censored; the fitter chooses among a few reads per region (onboard.reads), so a model read
+another way costs its 8 bytes, 2 bits and one byte. Dependence costs its section and no
+header beyond the flag bit (the section's length follows from the labels and bands), so a
+packet grows by 11 bytes per RGB label, plus one byte of the blob's msgpack header when the
+section pushes it past 255 bytes.
 """
 from __future__ import annotations
 
@@ -46,7 +48,7 @@ import numpy as np
 
 from onboard.censor import CENSOR_SCALE, MAX_SHIFT_CODE, SHIFT_SCALE, fallback_probs
 from onboard.dependence import Dependence
-from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percentiles, support_point
+from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percentiles
 from onboard.johnson import Johnson
 from radio import FrameError
 from radio.packet_base import (
@@ -63,22 +65,25 @@ _NB_MASK = 0x3F
 
 
 class TailFlag(enum.IntFlag):
-    SUPPORT_LOW = 1
-    SUPPORT_HIGH = 2
-    CENSORED_LOW = 4
-    CENSORED_HIGH = 8
-    SHIFT = 16
-    FALLBACK = 32
-    Z = 64
+    CENSORED_LOW = 1
+    CENSORED_HIGH = 2
+    SHIFT = 4
+    FALLBACK = 8
+    Z = 16
+    EXACT = 32
 
 
 class TailCode(enum.IntEnum):
     """A model's 2-bit entry in the records bitmap."""
 
     PLAIN = 0
-    HIGH = 1
-    LOW = 2
+    READ = 1
     FLAGGED = 3
+
+
+# The read byte's shifts (codes in 1/32): the centres onboard.reads tries.
+READ_SHIFTS: tuple[int, ...] = (0, -16, 16)
+_READ_EXACT = 0x40
 
 
 @dataclass(frozen=True, slots=True)
@@ -90,8 +95,7 @@ class Tail:
     censored_low: float = 0.0
     censored_high: float = 0.0
     fallback: bool = False
-    support_low: int | None = None  # lowest occupied level, when the support was widened to it
-    support_high: int | None = None
+    exact_family: bool = False  # the family from the sign of ln d alone (onboard.percentile)
 
 
 @dataclass(frozen=True, slots=True)
@@ -172,8 +176,7 @@ class ModelsPacket:
         out += codes.astype(dtype).tobytes()
         if self.dependence:
             out += encode_dependence(self.dependence, ids, len(self.bands))
-        level = _U8 if self.levels <= 256 else _U16
-        entries = [_tail_bytes(t, lab.z_index, level) for lab in self.labels
+        entries = [_tail_bytes(t, lab.z_index) for lab in self.labels
                    for t in (lab.tails + (None,) * len(self.bands))[:len(self.bands)]]
         if any(c for c, _ in entries):
             marks = bytearray((len(entries) + 3) // 4)
@@ -230,7 +233,7 @@ class ModelsPacket:
             if not dependence:
                 raise FrameError("dependence section flagged but no label has a measurement")
             pos = end
-        tails = _tails(blob, pos, [z for _, _, z in heads], n_bands, levels)
+        tails = _tails(blob, pos, [z for _, _, z in heads], n_bands)
         records = tuple(
             LabelModels(label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]), tails[i])
             for i, (label, count, z_index) in enumerate(heads))
@@ -298,8 +301,8 @@ def models_packet(
         for r in per_band:
             if r.z not in Z_LADDER:
                 raise ValueError(f"label {label}: z = {r.z} is not on the z ladder")
-        plain = [r for r in per_band if not _special(r)]
-        z = (plain or per_band)[0].z
+        simple = [r.z for r in per_band if not _special(r)] or [per_band[0].z]
+        z = max(simple, key=simple.count)  # the commonest: its models travel free
         override = censored.get(label)
         if override is not None:
             for v in override:
@@ -307,7 +310,7 @@ def models_packet(
         records.append(LabelModels(
             label, int(per_band[0].count), Z_LADDER.index(z),
             tuple(tuple(int(c) for c in codec.encode(r.percentiles)) for r in per_band),
-            tuple(_tail_of(r, z, override, codec) for r in per_band),
+            tuple(_tail_of(r, z, override) for r in per_band),
         ))
     if len(fits) != len(records) * len(bands):
         raise ValueError("fits hold band indices outside the band list")
@@ -320,44 +323,36 @@ def models_packet(
 
 
 def _special(r: FitResult) -> bool:
-    return bool(r.shift or r.censored_low or r.censored_high or r.fallback or r.support)
+    return bool(r.shift or r.censored_low or r.censored_high or r.fallback or r.exact_family)
 
 
-def _tail_of(r: FitResult, label_z: float, override: tuple[float, float] | None,
-             codec: PercentileCodec) -> Tail | None:
+def _tail_of(r: FitResult, label_z: float, override: tuple[float, float] | None) -> Tail | None:
     """The record a model needs beyond its label's fields, or None for a plain model. The
     `censored` override of models_packet annotates fits that measured no censoring."""
     low, high = r.censored_low, r.censored_high
     if override is not None and not (low or high or r.fallback):
         low, high = override
-    if not (r.z != label_z or r.shift or low or high or r.fallback or r.support):
+    if not (r.z != label_z or r.shift or low or high or r.fallback or r.exact_family):
         return None
-    ends = (None, None) if r.support is None else tuple(
-        None if v is None else _level_of(v, side, codec) for side, v in enumerate(r.support))
     code = round(r.shift * SHIFT_SCALE)
     if code / SHIFT_SCALE != r.shift or abs(code) > MAX_SHIFT_CODE:
         raise ValueError(f"shift {r.shift} is not a multiple of 1/{SHIFT_SCALE} within the int8 range")
     if r.fallback and (_censor_code(low) / CENSOR_SCALE, _censor_code(high) / CENSOR_SCALE) != (low, high):
         raise ValueError("a fallback model needs its censored fractions in 1/65535 fixed point")
-    return Tail(Z_LADDER.index(r.z), code, float(low), float(high), bool(r.fallback), *ends)
+    return Tail(Z_LADDER.index(r.z), code, float(low), float(high), bool(r.fallback), bool(r.exact_family))
 
 
-def _level_of(point: float, side: int, codec: PercentileCodec) -> int:
-    level = round(point - 0.25 + 0.5 * side)  # support_point: a quarter level inside
-    if support_point(level, side, codec) != point:
-        raise ValueError(f"support point {point} is not a level")
-    return level
-
-
-def _tail_bytes(t: Tail | None, label_z: int, level: struct.Struct) -> tuple[int, bytes]:
+def _tail_bytes(t: Tail | None, label_z: int) -> tuple[int, bytes]:
     """(TailCode, bytes) of one model's record (see module doc)."""
     if t is None:
         return TailCode.PLAIN, b""
     low, high = _censor_code(t.censored_low), _censor_code(t.censored_high)
+    if not (low or high or t.fallback) and t.shift_code in READ_SHIFTS:
+        return TailCode.READ, bytes([t.z_index | READ_SHIFTS.index(t.shift_code) << 4
+                                     | (_READ_EXACT if t.exact_family else 0)])
     fields = [(TailFlag.Z, _U8, t.z_index if t.z_index != label_z else None),
               (TailFlag.SHIFT, _I8, t.shift_code or None),
-              (TailFlag.CENSORED_LOW, _U16, low or None), (TailFlag.CENSORED_HIGH, _U16, high or None),
-              (TailFlag.SUPPORT_LOW, level, t.support_low), (TailFlag.SUPPORT_HIGH, level, t.support_high)]
+              (TailFlag.CENSORED_LOW, _U16, low or None), (TailFlag.CENSORED_HIGH, _U16, high or None)]
     flags = TailFlag(0)
     out = b""
     for flag, fmt, value in fields:
@@ -366,10 +361,8 @@ def _tail_bytes(t: Tail | None, label_z: int, level: struct.Struct) -> tuple[int
             out += fmt.pack(value)
     if t.fallback:
         flags |= TailFlag.FALLBACK
-    if flags == TailFlag.SUPPORT_HIGH:
-        return TailCode.HIGH, out
-    if flags == TailFlag.SUPPORT_LOW:
-        return TailCode.LOW, out
+    if t.exact_family:
+        flags |= TailFlag.EXACT
     if not flags:
         return TailCode.PLAIN, b""
     return TailCode.FLAGGED, bytes([flags]) + out
@@ -388,54 +381,54 @@ def _label_ids(blob: bytes, pos: int) -> tuple[list[int], int]:
 
 def _take(blob: bytes, pos: int, fmt: struct.Struct) -> tuple[int, int]:
     if pos + fmt.size > len(blob):
-        raise FrameError("censored and support records end inside a record")
+        raise FrameError("model records end inside a record")
     return fmt.unpack_from(blob, pos)[0], pos + fmt.size
 
 
-def _tails(blob: bytes, pos: int, label_z: list[int], n_bands: int,
-           levels: int) -> list[tuple[Tail | None, ...]]:
+def _tails(blob: bytes, pos: int, label_z: list[int], n_bands: int) -> list[tuple[Tail | None, ...]]:
     n = len(label_z) * n_bands
     out: list[list[Tail | None]] = [[None] * n_bands for _ in label_z]
     if pos == len(blob):
         return [tuple(t) for t in out]
     marks_end = pos + (n + 3) // 4
     if marks_end > len(blob):
-        raise FrameError("censored and support records end inside their bitmap")
+        raise FrameError("model records end inside their bitmap")
     marks, pos = blob[pos:marks_end], marks_end
-    level = _U8 if levels <= 256 else _U16
     for i in range(n):
         code = marks[i // 4] >> (2 * (i % 4)) & 3
         if code == TailCode.PLAIN:
             continue
-        if code == TailCode.FLAGGED:
-            flags, pos = _take(blob, pos, _U8)
-            if not flags or flags & 0x80 or (flags & TailFlag.FALLBACK and not flags & (
-                    TailFlag.CENSORED_LOW | TailFlag.CENSORED_HIGH)):
-                raise FrameError(f"censored record for model {i} has bad flags {flags:#x}")
-        else:
-            flags = TailFlag.SUPPORT_HIGH if code == TailCode.HIGH else TailFlag.SUPPORT_LOW
-        z_index, shift, low, high, ends = label_z[i // n_bands], 0, 0, 0, [None, None]
+        if code == TailCode.READ:
+            byte, pos = _take(blob, pos, _U8)
+            slot, z_index = byte >> 4 & 3, byte & 0x0F
+            if byte & 0x80 or slot >= len(READ_SHIFTS) or z_index >= len(Z_LADDER):
+                raise FrameError(f"read byte {byte:#x} of model {i} is not a read")
+            out[i // n_bands][i % n_bands] = Tail(z_index, READ_SHIFTS[slot], exact_family=bool(byte & _READ_EXACT))
+            continue
+        if code != TailCode.FLAGGED:
+            raise FrameError(f"model {i} has record code {code}, which no record uses")
+        flags, pos = _take(blob, pos, _U8)
+        if not flags or flags & ~0x3F or (flags & TailFlag.FALLBACK and not flags & (
+                TailFlag.CENSORED_LOW | TailFlag.CENSORED_HIGH)):
+            raise FrameError(f"record of model {i} has bad flags {flags:#x}")
+        z_index, shift, low, high = label_z[i // n_bands], 0, 0, 0
         if flags & TailFlag.Z:
             z_index, pos = _take(blob, pos, _U8)
             if z_index >= len(Z_LADDER):
-                raise FrameError(f"censored record: z ladder index {z_index} outside 0..{len(Z_LADDER) - 1}")
+                raise FrameError(f"record: z ladder index {z_index} outside 0..{len(Z_LADDER) - 1}")
         if flags & TailFlag.SHIFT:
             shift, pos = _take(blob, pos, _I8)
             if abs(shift) > MAX_SHIFT_CODE:
-                raise FrameError(f"censored record: shift code {shift} outside +-{MAX_SHIFT_CODE}")
+                raise FrameError(f"record: shift code {shift} outside +-{MAX_SHIFT_CODE}")
         if flags & TailFlag.CENSORED_LOW:
             low, pos = _take(blob, pos, _U16)
         if flags & TailFlag.CENSORED_HIGH:
             high, pos = _take(blob, pos, _U16)
         if low + high > CENSOR_SCALE + 1:  # two halves may each round up
             raise FrameError("censored fractions of a model add up to more than 1")
-        for side, flag in enumerate((TailFlag.SUPPORT_LOW, TailFlag.SUPPORT_HIGH)):
-            if flags & flag:
-                ends[side], pos = _take(blob, pos, level)
-                if ends[side] >= levels:
-                    raise FrameError(f"censored record: support level {ends[side]} outside 0..{levels - 1}")
         out[i // n_bands][i % n_bands] = Tail(
-            z_index, shift, low / CENSOR_SCALE, high / CENSOR_SCALE, bool(flags & TailFlag.FALLBACK), *ends)
+            z_index, shift, low / CENSOR_SCALE, high / CENSOR_SCALE, bool(flags & TailFlag.FALLBACK),
+            bool(flags & TailFlag.EXACT))
     if pos != len(blob):
         raise FrameError(f"models blob has {len(blob) - pos} bytes after its records")
     return [tuple(t) for t in out]
@@ -450,11 +443,9 @@ def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, 
             kw: dict[str, Any] = {}
             if t is not None:
                 kw["shift"] = t.shift_code / SHIFT_SCALE
+                kw["exact_family"] = t.exact_family
                 if t.fallback:
                     kw["normal_probs"] = fallback_probs(t.censored_low, t.censored_high)
-                if t.support_low is not None or t.support_high is not None:
-                    kw["support"] = tuple(None if v is None else support_point(v, side, codec)
-                                          for side, v in enumerate((t.support_low, t.support_high)))
             try:
                 model = model_from_percentiles(codec.decode(codes), z, rec.count, **kw)
             except (ValueError, ArithmeticError) as exc:

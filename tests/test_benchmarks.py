@@ -16,6 +16,7 @@ from benchmarks.stability_score import METHODS, Cause, Size, Truth, diagnose, ev
 from onboard.johnson import Family, Johnson
 
 EXPECTED = {"core", "dependence", "hostmem", "ingest", "onboard", "peers", "runtime", "sampling", "scene", "stability",
+            "startup",
             "subsample", "synth", "wire", "link"}
 
 
@@ -192,7 +193,10 @@ def test_censoring_recovers_a_saturated_normal_that_the_uncensored_fit_misses():
     for sat in SATURATIONS[1:]:
         cen, unc = res[("percentile", sizes[1], sat)], res[("uncensored", sizes[1], sat)]
         assert cen.worst < 0.5 and cen.l1 < 0.01  # shifted or the (exact) fallback normal
-        assert unc.worst > 5.0 and unc.l1 > 0.1
+        # up to 25% the off-centre reads keep clear of the pile even without censoring; at 40%
+        # only the censored placement or the fallback does
+        if sat.fraction >= 0.4:
+            assert unc.worst > 5.0 and unc.l1 > 0.1
 
 
 def test_quick_stability_map_has_the_saturation_axis_and_no_percentile_failure(quick):
@@ -246,3 +250,47 @@ def test_diagnosis_calls_a_curve_spilling_past_the_8_bit_range_a_grid_artifact()
     below, above = (0.5 * math.erfc(t / 100.0 / math.sqrt(2.0)) for t in (128.5, 127.5))
     assert d.outside == pytest.approx(below + above, rel=1e-9)
     assert d.cause is Cause.GRID and "folds" in d.why
+
+
+def test_photo_cases_come_from_shipped_photographs_with_at_least_40_cases():
+    from benchmarks import photo_cases
+
+    cases = photo_cases.cases()
+    assert len(cases) >= 40
+    assert {c.mask for c in cases} == {"kmeans3", "whole", "depth3"}
+    assert {c.band for c in cases} >= {"Y", "R", "G", "B"}
+    assert all(c.counts.shape == (256,) and c.count >= 200 for c in cases)
+
+
+def test_photos_run_without_r_says_so_and_runs_the_rest(monkeypatch, tmp_path):
+    from benchmarks import bench_photos, rpeer
+
+    monkeypatch.setattr(rpeer, "available", lambda: False)
+    sections = bench_photos.run(Context(quick=True, out=tmp_path))
+    text = "\n".join(line for s in sections for line in s.markdown())
+    assert "R SuppDists not run: Rscript or the SuppDists package is missing" in text
+    assert re.search(r"ours / Gaussian = 0\.\d+x", text) and "our failures: 0" in text
+    assert re.search(r"Worst case against the plain percentile fit: [+-]0\.0\d+ exact L1", text)
+
+
+def test_r_peer_parses_fits_and_failures():
+    from benchmarks.rpeer import _parse
+
+    probs = np.full(256, 1 / 256)
+    ok = _parse("SU 0.002 " + " ".join(map(str, (0.1, 1.5, 100.0, 20.0, *probs))))
+    assert ok.family == "SU" and ok.params == (0.1, 1.5, 100.0, 20.0) and ok.seconds == 0.002
+    assert ok.probs.sum() == pytest.approx(1.0)
+    bad = _parse("SL 0.001 " + " ".join(map(str, (0.0, -4.4, 190.0, -81.0, *probs))))
+    assert bad.probs is None and "out-of-range" in bad.error
+    assert _parse("ERROR Sb_values_out_of_range.").error == "Sb values out of range."
+
+
+@pytest.mark.skipif(not __import__("benchmarks.rpeer").rpeer.available(), reason="Rscript with SuppDists not installed")
+def test_r_peer_fits_a_normal_histogram():
+    from benchmarks import rpeer
+
+    h = np.bincount(np.clip(np.rint(np.random.default_rng(0).normal(120, 15, 20_000)), 0, 255).astype(int),
+                    minlength=256)
+    (fit,) = rpeer.fit_all([h])
+    assert fit.probs is not None and fit.probs.sum() == pytest.approx(1.0)
+    assert np.abs(fit.probs - h / h.sum()).sum() < 0.1

@@ -3,13 +3,21 @@ from pathlib import Path
 
 import pytest
 
+from radio.link import Link
 from tools.demo import DemoConfig, run_demo
 
 
 @pytest.fixture(scope="module")
-def result(tmp_path_factory):
+def first_run(tmp_path_factory):
+    """The demo's result and its report page, read before a later test runs the demo again there."""
     out = tmp_path_factory.mktemp("demo")
-    return run_demo(out, DemoConfig(size=(48, 64), elevations=(30.0, 40.0, 50.0, 60.0)), progress=False)
+    res = run_demo(out, DemoConfig(size=(48, 64), elevations=(30.0, 40.0, 50.0, 60.0)), progress=False)
+    return res, (out / "report" / "index.html").read_text()
+
+
+@pytest.fixture(scope="module")
+def result(first_run):
+    return first_run[0]
 
 
 def test_every_pose_of_every_plate_crossed_the_lossy_link_into_the_database(result):
@@ -65,3 +73,53 @@ def test_a_robot_that_dies_is_reported_with_the_last_lines_of_its_stderr(tmp_pat
     with Store.open(tmp_path / "s.db") as store, pytest.raises(RuntimeError) as err:
         demo.sweep_robots(tmp_path, ["black"], store, DemoConfig(robot_timeout_s=20), [30.0])
     assert "black exited early" in str(err.value) and "no_such_setting" in str(err.value)
+
+
+def test_report_and_console_state_the_same_run_time(first_run):
+    from tools.cmd_demo import _summary
+
+    result, page = first_run
+    console = "\n".join(_summary(result))
+    stated = f"run time {result.seconds:.1f} s"
+    assert stated in console and stated in page.lower()
+
+
+def test_retransmissions_count_both_ends(result):
+    link = result.link
+    assert link["retransmissions"] == link["retransmissions_robot"] + link["retransmissions_host"]
+
+
+def test_resends_read_off_the_byte_stream_match_the_links_own_count():
+    """Two links over a channel that drops every fourth frame each way; the counter on each
+    end's bytes agrees with that end's own retransmission count."""
+    from radio.auth import MemoryCounterStore
+    from radio.frame import Deframer
+    from tools.demo import Resends
+
+    key = bytes(range(32))
+    robot = Link(1, 2, 1, key, MemoryCounterStore(), heartbeat=0.2)
+    host = Link(2, 1, 1, key, MemoryCounterStore(), heartbeat=0.2)
+    for k in range(40):
+        robot.send(bytes([k]) * 300, 0.0)
+    host.send(b"command" * 40, 0.0)
+    taps = {"robot": Resends(key), "host": Resends(key)}
+    frames = {"robot": 0, "host": 0}
+
+    def lossy(end: str, data: bytes) -> bytes:
+        taps[end].feed(data)
+        kept = []
+        for body in Deframer(4096).feed(data):
+            frames[end] += 1
+            if frames[end] % 4:
+                kept.append(b"\x00" + body + b"\x00")
+        return b"".join(kept)
+
+    t = 0.0
+    while t < 60.0 and not (robot.idle and host.idle):
+        host.receive(lossy("robot", robot.poll(t)), t)
+        robot.receive(lossy("host", host.poll(t)), t)
+        t += 0.01
+    assert robot.idle and host.idle
+    assert robot.stats().retransmissions > 5
+    assert taps["robot"].count == robot.stats().retransmissions
+    assert taps["host"].count == host.stats().retransmissions

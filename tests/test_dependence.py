@@ -1,6 +1,8 @@
 """On-board dependence measurement and its packet entry."""
 from __future__ import annotations
 
+import dataclasses
+
 import msgpack
 import numpy as np
 import pytest
@@ -8,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from onboard.dependence import LAGS, Dependence, measure
-from onboard.fit import FrameFitter
+from onboard.fit import FrameFitter, z_for_count
 from onboard.johnson import Johnson
 from radio import FrameError
 from radio import packet as pk
@@ -95,10 +97,16 @@ def test_bad_blobs_are_refused_with_a_reason(blob, reason):
         decode_dependence(blob, [0], 3)
 
 
-def _fit_stub(n_labels: int):
+def _fit_stub(n_labels: int, plain: bool = False):
+    """Fits of an AR texture; `plain`: each re-read at its label's z, unshifted, so the blob
+    carries no records (the dependence section is then its end)."""
     img = _ar_image(64, 64, 0.5, 0.5, seed=6)
     labels = (np.arange(64)[None, :] * n_labels // 64).repeat(64, axis=0)
-    return _fits(img, labels), labels, img
+    fits = _fits(img, labels)
+    if plain:
+        fits = {k: dataclasses.replace(f, z=z_for_count(f.count), shift=0.0, exact_family=False)
+                for k, f in fits.items()}
+    return fits, labels, img
 
 
 @pytest.mark.parametrize("n_labels", [1, 2, 4, 8, 16])
@@ -152,7 +160,7 @@ def test_dependence_for_a_label_the_packet_lacks_or_of_other_bands_is_refused():
 @settings(max_examples=200, deadline=None)
 @given(st.binary(min_size=22, max_size=22))
 def test_any_section_bytes_decode_to_steps_of_1_127_or_a_frame_error(section):
-    fits, _, _ = _fit_stub(2)
+    fits, _, _ = _fit_stub(2, plain=True)
     plain = pk.encode_models(fits, bands=("R", "G", "B"), **HEADER)
     assert not any(t for lab in pk.decode(plain).labels for t in lab.tails)  # the blob ends with its codes
     items = msgpack.unpackb(plain)

@@ -4,6 +4,8 @@ import math
 import numpy as np
 import pytest
 
+from onboard.codec import COUNT_LADDER
+from onboard.reads import GRID
 from onboard.fit import (Z_LADDER, FitResult, FrameFitter, PercentileCodec, fit_histogram,
                          fit_values, model_from_percentiles, rebuild, z_for_count)
 from onboard.johnson import Family, Johnson
@@ -75,7 +77,9 @@ def test_z_ladder_steps_down_for_small_regions():
     assert Z_LADDER[0] == 0.524
     assert z_for_count(10**6) == 0.524
     assert z_for_count(10) < z_for_count(100) <= z_for_count(1000) == 0.524
-    assert all(a > b for a, b in zip(Z_LADDER, Z_LADDER[1:]))
+    assert all(a > b for a, b in zip(COUNT_LADDER, COUNT_LADDER[1:])) and COUNT_LADDER == Z_LADDER[:10]
+    # every read the fitter tries is on the ladder, whose index travels in 4 bits
+    assert len(Z_LADDER) <= 16 and {z for z, _ in GRID} <= set(Z_LADDER)
 
 
 def test_codec_round_trip_reproduces_the_model_bit_for_bit():

@@ -108,7 +108,8 @@ def test_mask_methods_find_the_two_plates(host, files, method):
 def test_resolve_json(host):
     code, out, _ = host("resolve", "--grain-mm", 0.02, "--wavelength-nm", 700, "--pixel-mm", 0.125, "--json")
     doc = json.loads(out)
-    assert code == 0 and doc["verdict"] == "statistical" and doc["rayleigh_height_nm"] == 87.5
+    assert code == 0 and doc["physical"]["verdict"] == "statistical" and doc["physical"]["rayleigh_height_nm"] == 87.5
+    assert doc["paper"]["verdict"] == "statistical"
 
 
 @pytest.mark.parametrize("argv, words", [

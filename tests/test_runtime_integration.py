@@ -66,9 +66,10 @@ def test_hal_body_is_never_a_silent_fake(tmp_path, monkeypatch):
 def test_scene_labels_come_from_the_frame_the_camera_rendered(tmp_path, monkeypatch):
     rt, tr = make(tmp_path, HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
     calls = []
-    real = fake_camera.render
-    monkeypatch.setattr(fake_camera, "render", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = fake_camera.scene_radiance  # the fake camera renders through it (then exposes)
+    monkeypatch.setattr(fake_camera, "scene_radiance", lambda *a, **k: calls.append(1) or real(*a, **k))
     monkeypatch.setattr(hal.scene, "render", lambda *a, **k: pytest.fail("rendered a second time"))
+    monkeypatch.setattr(hal.scene, "scene_radiance", lambda *a, **k: pytest.fail("rendered a second time"))
     rt.boot()
     command(rt, tr, 1, pk.CommandName.CAPTURE)
     assert len(calls) == 1

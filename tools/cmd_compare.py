@@ -5,8 +5,6 @@ import argparse
 import json
 
 from tools.cli import CliError
-from tools.images import ImageError, feature_bands, read_image, read_mask
-from tools.metrics import METRICS, compare_bands
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -20,6 +18,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tools.images import ImageError, feature_bands, read_image, read_mask
+    from tools.metrics import METRICS, compare_bands
+
     try:
         ref = read_image(args.ref)
         test = read_image(args.test)

@@ -5,11 +5,7 @@ import argparse
 import json
 import time
 
-
-from tools.cli import CliError
-from tools.images import SPACES, fit_image
-from tools.store import CorruptDatabase, Store
-from tools.synth import models_document
+from tools.cli import FEATURE_SPACES, CliError, elevation
 
 ROBOT_ID = "host"
 
@@ -19,33 +15,48 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                        description="Fit Johnson models per (label, band); without --mask the whole image is label 0.")
     p.add_argument("image")
     p.add_argument("--mask", help="label mask PNG, same size as the image")
-    p.add_argument("--space", choices=SPACES, default="rgb")
+    p.add_argument("--space", choices=FEATURE_SPACES, default="rgb")
     p.add_argument("--angle", type=float, help="view elevation in degrees (needed with --db)")
     p.add_argument("--db", help="store the models as a capture of robot 'host' in this database")
     p.add_argument("--json", action="store_true", help="print the models document (MODELS.json)")
     return p
 
 
+def _store(args: argparse.Namespace, fitted) -> int:
+    """Stores the fit as the next capture of robot 'host'; its sequence number."""
+    from tools.store import CorruptDatabase, Store
+
+    try:
+        with Store.open(args.db) as store:
+            seq = store.next_sequence(ROBOT_ID)
+            if not store.add_capture(ROBOT_ID, seq, time.time(), None, (args.angle, 0.0), args.space,
+                                     fitted.feats.band_names, fitted.results):
+                raise CliError(f"database {args.db}: capture {ROBOT_ID}/{seq} was taken by another writer; "
+                               "not stored (run fit again)")
+            if args.mask:
+                store.add_mask(f"{ROBOT_ID}/{seq}", fitted.labels, ROBOT_ID)
+    except CorruptDatabase as exc:
+        raise CliError(str(exc)) from None
+    return seq
+
+
 def run(args: argparse.Namespace) -> int:
+    from tools.images import fit_image
+    from tools.synth import models_document
+
     if args.db and args.angle is None:
         raise CliError("--db needs --angle: every stored capture has a view angle")
+    if args.angle is not None:
+        elevation(args.angle)
     try:
         fitted = fit_image(args.image, args.mask, args.space)
     except ValueError as exc:  # ImageError too
         raise CliError(str(exc)) from None
-    feats, pca, mask, results = fitted.feats, fitted.pca, fitted.labels, fitted.results
+    feats, pca, results = fitted.feats, fitted.pca, fitted.results
     doc = models_document(args.space, feats.band_names, feats.levels, args.angle, results,
                           pca=None if pca is None else pca.to_record(), image=str(args.image))
     if args.db:
-        try:
-            with Store.open(args.db) as store:
-                seq = store.next_sequence(ROBOT_ID)
-                store.add_capture(ROBOT_ID, seq, time.time(), None, (args.angle, 0.0), args.space,
-                                  feats.band_names, results)
-                if args.mask:
-                    store.add_mask(f"{ROBOT_ID}/{seq}", mask, ROBOT_ID)
-        except CorruptDatabase as exc:
-            raise CliError(str(exc)) from None
+        seq = _store(args, fitted)
         doc["stored"] = {"db": str(args.db), "robot": ROBOT_ID, "sequence": seq}
     if args.json:
         print(json.dumps(doc, indent=1))

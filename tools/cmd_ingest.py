@@ -2,13 +2,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
-from tqdm import tqdm
-
-from tools.cli import CliError
+from tools.cli import CliError, elevation
 from tools.datasets import DatasetError, Layout
 from tools.ingest import INGEST_SPACES, NADIR, IngestError, ingest
-from tools.store import CorruptDatabase
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -26,11 +24,17 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="view elevation for a folder without angles (default: 90, straight down)")
     p.add_argument("--workers", type=int, help="local processes (default: CPU count; 0: this process)")
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786")
+    p.add_argument("--keep-going", action="store_true",
+                   help="skip images that cannot be fitted, name them at the end and exit with status 1")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from tools.store import CorruptDatabase
+
     if args.layout not in {m.value for m in Layout}:
         raise CliError(f"layout {args.layout!r}: expected one of {', '.join(m.value for m in Layout)}")
     if args.space not in INGEST_SPACES:
@@ -39,18 +43,26 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"--workers must be >= 0, got {args.workers}")
     if args.scheduler is not None and args.workers is not None:
         raise CliError("--workers and --scheduler exclude each other: the cluster has its own workers")
-    bar: list[tqdm] = []
+    elevation(args.angle)
+    bar: list = []
     try:
         report = ingest(args.dir, args.layout, args.db, mask=args.mask, space=args.space,
                         workers=args.workers, scheduler=args.scheduler, table=args.table,
                         default_elevation=args.angle,
                         on_total=lambda n: bar.append(tqdm(total=n, unit="img", disable=args.quiet)),
-                        on_image=lambda _name: bar[0].update(1))
+                        on_image=lambda _name: bar[0].update(1), keep_going=args.keep_going)
     except (DatasetError, IngestError, CorruptDatabase) as exc:
         raise CliError(str(exc)) from None
     finally:
         for b in bar:
             b.close()
-    print(f"{report.stored} image(s) stored, {report.skipped} already there, "
+    damaged = f"{len(report.damaged)} damaged, " if args.keep_going else ""
+    print(f"{report.stored} image(s) stored, {report.skipped} already there, {damaged}"
           f"{report.total} in the dataset; robot {report.robot}")
+    if report.damaged:
+        for d in report.damaged:
+            print(f"btf-host: skipped {d.reason}", file=sys.stderr)
+        print(f"btf-host: {len(report.damaged)} damaged image(s) skipped; fix or remove them and run "
+              "ingest again (stored images are kept)", file=sys.stderr)
+        return 1
     return 0

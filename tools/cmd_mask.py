@@ -2,10 +2,15 @@
 from __future__ import annotations
 
 import argparse
+import math
+from typing import TYPE_CHECKING
 
-from tools.cli import CliError
-from tools.images import ImageError, read_image, write_mask
-from tools.masks import METHODS, segment
+from tools.cli import CliError, add_force, check_out
+
+if TYPE_CHECKING:  # numpy and the segmenters load where used: --help builds this parser too
+    import numpy as np
+
+METHODS = ("isodata", "kmeans", "felzenszwalb", "slic")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -16,13 +21,29 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--scale", type=float, default=100.0, help="felzenszwalb scale")
     p.add_argument("--segments", type=int, default=400, help="slic superpixels")
-    p.add_argument("--out", required=True, help="output mask .png")
+    p.add_argument("--out", required=True, help="output mask .png (never the input; an existing file needs --force)")
+    add_force(p)
     return p
 
 
+def segment(image: np.ndarray, method: str, k: int, seed: int = 0, scale: float = 100.0,
+            segments: int = 400) -> np.ndarray:
+    """A uint8 mask, classes darkest first (tools.masks: bounded memory, tiled)."""
+    from tools.masks import segment as segment_image
+
+    return segment_image(image, method, k, seed, scale, segments)
+
+
 def run(args: argparse.Namespace) -> int:
+    from tools.images import ImageError, read_image, write_mask
+
     if not 1 <= args.k <= 255:
         raise CliError(f"--k {args.k}: must lie in 1..255")
+    if args.segments < 1:
+        raise CliError(f"--segments {args.segments}: slic needs at least 1 superpixel")
+    if not (math.isfinite(args.scale) and args.scale > 0):
+        raise CliError(f"--scale {args.scale}: felzenszwalb needs a positive number")
+    check_out(args.out, (args.image,), args.force)
     try:
         image = read_image(args.image)
         if image.shape[0] * image.shape[1] < args.k:

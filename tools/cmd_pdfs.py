@@ -4,22 +4,23 @@ from __future__ import annotations
 import argparse
 import json
 
-from tools.cli import CliError
-from tools.images import SPACES, ImageError, feature_bands, read_image, read_mask
-from tools.pdfs import PEERS, table
+from tools.cli import FEATURE_SPACES, CliError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("pdfs", help="histogram error of Johnson vs Gaussian, uniform, Weibull, lognormal")
     p.add_argument("image")
     p.add_argument("--mask", required=True)
-    p.add_argument("--space", choices=SPACES, default="rgb")
+    p.add_argument("--space", choices=FEATURE_SPACES, default="rgb")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
     return p
 
 
 def run(args: argparse.Namespace) -> int:
+    from tools.images import ImageError, feature_bands, read_image, read_mask
+    from tools.pdfs import PEERS, table
+
     try:
         image = read_image(args.image)
         mask = read_mask(args.mask, image.shape[:2])

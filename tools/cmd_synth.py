@@ -6,14 +6,13 @@ import json
 import sys
 import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import numpy as np
+from tools.cli import (FEATURE_SPACES, CliError, add_force, add_source_filters, check_out, choose_source,
+                       elevation)
 
-from onboard.features import PcaBasis
-from tools.cli import CliError
-from tools.images import SPACES, ImageError, read_mask, to_rgb, write_image
-from tools.store import CorruptDatabase, Store
-from tools.synth import ExtrapolationWarning, MissingModels, models_from_document, synthesize_at
+if TYPE_CHECKING:
+    import numpy as np
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -27,15 +26,19 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--azimuth", type=float, help="view azimuth, degrees")
     p.add_argument("--light-elevation", type=float, help="light elevation, degrees (with --light-azimuth)")
     p.add_argument("--light-azimuth", type=float, help="light azimuth, degrees")
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", required=True, help="output image (never an input; an existing file needs --force)")
+    add_force(p)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--space", choices=SPACES, help="which stored feature space (--db)")
+    p.add_argument("--space", choices=FEATURE_SPACES, help="which stored feature space (--db)")
+    add_source_filters(p)
     p.add_argument("--independent", action="store_true",
                    help="draw every pixel on its own even when grain and band correlation are stored")
     return p
 
 
 def _from_json(path: str) -> tuple[dict, str, int, dict | None]:
+    from tools.synth import models_from_document
+
     try:
         raw = json.loads(Path(path).read_text())
     except FileNotFoundError:
@@ -66,23 +69,30 @@ def _from_json(path: str) -> tuple[dict, str, int, dict | None]:
     return by_angle, str(first.get("space") or "rgb"), levels, first.get("pca")
 
 
-def _from_db(path: str, space: str | None) -> tuple[dict, str]:
+def _source(store, args: argparse.Namespace) -> dict:
+    """Store filters for the one robot, scene and feature space to synthesize from."""
+    robot, scene = choose_source(store.captures(), args.db, args.robot, args.scene)
+    space = args.space
+    spaces = sorted({c.space for c in store.captures(robot=robot, scene=scene)})
+    if space is None:
+        if len(spaces) > 1:
+            raise CliError(f"database {args.db}: several feature spaces {spaces}; choose one with --space")
+        space = spaces[0]
+    if space not in spaces:
+        raise CliError(f"database {args.db}: no captures in feature space {space} (it holds {', '.join(spaces)})")
+    return {"robot": robot, "scene": scene, "space": space}
+
+
+def _open_db(path: str):
+    from tools.store import CorruptDatabase, Store
+
     try:
-        with Store.open(path, create=False) as store:
-            spaces = sorted({c.space for c in store.captures()})
-            if space is None:
-                if len(spaces) > 1:
-                    raise CliError(f"database {path}: several feature spaces {spaces}; choose one with --space")
-                space = spaces[0] if spaces else "rgb"
-            by_angle = store.models_by_angle(space=space)
+        return Store.open(path, create=False)
     except CorruptDatabase as exc:
         raise CliError(str(exc)) from None
-    if not by_angle:
-        raise CliError(f"database {path}: no captures in feature space {space}")
-    return by_angle, space
 
 
-def _stored_basis(bases: dict, db: str) -> PcaBasis:
+def _stored_basis(bases: dict, db: str):
     """The one PCA basis of the stored pca captures (components of different bases do not mix)."""
     distinct = {b for b in bases.values()}
     if None in distinct:
@@ -92,63 +102,89 @@ def _stored_basis(bases: dict, db: str) -> PcaBasis:
     return distinct.pop()
 
 
+def _read_mask(path: str) -> np.ndarray:
+    from tools.images import ImageError, read_mask
+
+    try:
+        return read_mask(path)
+    except ImageError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _write(args: argparse.Namespace, bands: np.ndarray, space: str, pca=None) -> int:
+    import numpy as np
+
+    from tools.images import ImageError, to_rgb, write_image
+
+    try:
+        write_image(args.out, to_rgb(bands.astype(np.uint8, copy=False), space, pca))
+    except ImageError as exc:
+        raise CliError(str(exc)) from None
+    return 0
+
+
 def _run_direction(args: argparse.Namespace, direction) -> int:
     """Several angles: barycentric quantile blending over the stored directions (tools.interp)."""
+    import numpy as np
+
     from tools.interp import models_by_direction, synthesize_at_direction
+    from tools.synth import ExtrapolationWarning, MissingModels
 
     if not args.db:
         raise CliError("synth: several angles need --db (a models document holds one angle)")
     if args.space == "pca":
         raise CliError("synth --db: pca bases are not stored yet; use --model from `fit --json`")
-    _, space = _from_db(args.db, args.space)
-    with Store.open(args.db, create=False) as store:
-        by_direction = models_by_direction(store, space=space)
-    try:
-        mask = read_mask(args.mask)
-    except ImageError as exc:
-        raise CliError(str(exc)) from None
+    with _open_db(args.db) as store:
+        source = _source(store, args)
+        by_direction = models_by_direction(store, **source)
+    mask = _read_mask(args.mask)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ExtrapolationWarning)
         try:
             bands = synthesize_at_direction(by_direction, mask, direction, np.random.default_rng(args.seed))
         except (MissingModels, ValueError) as exc:
             raise CliError(str(exc)) from None
+    _warn(caught)
+    return _write(args, bands, source["space"])
+
+
+def _warn(caught) -> None:
     for w in caught:
         print(f"btf-host: warning: {w.message}", file=sys.stderr)
-    try:
-        write_image(args.out, to_rgb(bands.astype(np.uint8, copy=False), space))
-    except ImageError as exc:
-        raise CliError(str(exc)) from None
-    return 0
 
 
 def run(args: argparse.Namespace) -> int:
     from tools.interp import requested_direction
 
+    check_out(args.out, (args.db, args.model, args.mask), args.force)
     try:
         direction = requested_direction(args.angle, args.azimuth, args.light_elevation, args.light_azimuth)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     if direction is not None:
         return _run_direction(args, direction)
-    args.angle = float(args.angle)
+    args.angle = elevation(float(args.angle))
+    import numpy as np
+
+    from onboard.features import PcaBasis
+    from tools.synth import ExtrapolationWarning, MissingModels, synthesize_at
+
     pca = None
     dependence: dict = {}
     if args.db:
-        by_angle, space = _from_db(args.db, args.space)
         levels = 256
-        with Store.open(args.db, create=False) as store:
+        with _open_db(args.db) as store:
+            source = _source(store, args)
+            space = source["space"]
+            by_angle = store.models_by_angle(**source)
             if not args.independent:
-                dependence = store.dependence_by_angle(space=space)
+                dependence = store.dependence_by_angle(**source)
             if space == "pca":
-                pca = _stored_basis(store.pca_by_angle(space=space), args.db)
+                pca = _stored_basis(store.pca_by_angle(**source), args.db)
     else:
         by_angle, space, levels, pca_rec = _from_json(args.model)
         pca = PcaBasis.from_record(pca_rec) if pca_rec else None
-    try:
-        mask = read_mask(args.mask)
-    except ImageError as exc:
-        raise CliError(str(exc)) from None
+    mask = _read_mask(args.mask)
     angle = args.angle
     if float("-inf") in by_angle:
         by_angle, angle = {angle: by_angle[float("-inf")]}, angle
@@ -159,10 +195,5 @@ def run(args: argparse.Namespace) -> int:
                                   dependence=dependence, independent=args.independent)
         except (MissingModels, ValueError) as exc:
             raise CliError(str(exc)) from None
-    for w in caught:
-        print(f"btf-host: warning: {w.message}", file=sys.stderr)
-    try:
-        write_image(args.out, to_rgb(bands.astype(np.uint8, copy=False), space, pca))
-    except ImageError as exc:
-        raise CliError(str(exc)) from None
-    return 0
+    _warn(caught)
+    return _write(args, bands, space, pca)

@@ -28,7 +28,9 @@ from onboard.fit import FrameFitter, fit_histogram
 from onboard.johnson import Johnson, normal_ppf
 from radio import packet as pk
 from radio.auth import MemoryCounterStore
+from radio import FrameError
 from radio.channel import Channel, ChannelConfig
+from radio.frame import Deframer, Kind, decode
 from radio.keys import load_key, write_key
 from radio.link import Link
 from radio.serial_port import FdPort
@@ -67,7 +69,8 @@ class DemoResult:
     unseen: dict[str, dict[str, float]] = field(default_factory=dict)  # plate -> errors
     pdfs: dict[str, dict[str, float]] = field(default_factory=dict)  # scene -> totals
     table1: list[dict] = field(default_factory=list)  # method, space, correlation per band
-    seconds: float = 0.0
+    seconds: float = 0.0  # sweeps and experiments: the run time the report states
+    report_seconds: float = 0.0  # writing the report, after that
 
     def bars(self) -> dict[str, bool]:
         mixed_ok = bool(self.mixed) and all(
@@ -80,18 +83,52 @@ class DemoResult:
         return {"mixed_reproduction": mixed_ok, "unseen_angle": unseen_ok, "johnson_best": pdf_ok}
 
 
+class Resends:
+    """Counts the DATA frames one end sends again (retransmissions), read off its byte stream
+    before the channel: the link numbers new frames one after another, so a DATA frame that
+    does not take the next number is a resend. The link may send a resend twice back to back
+    (one write); such copies count once when they arrive in one `feed`."""
+
+    def __init__(self, key: bytes) -> None:
+        self._key, self._deframer = key, Deframer(max_body=8192)
+        self._next, self._last = 0, None
+        self.count = 0
+
+    def feed(self, data: bytes) -> None:
+        self._last = None
+        for body in self._deframer.feed(data):
+            try:
+                f = decode(body, self._key)
+            except FrameError:
+                continue
+            if f.kind is Kind.SYN:  # a new session numbers its frames from 0
+                self._next, self._last = 0, None
+            elif f.kind is Kind.DATA:
+                if f.seq == self._next:
+                    self._next = (f.seq + 1) & 0xFF
+                elif f.seq != self._last:
+                    self.count += 1
+                self._last = f.seq
+            else:
+                self._last = None
+
+
 class SimulatedRadio:
-    """A port over a pty fd whose bytes cross a seeded lossy channel in each direction."""
+    """A port over a pty fd whose bytes cross a seeded lossy channel in each direction;
+    with the link key, each end's retransmissions are counted on the way (`resends`)."""
 
     def __init__(self, port: FdPort, config: ChannelConfig, seed: int,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic, key: bytes | None = None) -> None:
         self.port, self.clock = port, clock
         self.up, self.down = Channel(config, seed), Channel(config, seed + 1)
+        self.resends = None if key is None else {"robot": Resends(key), "host": Resends(key)}
 
     def read(self, size: int = 4096) -> bytes:
         data = self.port.read(size)
         now = self.clock()
         if data:
+            if self.resends:
+                self.resends["robot"].feed(data)
             self.up.transmit(data, now)
         arrived = self.down.deliver(now)
         if arrived:
@@ -99,6 +136,8 @@ class SimulatedRadio:
         return self.up.deliver(now)
 
     def write(self, data: bytes) -> int:
+        if self.resends:
+            self.resends["host"].feed(data)
         self.down.transmit(data, self.clock())
         return len(data)
 
@@ -145,7 +184,8 @@ class RobotRun:
                  "--config", str(_robot_config(work, scene, robot_id, cfg.size)), "--hal", "fake",
                  "--port", os.ttyname(self.slave), "--max-seconds", str(cfg.robot_timeout_s + 30)],
                 cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err)
-        self.radio = SimulatedRadio(FdPort(self.master, timeout=0.0), cfg.channel, cfg.seed * 101 + robot_id)
+        self.radio = SimulatedRadio(FdPort(self.master, timeout=0.0), cfg.channel, cfg.seed * 101 + robot_id,
+                                    key=key)
         link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, key, MemoryCounterStore(), heartbeat=0.2,
                     link_timeout=30)
         self.session = HostSession(link, self.radio, Receiver(store, scene=scene))
@@ -187,8 +227,9 @@ class RobotRun:
     def stats(self) -> dict:
         st = self.session.stats()
         up, down = self.radio.up, self.radio.down
-        return {"rejected": sum(st.rejected.values()), "retransmissions": st.retransmissions,
-                "delivered": st.delivered, "duplicates": st.duplicates,
+        robot, host = self.radio.resends["robot"].count, self.radio.resends["host"].count
+        return {"rejected": sum(st.rejected.values()), "retransmissions": robot + host,
+                "retransmissions_robot": robot, "retransmissions_host": host, "delivered": st.delivered, "duplicates": st.duplicates,
                 "lost": up.lost + down.lost, "corrupted": up.corrupted + down.corrupted,
                 "skipped": len(self.skipped)}
 
@@ -371,7 +412,8 @@ def run_demo(out: Path, cfg: DemoConfig = DemoConfig(), progress: bool = True) -
         steps.close()
         from tools.report import write_report
 
+        # The report states the run time, so it is taken before the report is written.
         res.seconds = time.monotonic() - t0
-        write_report(store, out / "report", demo=res, size=cfg.size)
-    res.seconds = time.monotonic() - t0
+        write_report(store, out / "report", demo=res, size=cfg.size, progress=progress)
+    res.report_seconds = time.monotonic() - t0 - res.seconds
     return res

@@ -5,24 +5,27 @@ local process pool by default, or a Dask distributed cluster. Results come back 
 writer in file-name order, so the database is the same whatever the executor and however
 many workers ran. Each image is one capture of the "robot" `dataset:<absolute folder>`,
 keyed by its file name (`source`); images already stored are skipped, so an interrupted
-run continues where it stopped.
+run continues where it stopped. With `keep_going`, an image that cannot be fitted (damaged,
+unreadable, the wrong size for its mask) is skipped and named in the report instead.
 """
 from __future__ import annotations
 
 import collections
 import os
 import time
-from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterator
 
-import numpy as np
-
-from onboard.fit import FitResult
 from tools.datasets import Angles, DatasetImage, Layout, scan
-from tools.images import ImageError, fit_image, read_mask
-from tools.store import Store
+
+if TYPE_CHECKING:  # numpy and the fitter load with the first image, not with the command line
+    from concurrent.futures import Executor
+
+    import numpy as np
+
+    from onboard.fit import FitResult
+    from tools.store import Store
 
 # Images per database commit, and the longest a fitted image waits for its commit.
 BATCH_IMAGES = 64
@@ -55,11 +58,20 @@ class Fitted:
 
 
 @dataclass(frozen=True, slots=True)
+class Damaged:
+    """An image that could not be fitted, and why (with keep_going)."""
+
+    name: str
+    reason: str
+
+
+@dataclass(frozen=True, slots=True)
 class IngestReport:
     robot: str
     total: int
     skipped: int
     stored: int
+    damaged: tuple[Damaged, ...] = ()
 
 
 def dataset_robot(root: str | Path) -> str:
@@ -69,12 +81,22 @@ def dataset_robot(root: str | Path) -> str:
 
 def fit_job(job: Job) -> Fitted:
     """Fit one image (runs in a worker). Raises IngestError naming the file."""
+    from tools.images import fit_image
+
     try:
         fitted = fit_image(job.path, job.mask, job.space)
     except ValueError as exc:  # ImageError too
         raise IngestError(str(exc)) from None
     return Fitted(job.name, tuple(fitted.feats.band_names), fitted.results,
                   fitted.labels if job.mask else None)
+
+
+def fit_or_damaged(job: Job) -> Fitted | Damaged:
+    """fit_job, with a file that cannot be fitted returned as Damaged instead of raised."""
+    try:
+        return fit_job(job)
+    except IngestError as exc:
+        return Damaged(job.name, str(exc))
 
 
 def _mask_for(image: DatasetImage, mask: Path | None) -> str | None:
@@ -108,6 +130,8 @@ def _ordered(executor: Executor, fn: Callable[[Job], Fitted], jobs: list[Job],
 def _executor(workers: int, scheduler: str | None):
     """(executor, closer, worker count) for a process pool or a Dask cluster."""
     if scheduler is None:
+        from concurrent.futures import ProcessPoolExecutor
+
         pool = ProcessPoolExecutor(max_workers=workers)
         return pool, lambda: pool.shutdown(cancel_futures=True), workers
     from distributed import Client
@@ -124,12 +148,17 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
            space: str = "rgb", workers: int | None = None, scheduler: str | None = None,
            table: str | Path | None = None, default_elevation: float = NADIR,
            on_total: Callable[[int], None] | None = None,
-           on_image: Callable[[str], None] | None = None) -> IngestReport:
+           on_image: Callable[[str], None] | None = None, keep_going: bool = False) -> IngestReport:
     """Fit and store every not-yet-stored image of the dataset at `root`.
 
     `workers=0` fits in this process; otherwise a process pool of `workers` (default: the
-    CPU count), or the Dask cluster at `scheduler` (e.g. tcp://host:8786).
+    CPU count), or the Dask cluster at `scheduler` (e.g. tcp://host:8786). An image that
+    cannot be fitted stops the run (IngestError), or with `keep_going` is skipped and
+    listed in the report's `damaged`.
     """
+    from tools.images import ImageError, read_mask
+    from tools.store import Store
+
     if space not in INGEST_SPACES:
         raise IngestError(f"feature space {space!r}: ingest stores one of {', '.join(INGEST_SPACES)}")
     if not 0.0 <= default_elevation <= 90.0:
@@ -148,10 +177,11 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
                 store.add_mask(robot, read_mask(mask_path), robot)
             except ImageError as exc:
                 raise IngestError(str(exc)) from None
-        stored = 0
+        stored, damaged = 0, []
         if jobs:
             by_name = {im.name: im for im in todo}
-            results, close = _run(jobs, workers, scheduler)  # connects before any work is shown
+            # connects before any work is shown
+            results, close = _run(jobs, workers, scheduler, fit_or_damaged if keep_going else fit_job)
             try:
                 if on_total:
                     on_total(len(jobs))
@@ -159,9 +189,11 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
                     # One commit per batch: an interrupted run redoes at most one batch.
                     with store.batch():
                         for fitted in chunk:
-                            _store(store, robot, by_name[fitted.name], fitted, space, Path(root).name,
-                                   default_elevation)
-                    stored += len(chunk)
+                            if isinstance(fitted, Damaged):
+                                damaged.append(fitted)
+                            else:
+                                stored += _store(store, robot, by_name[fitted.name], fitted, space,
+                                                 Path(root).name, default_elevation)
                     if on_image:
                         for fitted in chunk:
                             on_image(fitted.name)
@@ -169,7 +201,7 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
                 close()
         elif on_total:
             on_total(0)
-    return IngestReport(robot, len(images), len(images) - len(todo), stored)
+    return IngestReport(robot, len(images), len(images) - len(todo), stored, tuple(damaged))
 
 
 def _batches(results: Iterator[Fitted], size: int, seconds: float) -> Iterator[list[Fitted]]:
@@ -190,26 +222,29 @@ def _batches(results: Iterator[Fitted], size: int, seconds: float) -> Iterator[l
         yield chunk
 
 
-def _run(jobs: list[Job], workers: int | None,
-         scheduler: str | None) -> tuple[Iterator[Fitted], Callable[[], object]]:
-    """(results in job order, closer of the executor)."""
+def _run(jobs: list[Job], workers: int | None, scheduler: str | None,
+         fit: Callable[[Job], Fitted | Damaged] = fit_job) -> tuple[Iterator, Callable[[], object]]:
+    """(results of `fit` in job order, closer of the executor)."""
     if scheduler is None and workers == 0:
-        return map(fit_job, jobs), lambda: None
+        return map(fit, jobs), lambda: None
     n = workers or os.cpu_count() or 1
     if n < 0:
         raise IngestError(f"workers must be >= 0, got {n}")
     executor, close, n = _executor(n, scheduler)
-    return _ordered(executor, fit_job, jobs, window=4 * n), close
+    return _ordered(executor, fit, jobs, window=4 * n), close
 
 
 def _store(store: Store, robot: str, image: DatasetImage, fitted: Fitted, space: str,
-           scene: str, default_elevation: float) -> None:
+           scene: str, default_elevation: float) -> bool:
+    """Stores one fitted image; False when its capture was already there."""
     a = image.angles or Angles(default_elevation, 0.0)
     seq = store.next_sequence(robot)
     # the file's modification time, so the database does not depend on when it was built
     mtime = image.path.stat().st_mtime
     light = (a.light_elevation, a.light_azimuth) if a.has_light else None
-    store.add_capture(robot, seq, mtime, None, (a.elevation, a.azimuth), space, fitted.band_names,
-                      fitted.results, scene=scene, illumination=light, source=image.name)
+    if not store.add_capture(robot, seq, mtime, None, (a.elevation, a.azimuth), space, fitted.band_names,
+                             fitted.results, scene=scene, illumination=light, source=image.name):
+        return False
     if fitted.mask is not None:
         store.add_mask(f"{robot}/{seq}", fitted.mask, robot)
+    return True

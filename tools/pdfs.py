@@ -78,6 +78,11 @@ def _peer_probabilities(values: Values, n: int, levels: int, rng: np.random.Gene
     return out
 
 
+def peer_probabilities(values: np.ndarray, levels: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """The peers' binned probabilities fitted to integer `values` (at most FIT_SAMPLE of them, seeded)."""
+    return _peer_probabilities(lambda positions: values[positions], len(values), levels, rng)
+
+
 def gather(bands: np.ndarray, band: int, mask: np.ndarray, where: Region, positions: np.ndarray) -> np.ndarray:
     """The values of band `band` at `positions` (any order) among the region's pixels in
     row-major order, read tile by tile: memory for the positions only."""

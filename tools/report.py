@@ -37,8 +37,13 @@ def _figure(src: str, caption: str) -> str:
 
 
 def capture_mask(store: Store, cap: Capture) -> np.ndarray | None:
-    """The robot's label map for a capture: its own MASK, or the latest one sent before it."""
-    for seq in range(cap.sequence, -1, -1):
+    """A capture's label map: the robot's MASK for it, the one `fit --mask` or `ingest --mask`
+    stored with it, an ingested dataset's common mask, or the robot's latest MASK before it."""
+    for key in (mask_key(cap.sequence), f"{cap.robot}/{cap.sequence}", cap.robot):
+        m = store.mask(key, cap.robot)
+        if m is not None:
+            return m
+    for seq in range(cap.sequence - 1, -1, -1):
         m = store.mask(mask_key(seq), cap.robot)
         if m is not None:
             return m
@@ -94,13 +99,22 @@ def _demo_sections(demo: Any) -> list[str]:
     out.append("<h2>Bars</h2><ul>" + "".join(
         f"<li class={'ok' if v else 'bad'}>{html.escape(k)}: {'met' if v else 'MISSED'}</li>"
         for k, v in bars.items()) + "</ul>")
-    out.append(f"<p>Link: {html.escape(str(demo.link))}. Run time {demo.seconds:.1f} s.</p>")
+    out.append(f"<p>Link, both ends: {html.escape(', '.join(f'{k} {v}' for k, v in demo.link.items()))}. "
+               f"Run time {demo.seconds:.1f} s (sweeps and experiments; this report was written after).</p>")
     return out
 
 
+def _note(text: str) -> str:
+    return f"<p class=note><em>{html.escape(text)}</em></p>"
+
+
 def write_report(store: Store, out: Path, measured: Measured | None = None, demo: Any = None,
-                 size: tuple[int, int] | None = None, seed: int = 0) -> Path:
-    """Writes out/index.html and its PNGs; returns the HTML path."""
+                 size: tuple[int, int] | None = None, seed: int = 0, robot: str | None = None,
+                 scene: str | None = None, progress: bool = False) -> Path:
+    """Writes out/index.html and its PNGs for the captures of `robot` and `scene` (all when None);
+    returns the HTML path. `progress` shows a tqdm bar over the captures on stderr."""
+    from tqdm import tqdm
+
     out.mkdir(parents=True, exist_ok=True)
     if measured is None and demo is not None and size is not None:
         from tools.demo import capture
@@ -108,9 +122,11 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
         def measured(scene: str, angle: float) -> np.ndarray | None:
             return capture(scene, angle, size).image if scene else None
     rng = np.random.default_rng(seed)
-    caps = store.captures()
+    caps = store.captures(robot=robot, scene=scene)
+    chosen = " ".join(f"{k} {v}" for k, v in (("robot", robot), ("scene", scene)) if v is not None)
     parts = [f"<!doctype html><meta charset=utf-8><title>btfscout report</title><style>{_CSS}</style>",
-             f"<h1>btfscout report: {html.escape(store.path.name)}</h1>",
+             f"<h1>btfscout report: {html.escape(store.path.name)}"
+             + (f" ({html.escape(chosen)})" if chosen else "") + "</h1>",
              "<h2>Captures per angle</h2>",
              _table(["scene", "robot", "seq", "commanded", "measured", "space", "models"],
                     [[c.scene, c.robot, c.sequence, "" if c.commanded[0] is None else f"{c.commanded[0]:.1f}",
@@ -122,11 +138,13 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
             rows.append([c.scene, f"{c.elevation:.1f}", m.label, c.band_names[m.band] if m.band < len(c.band_names)
                          else m.band, j.family.value, j.gamma, j.delta, j.xi, j.lam, m.count])
     parts += ["<h2>Models</h2>", _table(["scene", "angle", "label", "band", "family", "gamma", "delta",
-                                         "xi", "lambda", "pixels"], rows)]
+                                         "xi", "lambda", "pixels"], rows) if rows else _note("No models stored.")]
     parts.append("<h2>Synthetic beside measured</h2>")
-    for k, c in enumerate(caps):
+    shown, unmasked = len(parts), 0
+    for c in tqdm(caps, desc="report", unit="capture", disable=not progress):
         mask = capture_mask(store, c)
         models = {(m.label, m.band): m.model for m in store.models(c.id)}
+        unmasked += mask is None
         if mask is None or not models:
             continue
         name = f"{c.scene or 'robot' + c.robot}_{c.elevation:05.1f}_{c.sequence}"
@@ -154,6 +172,13 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
         imgs.append(f"<img src='{name}_hist.png' style='width:480px' title='histograms'>")
         parts.append(f"<h3>{html.escape(c.scene)} at {c.elevation:.1f}° (seq {c.sequence})</h3>"
                      "<div>" + "".join(imgs) + "</div>")
+    if unmasked == len(caps):
+        parts.append(_note("None: no capture has a label mask (the robot sends one with its captures; "
+                           "`fit --mask` and `ingest --mask` store one), so nothing can be synthesized."))
+    elif len(parts) == shown:
+        parts.append(_note("None: no capture with a label mask has models for it."))
+    elif unmasked:
+        parts.append(_note(f"{unmasked} capture(s) without a label mask are not shown."))
     if demo is not None:
         parts += _demo_sections(demo)
     path = out / "index.html"

@@ -1,6 +1,18 @@
 """Facet-based or statistical modelling? The resolution rule of the paper's Section 2.
 
-A surface can be rendered from facets only if the sensor resolves its grains and the
+Two views. The **paper view** reproduces the paper's own derivation: the geometric-optics
+condition lambda << facet << dA, read with three factors as
+
+    Kpf Kfl Kr lambda^2 < Kpf (facet area) < dA
+
+(Kpf pixel area per facet area, Kfl facet area per lambda^2, Kr rays per facet; the paper
+takes 1000, 1000 and 100), with dA one grain's viewing area D^2 and facets and grains
+taken as spheres (area 4 pi r^2). It gives four bounds: the widest facet and the longest
+wavelength dA allows, the smallest grain the wavelength allows and the longest wavelength
+the grain allows. For sand (D = 0.02 mm, lambda = 700 nm) they are 356.82 nm, 2 nm,
+0.125 mm and 112.1 nm, and every one rules facets out.
+
+The **physical view** asks what optics and surface roughness allow. A surface can be rendered from facets only if the sensor resolves its grains and the
 grains are large, smooth reflectors at the wavelength; when one pixel integrates many
 grains, only the statistics of the grain population survive, and a per-pixel
 statistical model (our Johnson BTF) is the right one. The bounds, all for wavelength L,
@@ -23,6 +35,14 @@ from dataclasses import asdict, dataclass
 
 # A pixel integrating at least this many grains sees only their statistics.
 MIN_GRAINS_PER_PIXEL = 25
+
+
+# The paper's worked example (Section 2): the smallest sand grain at the longest visible wavelength.
+PAPER_GRAIN_MM = 0.02
+PAPER_WAVELENGTH_NM = 700.0
+PAPER_PIXEL_PER_FACET = 1000.0
+PAPER_FACET_PER_WAVELENGTH2 = 1000.0
+PAPER_RAYS_PER_FACET = 100.0
 
 
 class Verdict(enum.StrEnum):
@@ -95,3 +115,81 @@ def bounds(grain_mm: float, wavelength_nm: float, pixel_mm: float | None = None,
         raise ValueError("grain size, wavelength and pixel footprint are too far apart for "
                          "floating point; give them in sensible units")
     return b
+
+
+@dataclass(frozen=True, slots=True)
+class PaperBound:
+    """One bound of the paper's derivation: `value` is an upper or lower `limit` on the
+    quantity whose actual size is `actual` (None for the facet, which has no given size;
+    `actual` is then the smallest facet the wavelength allows)."""
+    name: str
+    quantity: str
+    formula: str
+    inputs: dict[str, float]
+    value: float
+    unit: str
+    limit: str  # "upper" or "lower"
+    actual: float
+    rules_out_facets: bool
+
+
+@dataclass(frozen=True, slots=True)
+class PaperView:
+    grain_mm: float
+    wavelength_nm: float
+    pixel_per_facet: float
+    facet_per_wavelength2: float
+    rays_per_facet: float
+    pixel_area_nm2: float
+    bounds: tuple[PaperBound, ...]
+    verdict: Verdict
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d["verdict"] = self.verdict.value
+        return d
+
+
+def paper_bounds(grain_mm: float = PAPER_GRAIN_MM, wavelength_nm: float = PAPER_WAVELENGTH_NM,
+                 pixel_per_facet: float = PAPER_PIXEL_PER_FACET,
+                 facet_per_wavelength2: float = PAPER_FACET_PER_WAVELENGTH2,
+                 rays_per_facet: float = PAPER_RAYS_PER_FACET) -> PaperView:
+    """The paper's four bounds for grain size D, wavelength lambda and the three factors."""
+    named = {"grain size": grain_mm, "wavelength": wavelength_nm, "pixel per facet": pixel_per_facet,
+             "facet per wavelength^2": facet_per_wavelength2, "rays per facet": rays_per_facet}
+    for name, v in named.items():
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"{name} must be a positive number, got {v}")
+    kpf, kfl, kr, lam = pixel_per_facet, facet_per_wavelength2, rays_per_facet, wavelength_nm
+    d_nm = grain_mm * 1e6
+    da = d_nm * d_nm  # one grain's viewing area
+    chain = kpf * kfl * kr  # the whole factor chain on lambda^2
+    four_pi = 4.0 * math.pi
+    # (1) facet area < dA / Kpf, as a sphere's 4 pi (d/2)^2; the wavelength wants Kfl Kr lambda^2.
+    facet_max = 2.0 * math.sqrt(da / (four_pi * kpf))
+    facet_min = 2.0 * math.sqrt(kfl * kr / four_pi) * lam
+    lam_pixel = math.sqrt(da / chain)
+    # (2) the wavelength bounds the grain: Kpf Kfl Kr lambda^2 < Kpf 4 pi (D/2)^2.
+    grain_min = 2.0 * math.sqrt(chain / (kpf * four_pi)) * lam
+    # (3) the grain bounds the wavelength, the same inequality solved for lambda.
+    lam_grain = math.sqrt(kpf * four_pi / chain) * (d_nm / 2.0)
+    factors = {"pixel_per_facet": kpf, "facet_per_wavelength2": kfl, "rays_per_facet": kr}
+    bounds_ = (
+        PaperBound("facet_diameter", "facet diameter", "d < 2 sqrt(dA / (4 pi Kpf)), dA = D^2",
+                   {"grain_mm": grain_mm, "pixel_per_facet": kpf}, facet_max, "nm", "upper",
+                   facet_min, facet_min >= facet_max),
+        PaperBound("wavelength_from_pixel", "wavelength", "lambda < sqrt(dA / (Kpf Kfl Kr)), dA = D^2",
+                   {"grain_mm": grain_mm, **factors}, lam_pixel, "nm", "upper", lam, lam >= lam_pixel),
+        PaperBound("grain_size", "grain diameter",
+                   "D > 2 sqrt(Kpf Kfl Kr lambda^2 / (4 pi Kpf))",
+                   {"wavelength_nm": lam, **factors}, grain_min, "nm", "lower", d_nm, d_nm <= grain_min),
+        PaperBound("wavelength_from_grain", "wavelength",
+                   "lambda < sqrt(Kpf 4 pi (D/2)^2 / (Kpf Kfl Kr))",
+                   {"grain_mm": grain_mm, **factors}, lam_grain, "nm", "upper", lam, lam >= lam_grain),
+    )
+    if not all(math.isfinite(v) and v > 0 for b in bounds_ for v in (b.value, b.actual)) \
+            or not math.isfinite(da) or da <= 0:
+        raise ValueError("grain size, wavelength and factors are too far apart for floating point; "
+                         "give them in sensible units")
+    verdict = Verdict.STATISTICAL if any(b.rules_out_facets for b in bounds_) else Verdict.FACET
+    return PaperView(grain_mm, lam, kpf, kfl, kr, da, bounds_, verdict)

@@ -4,7 +4,10 @@ Models what the driver depends on: chip id, the operating-mode state machine (co
 registers take writes only in CONFIG mode; Euler registers hold zero until a fusion mode
 has run), Euler angles following a commanded orientation plus noise, calibration status,
 the Euler unit (UNIT_SEL: 1/16 degree or 1/900 radian; read as degrees, radians come out
-1.8% small, silently), and NACKs (OSError 121) injected at a seeded rate or on demand.
+1.8% small, silently), the axis remap registers, a chip mounted other than upright on the
+camera (`mount`, a rotation from hal.orientation.MOUNTS), and NACKs (OSError 121) injected
+at a seeded rate or on demand. The orientation source gives the camera's orientation; the
+chip reports it through its mounting and remap, so a wrong remap reads wrong.
 """
 from __future__ import annotations
 
@@ -14,8 +17,11 @@ import random
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from hal.bno055 import CHIP_ID, DEFAULT_ADDRESS, EULER_RADIANS, Mode, Reg
+import numpy as np
+
+from hal.bno055 import CHIP_ID, DEFAULT_ADDRESS, EULER_RADIANS, AxisRemap, Mode, Reg
 from hal.interfaces import Orientation
+from hal.orientation import euler_angles, euler_matrix
 
 FUSION_MODES = frozenset(range(0x08, 0x0D))  # IMU, COMPASS, M4G, NDOF_FMC_OFF, NDOF
 # Registers writable in any mode (datasheet 3.3: the rest only in CONFIG mode).
@@ -36,7 +42,7 @@ class Access:
 class EmulatedSMBus:
     def __init__(self, orientation_source: Callable[[], Orientation] | None = None, nack_rate: float = 0.0,
                  seed: int = 0, noise_deg: float = 0.0, address: int = DEFAULT_ADDRESS,
-                 chip_id: int = CHIP_ID, calibration: int = 0xFF) -> None:
+                 chip_id: int = CHIP_ID, calibration: int = 0xFF, mount: np.ndarray | None = None) -> None:
         if not 0.0 <= nack_rate <= 1.0:
             raise ValueError(f"nack_rate must lie in [0, 1], got {nack_rate}")
         self.source = orientation_source or (lambda: Orientation(0.0, 0.0, -90.0))
@@ -46,6 +52,8 @@ class EmulatedSMBus:
         self.regs = bytearray(0x80)
         self.regs[Reg.CHIP_ID] = chip_id
         self.regs[Reg.CALIB_STAT] = calibration
+        self.regs[Reg.AXIS_MAP_CONFIG], self.regs[Reg.AXIS_MAP_SIGN] = AxisRemap().config, AxisRemap().sign
+        self.mount = None if mount is None else np.asarray(mount, float)
         self.nack_next = 0  # force this many NACKs before anything else
         self.history: list[Access] = []
         self.closed = False
@@ -69,7 +77,7 @@ class EmulatedSMBus:
     def _refresh_euler(self) -> None:
         if self.mode not in FUSION_MODES:
             return  # fusion stopped: registers keep their last (initially zero) values
-        o = self.source()
+        o = self._reported(self.source())
         values = (o.heading % 360.0, o.roll, o.pitch)
         per_degree = 900.0 * math.pi / 180.0 if self.regs[Reg.UNIT_SEL] & EULER_RADIANS else 16.0
         for i, deg in enumerate(values):
@@ -77,6 +85,14 @@ class EmulatedSMBus:
             raw = max(-32768, min(32767, round(deg * per_degree))) & 0xFFFF
             self.regs[Reg.EULER_H_LSB + 2 * i] = raw & 0xFF
             self.regs[Reg.EULER_H_LSB + 2 * i + 1] = raw >> 8
+
+    def _reported(self, camera: Orientation) -> Orientation:
+        """What the fusion reports for the camera's orientation, through the mount and the remap."""
+        remap = AxisRemap(self.regs[Reg.AXIS_MAP_CONFIG] & 0x3F, self.regs[Reg.AXIS_MAP_SIGN] & 0x07)
+        if self.mount is None and remap == AxisRemap():
+            return camera
+        mount = np.eye(3) if self.mount is None else self.mount
+        return euler_angles(euler_matrix(camera) @ mount @ remap.matrix.T)
 
     def read_byte_data(self, i2c_addr: int, register: int) -> int:
         self._nack("read", i2c_addr, register, None)

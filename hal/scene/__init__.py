@@ -13,7 +13,12 @@ Outputs of `render`:
   blue, green, red, red edge, near infrared in 0..255 (8-bit range); channel 5 is
   thermal brightness temperature in centikelvin (29315 = 20 degrees C).
 - mask: H x W uint8 material label per pixel, ids in `LABEL_NAMES`
-  (1 black sand, 2 white sand, 3 tan sand, 4 grass, 5 soil, 6 gravel).
+  (1 black sand, 2 white sand, 3 tan sand, 4 grass, 5 soil, 6 gravel, 7 grey reference).
+
+Any scene can hold a grey reference card (`reference=True`): a flat, spectrally grey
+patch of known reflectance (`GREY_REFERENCE_REFLECTANCE`) lying level on the grains at the
+plate's centre, so it is in every view; its level follows the light and the exposure, not
+the view, which is what drift normalisation needs.
 
 Scenes: "black", "white", "mixed" (west half black, east half white: the view's left
 and right at azimuth 0), "field" (irregular patches of tan sand, grass, soil, gravel).
@@ -29,11 +34,11 @@ import numpy as np
 
 from hal.interfaces import ViewAngles
 from hal.scene.light import SUN, LightAngles, check_light, shade, thermal
-from hal.scene.materials import BAND_NAMES, LABEL_NAMES, REFERENCE_SIZE, Label
+from hal.scene.materials import BAND_NAMES, GREY_REFERENCE_REFLECTANCE, LABEL_NAMES, REFERENCE_SIZE, Label
 from hal.scene.surface import Surface, build_surface
 
-__all__ = ["BAND_NAMES", "BANDS", "LABEL_NAMES", "Label", "LightAngles", "RenderedView", "SCENES", "SUN",
-           "render"]
+__all__ = ["BAND_NAMES", "BANDS", "GREY_REFERENCE_REFLECTANCE", "LABEL_NAMES", "Label", "LightAngles",
+           "RenderedView", "SCENES", "SUN", "SceneRadiance", "render", "scene_radiance"]
 
 SCENES: tuple[str, ...] = ("black", "white", "mixed", "field")
 BANDS: tuple[str, ...] = ("rgb", "multispectral")
@@ -101,37 +106,100 @@ def _visible(surface: Surface, view: ViewAngles, h: int, w: int) -> np.ndarray:
     return cells[k.T[::-1], np.arange(w)[None, :]]
 
 
-def render(scene: str, view: ViewAngles, size: tuple[int, int] = (480, 640), seed: int = 0,
-           bands: str = "rgb", light: LightAngles | None = None) -> RenderedView:
-    """Render `scene` seen from `view` at `size` = (height, width), lit from `light` (None: `SUN`).
+@dataclass(frozen=True, slots=True)
+class SceneRadiance:
+    """The light reaching each pixel of a view before the camera turns it into numbers.
 
-    Deterministic per seed; the grain layout is shared by every view and light of a seed.
+    `radiance` is H x W x B float32 (1.0 fills an 8-bit pixel at the reference exposure);
+    `kelvin` the thermal band (multispectral only). `expose` makes the image, so a camera
+    can meter (`metered_mean`) before it chooses an exposure, as auto exposure does.
     """
+
+    radiance: np.ndarray
+    kelvin: np.ndarray | None
+    mask: np.ndarray
+    scene: str
+    view: ViewAngles
+    bands: str
+    light: LightAngles
+    noise_seed: tuple[int, ...]
+
+    def band_factors(self, exposure: float, gain: float, white_balance: tuple[float, float]) -> np.ndarray:
+        """Radiance-to-DN multiplier per band: exposure and gain on all, the white balance on red and blue."""
+        factors = np.full(self.radiance.shape[-1], 255.0 * exposure * gain)
+        red, blue = (0, 2) if self.bands == "rgb" else (2, 0)
+        factors[red] *= white_balance[0]
+        factors[blue] *= white_balance[1]
+        return factors
+
+    def metered_mean(self, exposure: float = 1.0, gain: float = 1.0,
+                     white_balance: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:
+        """Mean level per band of the noise-free image at these settings (clipped like the sensor)."""
+        dn = np.clip(self.radiance * self.band_factors(exposure, gain, white_balance), 0.0, 255.0)
+        return dn.reshape(-1, dn.shape[-1]).mean(axis=0)
+
+    def expose(self, exposure: float = 1.0, gain: float = 1.0,
+               white_balance: tuple[float, float] = (1.0, 1.0)) -> RenderedView:
+        """The image at `exposure` (relative to the reference, 10 ms) and analogue `gain`; read
+        noise is amplified by the gain. At (1, 1, (1, 1)) this is exactly `render`'s image."""
+        _check_exposure(exposure, gain, white_balance)
+        rng = np.random.default_rng(list(self.noise_seed))
+        if exposure == gain == 1.0 and tuple(white_balance) == (1.0, 1.0):
+            scaled = self.radiance * 255.0
+        else:
+            scaled = self.radiance * self.band_factors(exposure, gain, white_balance)
+        dn = scaled + rng.normal(0.0, READ_NOISE_DN * gain, self.radiance.shape)
+        dn = np.clip(np.rint(dn), 0, 255)
+        if self.bands == "rgb":
+            return RenderedView(dn.astype(np.uint8), self.mask, self.scene, self.view, self.bands, self.light)
+        kelvin = self.kelvin
+        ck = np.clip(np.rint(kelvin * 100.0 + rng.normal(0.0, THERMAL_NOISE_CK, kelvin.shape)), 0, 65535)
+        image = np.concatenate([dn, ck[..., None]], axis=2).astype(np.uint16)
+        return RenderedView(image, self.mask, self.scene, self.view, self.bands, self.light)
+
+
+def _check_exposure(exposure: float, gain: float, white_balance: tuple[float, float]) -> None:
+    values = (exposure, gain, *white_balance)
+    if len(values) != 4 or not all(math.isfinite(v) and v > 0 for v in values):
+        raise ValueError(f"exposure, gain and white balance must be positive and finite, "
+                         f"got {exposure}, {gain}, {white_balance}")
+
+
+def scene_radiance(scene: str, view: ViewAngles, size: tuple[int, int] = (480, 640), seed: int = 0,
+                   bands: str = "rgb", light: LightAngles | None = None, reference: bool = False) -> SceneRadiance:
+    """What `render` sees before exposure: the view's radiance, mask and noise stream."""
     h, w = _check(scene, view, size, bands)
     light = check_light(light)
     long_side = max(h, w)
     scale = long_side / REFERENCE_SIZE
     ss = min(MAX_SUPERSAMPLE, max(1, math.ceil(MIN_GRAIN_PIXELS / (1.1 * scale))))
-    surface = build_surface(scene, int(seed), long_side * ss, scale * ss)
+    surface = build_surface(scene, int(seed), long_side * ss, scale * ss, bool(reference))
     shading = shade(surface, light)
     cells = _visible(surface, view, h * ss, w * ss)
-    rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, round(view.elevation * 1000),
-                                 round(view.azimuth % 360.0 * 1000), 1])
+    noise_seed = (int(seed) & 0xFFFFFFFF, round(view.elevation * 1000), round(view.azimuth % 360.0 * 1000), 1)
     center = cells[ss // 2::ss, ss // 2::ss]
     mask = surface.label[center]
-    if bands == "rgb":
-        radiance = shading.rgb[cells]
-    else:
-        radiance = shading.radiance[cells]
+    radiance = shading.rgb[cells] if bands == "rgb" else shading.radiance[cells]
     if ss > 1:
         radiance = radiance.reshape(h, ss, w, ss, -1).mean(axis=(1, 3))
-    dn = radiance * 255.0 + rng.normal(0.0, READ_NOISE_DN, radiance.shape)
-    dn = np.clip(np.rint(dn), 0, 255)
-    if bands == "rgb":
-        return RenderedView(dn.astype(np.uint8), mask, scene, view, bands, light)
-    kelvin = thermal(surface, light)[cells]
-    if ss > 1:
-        kelvin = kelvin.reshape(h, ss, w, ss).mean(axis=(1, 3))
-    ck = np.clip(np.rint(kelvin * 100.0 + rng.normal(0.0, THERMAL_NOISE_CK, kelvin.shape)), 0, 65535)
-    image = np.concatenate([dn, ck[..., None]], axis=2).astype(np.uint16)
-    return RenderedView(image, mask, scene, view, bands, light)
+    kelvin = None
+    if bands != "rgb":
+        kelvin = thermal(surface, light)[cells]
+        if ss > 1:
+            kelvin = kelvin.reshape(h, ss, w, ss).mean(axis=(1, 3))
+    return SceneRadiance(radiance, kelvin, mask, scene, view, bands, light, noise_seed)
+
+
+def render(scene: str, view: ViewAngles, size: tuple[int, int] = (480, 640), seed: int = 0,
+           bands: str = "rgb", light: LightAngles | None = None, exposure: float = 1.0, gain: float = 1.0,
+           white_balance: tuple[float, float] = (1.0, 1.0), reference: bool = False) -> RenderedView:
+    """Render `scene` seen from `view` at `size` = (height, width), lit from `light` (None: `SUN`).
+
+    `exposure` is relative to the reference exposure (10 ms: a pixel of radiance 1.0 fills
+    255), `gain` the analogue gain, `white_balance` the (red, blue) gains; more exposure is a
+    brighter image that saturates sooner. `reference` lays the grey reference card at the
+    plate's centre (label `Label.GREY_REFERENCE`). Deterministic per seed; the grain layout
+    is shared by every view, light and exposure of a seed.
+    """
+    _check_exposure(exposure, gain, white_balance)
+    return scene_radiance(scene, view, size, seed, bands, light, reference).expose(exposure, gain, white_balance)

@@ -11,7 +11,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from hal.scene.materials import MATERIALS, Label
+from hal.scene.materials import GREY_REFERENCE_EMISSIVITY, GREY_REFERENCE_HEAT_GAIN, MATERIALS, Label
 from hal.scene.surface import Surface
 
 AMBIENT = 0.12  # share of sky light that reaches every facet
@@ -85,8 +85,8 @@ def shade(surface: Surface, light: LightAngles = SUN) -> Shading:
 def thermal(surface: Surface, light: LightAngles = SUN) -> np.ndarray:
     """Brightness temperature per flat cell (float32 kelvin) from the light each facet absorbs."""
     direct = shade(surface, light).direct
-    table = [MATERIALS[Label(int(v))] for v in range(1, 7)]
-    emissivity = np.array([m.emissivity for m in table])[surface.label - 1]
-    gain = np.array([m.heat_gain for m in table])[surface.label - 1]
+    table = [MATERIALS[label] for label in Label if label in MATERIALS]
+    emissivity = np.array([m.emissivity for m in table] + [GREY_REFERENCE_EMISSIVITY])[surface.label - 1]
+    gain = np.array([m.heat_gain for m in table] + [GREY_REFERENCE_HEAT_GAIN])[surface.label - 1]
     absorbed = (1.0 - surface.albedo.mean(axis=1)) * direct
     return ((AIR_KELVIN + gain * absorbed) * emissivity**0.25).astype(np.float32)

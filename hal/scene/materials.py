@@ -19,6 +19,7 @@ class Label(IntEnum):
     GRASS = 4
     SOIL = 5
     GRAVEL = 6
+    GREY_REFERENCE = 7  # the grey reference card, not a clutter material
 
 
 class Shape(Enum):
@@ -29,6 +30,11 @@ class Shape(Enum):
 
 BAND_NAMES: tuple[str, ...] = ("blue", "green", "red", "red_edge", "nir")
 REFERENCE_SIZE = 640
+# The grey reference card: a flat, spectrally neutral diffuse target (an 18% grey card: it stays unclipped where auto exposure brightens black sand six times).
+GREY_REFERENCE_REFLECTANCE = 0.18
+GREY_REFERENCE_SIDE = 0.12  # side of the square card, share of the plate's side
+GREY_REFERENCE_EMISSIVITY = 0.95
+GREY_REFERENCE_HEAT_GAIN = 20.0
 
 
 @dataclass(frozen=True, slots=True)

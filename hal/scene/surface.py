@@ -12,7 +12,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from hal.scene.materials import MATERIALS, Label, Material, Shape
+from hal.scene.materials import (GREY_REFERENCE_REFLECTANCE, GREY_REFERENCE_SIDE, MATERIALS, Label, Material,
+                                  Shape)
 
 BLADE_POINTS = 8  # spheres along one grass blade
 
@@ -185,12 +186,15 @@ def _near(labels: np.ndarray, s: Spheres, label: int, reach: float) -> np.ndarra
 
 
 @lru_cache(maxsize=4)
-def build_surface(scene: str, seed: int, size: int, scale: float) -> Surface:
+def build_surface(scene: str, seed: int, size: int, scale: float, reference: bool = False) -> Surface:
     """The plate for `scene` on a size x size torus; each material draws from its own stream.
 
     A material's grains come from a generator seeded by (seed, label) only, so the black
-    half of the mixed plate is the same realisation as the black plate.
+    half of the mixed plate is the same realisation as the black plate. With `reference`,
+    the grey card lies on the same plate (`with_reference`).
     """
+    if reference:
+        return with_reference(build_surface(scene, seed, size, scale))
     labels = scene_labels(scene, size, scale, np.random.default_rng([seed, 0]))
     flat_labels = labels.ravel()
     height = np.zeros(size * size)
@@ -217,3 +221,21 @@ def build_surface(scene: str, seed: int, size: int, scale: float) -> Surface:
             albedo = grain_albedo
     height = height.reshape(size, size)
     return Surface(height.astype(np.float32), height, normal, albedo, flat_labels.copy())
+
+
+def with_reference(plate: Surface) -> Surface:
+    """`plate` with the grey reference card at its centre: a level square resting on the
+    highest grains (nothing hides it, it casts a shadow), facing straight up."""
+    size = plate.size
+    side = max(2, round(GREY_REFERENCE_SIDE * size))
+    lo = (size - side) // 2
+    card = np.zeros((size, size), bool)
+    card[lo:lo + side, lo:lo + side] = True
+    cells = np.flatnonzero(card)
+    height = plate.height64.copy()
+    height[card] = float(height.max()) + 0.5
+    normal, albedo, label = plate.normal.copy(), plate.albedo.copy(), plate.label.copy()
+    normal[cells] = (0.0, 0.0, 1.0)
+    albedo[cells] = GREY_REFERENCE_REFLECTANCE
+    label[cells] = Label.GREY_REFERENCE
+    return Surface(height.astype(np.float32), height, normal, albedo, label)

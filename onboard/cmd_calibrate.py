@@ -1,0 +1,151 @@
+"""`btf-robot calibrate arm | tracker`: the arm's joint offsets and signs, and the tracker's axis remap.
+
+Both move the arm and read the tracker. `arm` stores its fit in the state dir
+(`arm_calibration.json`), which `run` and `selftest --config` apply; `tracker` names the
+BNO055 axis remap to set (`[hal] tracker_remap`). Exit 0 when the result is good, 1 when
+the hardware needs a person (what to do is printed), 2 for bad usage.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import sys
+from pathlib import Path
+from typing import Any
+
+from onboard.cli import CliError
+from onboard.cmd_selftest import _hal_options
+
+
+def add_parser(sub: Any) -> argparse.ArgumentParser:
+    p = sub.add_parser("calibrate", help="fit the arm's joints to the tracker, or check the tracker's axis remap")
+    p.add_argument("what", choices=("arm", "tracker"))
+    p.add_argument("--hal", choices=("fake", "emulated", "real"), help="device body (default: config or BTF_HAL)")
+    p.add_argument("--config", metavar="FILE", help="robot TOML config: its [hal] section and state_dir")
+    p.add_argument("--state-dir", metavar="DIR", help="where the arm calibration is kept (default: the config's, "
+                                                      "else ./state)")
+    p.add_argument("--tracker-remap", metavar="P", help="try this BNO055 remap (P0..P7 or CONFIG/SIGN) instead of "
+                                                        "the config's")
+    p.add_argument("--json", action="store_true", help="one JSON object instead of text")
+    fake = p.add_argument_group("deliberate faults of the fake and emulated bodies")
+    fake.add_argument("--fake-joint-offset", action="append", default=[], metavar="JOINT=DEG",
+                      help="build the arm with this joint off by DEG (yaw or tilt; repeatable)")
+    fake.add_argument("--fake-joint-reversed", action="append", default=[], metavar="JOINT",
+                      help="build the arm with this joint's servo turning the other way")
+    fake.add_argument("--fake-tracker-mount", metavar="NAME",
+                      help="mount the tracker wrongly: upside_down, turned_90, turned_180, turned_270, ...")
+    fake.add_argument("--fake-tracker-bias", type=float, metavar="DEG", help="tracker bias (default 0.5)")
+    return p
+
+
+def _options(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
+    options = _hal_options(args) or {}
+    state_dir = Path("state")
+    if args.config:
+        from onboard.config import load
+
+        state_dir = load(args.config).state_dir  # _hal_options already refused a bad file
+    if args.state_dir:
+        state_dir = Path(args.state_dir)
+    offsets = {}
+    for item in args.fake_joint_offset:
+        joint, _, deg = item.partition("=")
+        try:
+            offsets[joint.strip()] = float(deg)
+        except ValueError:
+            raise CliError(f"--fake-joint-offset wants JOINT=DEG such as tilt=3, got {item!r}") from None
+    faults = {"fake_joint_offsets": offsets or None, "fake_joint_reversed": args.fake_joint_reversed or None,
+              "fake_tracker_mount": args.fake_tracker_mount, "fake_tracker_bias_deg": args.fake_tracker_bias}
+    options.update({k: v for k, v in faults.items() if v is not None})
+    if args.tracker_remap:
+        options["tracker_remap"] = args.tracker_remap
+    return options, state_dir
+
+
+def run(args: argparse.Namespace) -> int:
+    from hal.factory import HalConfigError, build_hal
+
+    options, state_dir = _options(args)
+    try:
+        hal = build_hal(options, state_dir=state_dir)
+    except HalConfigError as exc:
+        raise CliError(str(exc)) from None
+    real = hal.body.value == "real"
+    try:
+        if real:
+            _say(args, "calibrate: the arm moves through several poses: clear its travel and keep hands away")
+            if not hal.tracker.calibration().ok:
+                _say(args, "calibrate: the tracker reports itself uncalibrated: turn the rig slowly through a "
+                           "figure eight until its calibration status is at least 1, then run this again")
+        result = _arm(args, hal, state_dir) if args.what == "arm" else _tracker(args, hal)
+    except Exception as exc:  # noqa: BLE001 - a device that fails mid-way is one clear line
+        print(f"btf-robot calibrate {args.what}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        hal.close()
+    return result
+
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    print(text, file=sys.stderr if args.json else sys.stdout)
+
+
+def _arm(args: argparse.Namespace, hal: Any, state_dir: Path) -> int:
+    from hal.arm import save_arm_fit
+    from hal.geometry import GOOD_FIT_DEG, calibrate_arm
+
+    report = calibrate_arm(hal)
+    stored = str(save_arm_fit(state_dir, report.fit)) if report.ok else None
+    if args.json:
+        print(json.dumps({"what": "arm", "body": hal.body.value, "ok": report.ok, "stored": stored,
+                          "yaw": dataclasses.asdict(report.fit.yaw), "tilt": dataclasses.asdict(report.fit.tilt),
+                          "check_error_deg": report.check_error_deg}))
+        return 0 if report.ok else 1
+    print(f"calibrate arm ({hal.body.value} HAL): servo = sign * joint + offset, fitted to the tracker")
+    for name in ("yaw", "tilt"):
+        j = getattr(report.fit, name)
+        print(f"  {name:4s}: offset {j.offset_deg:+.2f} deg, sign {j.sign:+.0f}, residual {j.residual_deg:.2f} deg "
+              f"over {j.poses} poses")
+    v = report.check_view
+    print(f"  check: asked elevation {v.elevation:g} azimuth {v.azimuth:g}, the tracker agrees within "
+          f"{report.check_error_deg:.2f} deg")
+    if not report.ok:
+        print(f"NOT stored: a residual above {GOOD_FIT_DEG:g} deg is no rigid offset. On real hardware: tighten the "
+              "servo horns and the tracker's mount, check `btf-robot calibrate tracker`, then run this again.")
+        return 1
+    print(f"stored in {stored}; `btf-robot run` applies it at start (remove the file to go back to the config's "
+          "[hal] arm calibration)")
+    for name in ("yaw", "tilt"):
+        if getattr(report.fit, name).sign < 0:
+            print(f"  note: the {name} servo turns against its joint; the calibration handles it, "
+                  "but on real hardware check that the servo horn is mounted as intended")
+    return 0
+
+
+def _tracker(args: argparse.Namespace, hal: Any) -> int:
+    from hal.geometry import NADIR_TOLERANCE_DEG, SQUARE_TOLERANCE_DEG, calibrate_tracker
+
+    r = calibrate_tracker(hal)
+    if args.json:
+        print(json.dumps({"what": "tracker", "body": hal.body.value, "ok": r.ok,
+                          "nadir": dataclasses.asdict(r.nadir), "current": str(r.current), "needed": str(r.needed),
+                          "needed_placement": r.needed.placement, "needed_registers": [r.needed.config, r.needed.sign],
+                          "off_square_deg": r.off_square_deg}))
+        return 0 if r.ok else 1
+    n = r.nadir
+    print(f"calibrate tracker ({hal.body.value} HAL): looking straight down it reads heading {n.heading:.1f} "
+          f"roll {n.roll:.1f} pitch {n.pitch:.1f} deg (must be pitch -90, roll 0, within {NADIR_TOLERANCE_DEG:g})")
+    print(f"  axis remap now {r.current}; the mounting needs {r.needed}")
+    if r.off_square_deg > SQUARE_TOLERANCE_DEG:
+        print(f"the tracker sits {r.off_square_deg:.0f} deg off any square mounting: no remap fixes that. "
+              "Mount it flat and square on the camera body, then run this again.")
+        return 1
+    if r.ok:
+        print("  the remap is right: nothing to do")
+        return 0
+    setting = r.needed.placement or f"0x{r.needed.config:02X}/0x{r.needed.sign:02X}"
+    print(f'set tracker_remap = "{setting}" in [hal] of the robot config (the driver writes it at every start; '
+          "the BNO055 forgets it at power-off), or remount the tracker upright; then run "
+          "`btf-robot calibrate tracker` again (try it now with --tracker-remap " + setting + ")")
+    return 1
