@@ -15,8 +15,9 @@ from radio.packet_base import (
 )
 from radio.packet_models import LabelModels, ModelsPacket
 
-# Authentic-looking MASK body (issue 18): a 1 x 1 label map of a 65535 x 65535 frame.
-HUGE_MASK = bytes.fromhex("9a02020107cdffffcdffff0101c40101c4020001")
+# Issue 18's MASK body, a 1 x 1 label map of a 65535 x 65535 frame, was schema 2; the same
+# 20 bytes at the current schema version are what an authentic robot could send now.
+ISSUE_MASK = bytes.fromhex("9a02020107cdffffcdffff0101c40101c4020001")
 
 
 def _mask_body(fh: int, fw: int, h: int = 1, w: int = 1) -> bytes:
@@ -25,10 +26,15 @@ def _mask_body(fh: int, fw: int, h: int = 1, w: int = 1) -> bytes:
                          use_bin_type=True)
 
 
+HUGE_MASK = _mask_body(65535, 65535)
+
+
 def test_the_twenty_byte_mask_of_a_65535_square_frame_is_refused():
-    assert len(HUGE_MASK) == 20 and HUGE_MASK == _mask_body(65535, 65535)
+    assert len(HUGE_MASK) == 20 and HUGE_MASK[2:] == ISSUE_MASK[2:]
     with pytest.raises(FrameError, match="frame height = 65535 outside"):
         pk.decode(HUGE_MASK)
+    with pytest.raises(FrameError):
+        pk.decode(ISSUE_MASK)
 
 
 @pytest.mark.parametrize("shape", [(MAX_FRAME_SIDE + 1, 480), (480, MAX_FRAME_SIDE + 1)])

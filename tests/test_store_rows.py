@@ -40,7 +40,7 @@ def _spoiled(tmp_path, sql):
 def test_report_on_a_bad_row_is_one_line_and_status_2(tmp_path, capsys, reason):
     db = _spoiled(tmp_path, BAD_ROWS[reason])
     before = db.read_bytes()
-    assert main(["report", "--db", str(db), "--out", str(tmp_path / "rep")]) == 2
+    assert main(["report", "--db", str(db), "--out", str(tmp_path / "rep"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1, err
     assert reason in err[0] and str(db) in err[0] and "Traceback" not in err[0]
