@@ -42,6 +42,8 @@ def _bands(models: Models) -> int:
 
 def _check(mask: np.ndarray, models: Models, n_bands: int, where: str = "",
            labels: list[int] | None = None) -> list[int]:
+    if mask.ndim != 2:
+        raise ValueError(f"mask must be H x W, got shape {mask.shape}")
     labels = list(label_counts(mask)) if labels is None else labels
     missing = sorted({lab for lab in labels for b in range(n_bands) if (lab, b) not in models})
     if missing:
