@@ -6,11 +6,12 @@ import time
 import numpy as np
 
 from benchmarks.common import Context, paired_times, verdict
+from btf.dependence import Dependence
+from btf.johnson import Family, Johnson
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from onboard.dependence import Dependence, measure
+from onboard.dependence import measure
 from onboard.fit import FrameFitter
-from onboard.johnson import Family, Johnson
 from tools.field import empirical_autocorrelation
 from tools.synth import synthesize
 

@@ -13,7 +13,7 @@ import time
 from pathlib import Path
 
 from benchmarks.common import Context, Section
-from benchmarks.host_memory import commands, make_scene, per_pixel
+from benchmarks.host_memory import make_scene, per_pixel
 
 # The bar's size for the commands that work in tiles; the global k-means and the bottom-up
 # segmenters (seconds per megapixel) at a size that runs in minutes.

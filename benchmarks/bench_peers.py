@@ -19,8 +19,8 @@ from scipy import stats
 from benchmarks import moments_johnson
 from benchmarks.common import Context, Section, figure, save
 from benchmarks.scenes import field
+from btf.johnson import Family, Johnson
 from onboard.fit import fit_values
-from onboard.johnson import Family, Johnson
 from tools.pdfs import binned
 
 METHODS = ("percentile", "johnsonsu MLE", "johnsonsb MLE", "moments (AS 99)", "gaussian", "weibull")

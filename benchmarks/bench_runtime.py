@@ -18,7 +18,7 @@ from hal.scene import render
 from onboard import config
 from onboard.capture import Pipeline, models_body
 from onboard.isodata import IsodataParams, isodata
-from onboard.segment import SegmentConfig, SegmentMethod, Segmenter
+from onboard.segment import SegmentConfig, Segmenter, SegmentMethod
 
 
 def _cfg(**skip) -> config.Config:

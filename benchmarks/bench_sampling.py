@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.common import Context, Section, figure, paired_times, save
-from onboard.johnson import Family, Johnson
+from btf.johnson import Family, Johnson
 
 FAMILIES = {
     "SN": Johnson.normal(120.0, 20.0),

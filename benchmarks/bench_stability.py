@@ -10,7 +10,7 @@ import numpy as np
 
 from benchmarks.common import Context, Section, figure, save
 from benchmarks.johnson_moments import lognormal_beta2
-from benchmarks.stability_grid import FRACTIONS, NEAR_BOUNDARY, SATURATIONS, Point, Saturation, curve, grid
+from benchmarks.stability_grid import NEAR_BOUNDARY, SATURATIONS, Point, Saturation, curve, grid
 from benchmarks.stability_score import METHODS, Cause, Diagnosis, Size, Truth, diagnose, evaluate, fit_and_score
 
 TITLES = {"percentile": "percentile fit (censoring on, the product)",

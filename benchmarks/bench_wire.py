@@ -12,7 +12,9 @@ import time
 import numpy as np
 
 from benchmarks.common import Context, Section
-from onboard.fit import PercentileCodec, fit_histogram, model_from_percentiles
+from btf.codec import PercentileCodec
+from btf.percentile import model_from_percentiles
+from onboard.fit import fit_histogram
 from radio.packet import decode, encode_models
 
 BANDS = ("R", "G", "B")

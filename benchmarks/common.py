@@ -112,8 +112,9 @@ def figure(ncols: int = 1, nrows: int = 1, size: tuple[float, float] = (6.4, 4.2
 
 def save(fig, ctx: Context, name: str, tight: bool = True) -> str:
     """Write the figure as `name` under ctx.out; the markdown image line for RESULTS.md."""
-    import matplotlib.pyplot as plt
     import warnings
+
+    import matplotlib.pyplot as plt
     ctx.out.mkdir(parents=True, exist_ok=True)
     if tight:
         with warnings.catch_warnings():

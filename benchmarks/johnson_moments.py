@@ -12,7 +12,7 @@ import math
 import numpy as np
 from scipy import optimize
 
-from onboard.johnson import Family
+from btf.johnson import Family
 
 _Z = np.linspace(-12.0, 12.0, 8001)
 _W = np.exp(-0.5 * _Z * _Z)

@@ -12,8 +12,8 @@ import math
 from dataclasses import dataclass
 
 from benchmarks.johnson_moments import lognormal_beta2, lognormal_omega, solve_shape
+from btf.johnson import Family, Johnson
 from onboard.censor import saturating
-from onboard.johnson import Family, Johnson
 
 # Below beta2 = beta1 + 1 + NEAR_BOUNDARY the curves are U- or J-shaped, close to two-point
 # distributions: the quantile function is nearly a step, and any shift of the step's u shows

@@ -21,10 +21,11 @@ from scipy.optimize import minimize
 
 from benchmarks import moments_johnson
 from benchmarks.stability_grid import SATURATIONS, Point, Saturation
+from btf.codec import z_for_count
+from btf.johnson import Family, Johnson, normal_cdf
+from btf.percentile import model_from_percentiles
 from onboard.censor import expected_histogram, histogram_l1
-from onboard.fit import fit_histogram, histogram_percentiles, plain_fit, z_for_count
-from onboard.johnson import Family, Johnson, normal_cdf
-from onboard.percentile import model_from_percentiles
+from onboard.fit import fit_histogram, histogram_percentiles, plain_fit
 
 U = np.linspace(0.01, 0.99, 99)
 U_W1 = (np.arange(2000) + 0.5) / 2000

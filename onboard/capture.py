@@ -8,18 +8,19 @@ per capture, so memory does not grow with the mission.
 from __future__ import annotations
 
 import time
-from pathlib import Path
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Callable, TypeVar
 
 import numpy as np
 
+from btf.dependence import Dependence
+from btf.record import FittedModel
 from hal.interfaces import HalError, ViewAngles, view_from_orientation
 from onboard import dependence, skip
-from onboard.dependence import Dependence
 from onboard.config import Config
 from onboard.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
-from onboard.fit import FitResult, FrameFitter
+from onboard.fit import FrameFitter
 from radio import packet as pk
 
 T = TypeVar("T")
@@ -42,7 +43,7 @@ class Capture:
     measured: ViewAngles
     band_names: tuple[str, ...]
     levels: int
-    results: dict[tuple[int, int], FitResult]
+    results: dict[tuple[int, int], FittedModel]
     skipped_labels: tuple[int, ...]
     labels: np.ndarray = field(repr=False)
     mask_changed: bool = False
@@ -77,7 +78,7 @@ class Pipeline:
         self.pca: PcaBasis | None = None
         self.pca_pending = False  # fitted, not yet attached to a capture
         self._fitter: FrameFitter | None = None
-        self._previous: dict[tuple[int, int], dict[tuple[int, int], FitResult]] = {}
+        self._previous: dict[tuple[int, int], dict[tuple[int, int], FittedModel]] = {}
         self.faults: list[str] = []  # every retried fault, for STATUS
 
     # -- device steps ------------------------------------------------------------------

@@ -33,11 +33,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.johnson import Family, Johnson, normal_ppf_one
+from btf.codec import MAX_SHIFT_CODE, SHIFT_SCALE
+from btf.johnson import Family, Johnson, normal_ppf_one
 
-CENSOR_SCALE = 65535  # fractions travel as 1/65535 fixed point
-SHIFT_SCALE = 32  # shifts travel as int8 multiples of 1/32
-MAX_SHIFT_CODE = 127
 # Percentiles stay this much probability away from censored mass.
 MARGIN = 0.01
 # An end level is censored when it holds more than its neighbours extrapolate to, by more than
@@ -54,7 +52,7 @@ MIN_REPORTED = 0.005
 @dataclass(frozen=True, slots=True)
 class Placement:
     """Where the four percentiles are read: s + (-3z, -z, z, 3z), or the normal fallback;
-    `exact`: the family from the sign of ln d alone (no SL band, onboard.percentile)."""
+    `exact`: the family from the sign of ln d alone (no SL band, btf.percentile)."""
 
     z: float
     shift_code: int = 0
@@ -105,13 +103,6 @@ def censored_end_one(end, next1, next2):
     if float(end) > EXCESS * ref + NOISE_SDS * math.sqrt(n1 + 1.0) and end >= MIN_CENSORED_PIXELS:
         return end
     return 0
-
-
-def quantize(fraction: float) -> float:
-    """A censored fraction as it travels (1/65535 fixed point)."""
-    if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
-        raise ValueError(f"censored fraction {fraction} outside [0, 1]")
-    return round(fraction * CENSOR_SCALE) / CENSOR_SCALE
 
 
 def place(z_base: float, low: float, high: float, count: int, ladder: tuple[float, ...]) -> Placement:
@@ -175,14 +166,6 @@ def l1_on_grid(model: Johnson, grid: tuple[np.ndarray, np.ndarray]) -> float:
 
 def _ppf(u: float) -> float:
     return normal_ppf_one(min(max(u, 0.0), 1.0))
-
-
-def fallback_probs(low: float, high: float) -> tuple[float, float]:
-    """(pa, pe): the probabilities below the fallback normal's two points. A censored end uses
-    its limit; an uncensored end the middle of the uncensored mass."""
-    pa = low if low > 0.0 else 0.5 * (1.0 - high)
-    pe = 1.0 - high if high > 0.0 else 1.0 - 0.5 * (1.0 - low)
-    return pa, pe
 
 
 # -- helpers for benchmarks and tests: move a model so that a fraction saturates ----------------

@@ -57,13 +57,13 @@ def run(args: argparse.Namespace) -> int:
     cfg, key = _setup(args)
     from hal.factory import build_hal
     from hal.interfaces import HalError
-    from radio.auth import FileCounterStore
-    from radio.link import Link
     from onboard.outbox import OutboxError
     from onboard.runtime import Runtime
     from onboard.segmentation import Segmentation
     from onboard.transport import LinkTransport
     from onboard.watchdog import Notifier
+    from radio.auth import FileCounterStore
+    from radio.link import Link
 
     cfg.state_dir.mkdir(parents=True, exist_ok=True)
     try:

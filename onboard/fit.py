@@ -1,9 +1,7 @@
-"""The fixed-memory fitter: frames and raw values in, Johnson models out.
+"""The fixed-memory fitter: frames and raw values in, fitted models (btf.record) out.
 
 FrameFitter fills preallocated per-(label, band) histograms in bounded row chunks and fits
-them in one batch (onboard.histfit); fit_values bins raw values and fits them alone. The
-histogram fit, the z ladder and the percentile codec are re-exported here: callers import
-them all from this module.
+them in one batch (onboard.histfit); fit_values bins raw values and fits them alone.
 """
 from __future__ import annotations
 
@@ -11,19 +9,15 @@ import math
 
 import numpy as np
 
-from onboard.codec import Z_LADDER, PercentileCodec, z_for_count
-from onboard.histfit import (FitResult, fit_counts, fit_histogram, fit_rows, histogram_percentiles,
-                             plain_fit, rebuild)
-from onboard.percentile import model_from_percentiles
+from btf.codec import PercentileCodec, z_for_count
+from btf.record import FittedModel
+from onboard.histfit import fit_counts, fit_histogram, fit_rows, histogram_percentiles, plain_fit
 
-__all__ = [
-    "Z_LADDER", "FitResult", "FrameFitter", "PercentileCodec", "fit_histogram", "fit_values",
-    "histogram_percentiles", "model_from_percentiles", "plain_fit", "rebuild", "z_for_count",
-]
+__all__ = ["FrameFitter", "fit_histogram", "fit_values", "histogram_percentiles", "plain_fit"]
 
 
 def fit_values(values: np.ndarray, value_range: tuple[float, float] | None = None,
-               bins: int | None = None) -> FitResult:
+               bins: int | None = None) -> FittedModel:
     """Fit raw values. Integer dtypes default to one bin per level over the dtype's range;
     floats to 256 bins over `value_range` (default: the data's own range)."""
     v = np.asarray(values).ravel()
@@ -181,7 +175,7 @@ class FrameFitter:
             bad = lmin if lmin < 0 else lmax
             raise ValueError(f"label {bad} outside [0, {self.n_labels - 1}]")
 
-    def fit(self, min_count: int = 1, censor: bool = True) -> dict[tuple[int, int], FitResult]:
+    def fit(self, min_count: int = 1, censor: bool = True) -> dict[tuple[int, int], FittedModel]:
         """Fit every (label, band) with at least `min_count` pixels; others go to empty_labels."""
         totals = self.counts[:, 0, :].sum(axis=1)
         keep = [lab for lab in range(self.n_labels) if int(totals[lab]) >= max(min_count, 1)]

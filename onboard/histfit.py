@@ -17,32 +17,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.censor import (MIN_REPORTED, SHIFT_SCALE, Placement, censored_counts, censored_end_one, fallback_probs,
-                            piled_counts, place, quantize)
-from onboard.codec import COUNT_LADDER, PercentileCodec, default_codec, percentile_probs, z_for_count
-from onboard.johnson import Johnson
-from onboard.percentile import model_from_percentiles
+from btf.codec import (
+    COUNT_LADDER,
+    SHIFT_SCALE,
+    PercentileCodec,
+    default_codec,
+    fallback_probs,
+    percentile_probs,
+    quantize,
+    z_for_count,
+)
+from btf.johnson import Johnson
+from btf.percentile import model_from_percentiles
+from btf.record import FittedModel
+from onboard.censor import MIN_REPORTED, Placement, censored_counts, censored_end_one, piled_counts, place
 from onboard.reads import SN, TEMPLATE, WIDTH, in_band, l1, rank_grid, sl_bands, solve, template
-
-
-@dataclass(frozen=True, slots=True)
-class FitResult:
-    """One (label, band) fit: the model and what the packet carries to rebuild it."""
-
-    model: Johnson
-    count: int
-    z: float
-    percentiles: tuple[float, float, float, float]  # x(-3z), x(-z), x(z), x(3z), data units
-    beta1: float  # squared skewness of the histogram, for diagnostics
-    beta2: float  # kurtosis of the histogram
-    # Percentiles read at shift + (-3z, -z, z, 3z) on the normal scale (onboard.censor).
-    shift: float = 0.0
-    # Fractions of the pixels censored at the lowest and highest level (1/65535 fixed point).
-    censored_low: float = 0.0
-    censored_high: float = 0.0
-    fallback: bool = False  # the normal through the censor limits (onboard.censor)
-    # The family from the sign of ln d alone (the SL band would have chosen another).
-    exact_family: bool = False
 
 
 def histogram_percentiles(counts: np.ndarray, probs, lo: float = 0.0, bin_width: float = 1.0,
@@ -123,7 +112,7 @@ def _centres(lo: float, bin_width: float, bins: int) -> np.ndarray:
 
 def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
                   codec: PercentileCodec | None = None, z: float | None = None,
-                  censor: bool = True) -> FitResult:
+                  censor: bool = True) -> FittedModel:
     """Fit one histogram (bin k centred on lo + k * bin_width). Percentiles are snapped
     through `codec` (default: the range of the bins at 16 or 32 bits) before solving.
     With `censor`, mass piled up in the end bins is treated as censored (onboard.censor)."""
@@ -145,7 +134,7 @@ def fit_histogram(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
 
 
 def fit_counts(counts: np.ndarray, occupied: np.ndarray, count: int, lo: float, bin_width: float,
-               codec: PercentileCodec | None, z: float | None, censor: bool) -> FitResult:
+               codec: PercentileCodec | None, z: float | None, censor: bool) -> FittedModel:
     """fit_histogram of checked counts, their occupied bins and exact total."""
     if codec is None:
         codec = default_codec(lo, bin_width, counts.size)
@@ -155,7 +144,7 @@ def fit_counts(counts: np.ndarray, occupied: np.ndarray, count: int, lo: float, 
 
 def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, bin_width: float,
              codec: PercentileCodec, censor: bool = True,
-             occupied: np.ndarray | None = None) -> list[FitResult]:
+             occupied: np.ndarray | None = None) -> list[FittedModel]:
     """Fit each row of (rows, bins) counts; every row has pixels. Shared by fit_histogram and
     FrameFitter.fit, so both give the same model for the same histogram. A single row may come
     with its occupied bins (flatnonzero) already found. Each row is read several ways
@@ -169,14 +158,14 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
         first, last, low_n, high_n, pile_lo, pile_hi = _ends_one(counts[0], occupied, censor)
     else:
         first, last, low_n, high_n, pile_lo, pile_hi = _ends_rows(counts, censor)
-    out: list[FitResult | None] = [None] * rows
+    out: list[FittedModel | None] = [None] * rows
     plans: dict[int, tuple[Placement, float, float]] = {}
     for i in range(rows):
         count, z = totals[i], zs[i]
         if first[i] == last[i]:
             # One occupied bin: a constant region, sent as four equal percentiles.
             pct = codec.snap([lo + bin_width * int(first[i])] * 4)
-            out[i] = FitResult(Johnson.constant(pct[0]), count, z, pct, float(beta1[i]), float(beta2[i]))
+            out[i] = FittedModel(Johnson.constant(pct[0]), count, z, pct, float(beta1[i]), float(beta2[i]))
             continue
         low = quantize(float(low_n[i]) / count) if censor else 0.0
         high = quantize(float(high_n[i]) / count) if censor else 0.0
@@ -198,7 +187,7 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
                                            normal_probs=fallback_probs(low, high) if fallback else None,
                                            exact_family=exact)
             # the exact family travels only where the SL band would have chosen another
-            out[i] = FitResult(model, totals[i], z, p, float(beta1[i]), float(beta2[i]), code / SHIFT_SCALE,
+            out[i] = FittedModel(model, totals[i], z, p, float(beta1[i]), float(beta2[i]), code / SHIFT_SCALE,
                                low, high, fallback, exact and bool(reads.ok[j, 1]))
     return out  # type: ignore[return-value]
 
@@ -355,15 +344,6 @@ def plain_fit(counts: np.ndarray, lo: float = 0.0, bin_width: float = 1.0,
     z = z_for_count(count)
     pct = codec.snap(histogram_percentiles(counts, percentile_probs(z), lo, bin_width))
     return model_from_percentiles(pct, z, count, exact_family=True)
-
-
-def rebuild(result: FitResult, percentiles=None) -> Johnson:
-    """The model from a result's (or the given, e.g. decoded) percentiles and its read: what
-    the receiver computes from a packet."""
-    normal_probs = fallback_probs(result.censored_low, result.censored_high) if result.fallback else None
-    return model_from_percentiles(result.percentiles if percentiles is None else percentiles,
-                                  result.z, result.count, shift=result.shift,
-                                  normal_probs=normal_probs, exact_family=result.exact_family)
 
 
 def _exact_total(counts: np.ndarray, occupied: np.ndarray) -> int:

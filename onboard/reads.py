@@ -11,7 +11,7 @@ so no rule fits a region worse than the plain percentile fit. Nothing iterates: 
 reads, one closed form and one distance each, in array passes over every row of a frame.
 
 The distance here only ranks reads (a fast normal cdf, accurate to 2e-7); the chosen model
-is then solved once more by `onboard.percentile.model_from_percentiles`, as the host does
+is then solved once more by `btf.percentile.model_from_percentiles`, as the host does
 from the packet, so robot and host hold the same model bit for bit.
 """
 from __future__ import annotations
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from onboard.codec import MIN_TAIL_PIXELS, Z_LADDER, percentile_probs
-from onboard.percentile import GAP_FLOOR
+from btf.codec import MIN_TAIL_PIXELS, Z_LADDER, percentile_probs
+from btf.percentile import GAP_FLOOR
 
 # The reads of every region after its plain read: three spreads z by three centres s (shift
 # codes in 1/32, onboard.censor.SHIFT_SCALE), the plain read's own z and centre excepted.
@@ -95,12 +95,12 @@ def in_band(pct: np.ndarray, band: np.ndarray) -> np.ndarray:
 
 
 def sl_bands(count: np.ndarray) -> np.ndarray:
-    """onboard.percentile.sl_band of each count."""
+    """btf.percentile.sl_band of each count."""
     return np.maximum(4.0 / np.sqrt(np.maximum(count, 1.0)), 1e-6)
 
 
 def solve(pct: np.ndarray, z: np.ndarray, shift: np.ndarray, band: np.ndarray):
-    """The closed forms of onboard.percentile for N reads at once: (family, gamma, delta, xi,
+    """The closed forms of btf.percentile for N reads at once: (family, gamma, delta, xi,
     lam) arrays. `band` is each read's SL half-width (0: the family from the sign of ln d).
     Only for ranking: a failed form falls back to the normal, as the scalar solve does."""
     a, b, c, e = pct[:, 0], pct[:, 1], pct[:, 2], pct[:, 3]

@@ -32,8 +32,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from hal.interfaces import ViewAngles
-from onboard import config as config_mod
 from onboard import capture as wire
+from onboard import config as config_mod
 from onboard.capture import Capture, Pipeline, PoseSkipped
 from onboard.config import Config, ConfigError
 from onboard.outbox import Outbox, OutboxFull, Reply
@@ -43,7 +43,6 @@ from onboard.watchdog import Notifier
 from radio import FrameError
 from radio import packet as pk
 from radio.link import QueueFull
-
 
 # -- the runtime -----------------------------------------------------------------------
 

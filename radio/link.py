@@ -18,8 +18,18 @@ from dataclasses import dataclass, field
 from radio import FrameError
 from radio.auth import CounterStore, ReplayWindow
 from radio.fragment import AUTO_BASE, Reassembler, StreamAssembler, StreamPacker, split_datagram
-from radio.frame import (DEFAULT_MTU, Deframer, Frame, Kind, Reason, decode_repaired, encode,
-                         max_payload, reason_of, reject)
+from radio.frame import (
+    DEFAULT_MTU,
+    Deframer,
+    Frame,
+    Kind,
+    Reason,
+    decode_repaired,
+    encode,
+    max_payload,
+    reason_of,
+    reject,
+)
 
 
 @dataclass(frozen=True, slots=True)

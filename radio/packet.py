@@ -24,8 +24,21 @@ from typing import Any, ClassVar
 
 from radio import FrameError
 from radio.packet_base import (
-    MAX_ANGLES, MAX_BODY, SCHEMA_VERSION, UINT32, Kind, angles_from_wire, angles_to_wire, check_extras,
-    pack_body, split_fields, unpack_body, want_enum, want_float, want_int, want_str,
+    MAX_ANGLES,
+    MAX_BODY,
+    SCHEMA_VERSION,
+    UINT32,
+    Kind,
+    angles_from_wire,
+    angles_to_wire,
+    check_extras,
+    pack_body,
+    split_fields,
+    unpack_body,
+    want_enum,
+    want_float,
+    want_int,
+    want_str,
 )
 from radio.packet_mask import MAX_SIDE, MaskPacket, downsample_labels, mask_packet
 from radio.packet_models import LabelModels, ModelsPacket, UnchangedPacket, models_packet
@@ -270,7 +283,7 @@ def encode(packet: Packet) -> bytes:
 
 
 def encode_models(fits: Mapping, **kwargs: Any) -> bytes:
-    """The MODELS body for the fitter's results {(label, band index): FitResult}; see `models_packet`."""
+    """The MODELS body for the fitter's results {(label, band index): FittedModel}; see `models_packet`."""
     return encode(models_packet(fits, **kwargs))
 
 

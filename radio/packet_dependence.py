@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from onboard.dependence import LAGS, Dependence, corr_size
+from btf.dependence import LAGS, Dependence, corr_size
 from radio import FrameError
 from radio.packet_base import want_bin
 

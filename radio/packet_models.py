@@ -46,14 +46,28 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from onboard.censor import CENSOR_SCALE, MAX_SHIFT_CODE, SHIFT_SCALE, fallback_probs
-from onboard.dependence import Dependence
-from onboard.fit import Z_LADDER, FitResult, PercentileCodec, model_from_percentiles
-from onboard.johnson import Johnson
+from btf.codec import CENSOR_SCALE, MAX_SHIFT_CODE, SHIFT_SCALE, Z_LADDER, PercentileCodec
+from btf.dependence import Dependence
+from btf.johnson import Johnson
+from btf.record import FittedModel
 from radio import FrameError
 from radio.packet_base import (
-    MAX_BANDS, MAX_FRAME_PIXELS, MAX_LABELS, MAX_LEVELS, MAX_NAME, MIN_LEVELS, UINT32, Kind,
-    angles_from_wire, angles_to_wire, get_varint, put_varint, want_bin, want_float, want_int, want_str,
+    MAX_BANDS,
+    MAX_FRAME_PIXELS,
+    MAX_LABELS,
+    MAX_LEVELS,
+    MAX_NAME,
+    MIN_LEVELS,
+    UINT32,
+    Kind,
+    angles_from_wire,
+    angles_to_wire,
+    get_varint,
+    put_varint,
+    want_bin,
+    want_float,
+    want_int,
+    want_str,
 )
 from radio.packet_dependence import decode_dependence, encode_dependence, quantized, section_size
 
@@ -95,7 +109,7 @@ class Tail:
     censored_low: float = 0.0
     censored_high: float = 0.0
     fallback: bool = False
-    exact_family: bool = False  # the family from the sign of ln d alone (onboard.percentile)
+    exact_family: bool = False  # the family from the sign of ln d alone (btf.percentile)
 
 
 @dataclass(frozen=True, slots=True)
@@ -142,8 +156,13 @@ class ModelsPacket:
     extras: Mapping[str, Any] = field(default_factory=dict)
     # Grain and band correlation per label id, for some or all labels (empty: none measured).
     dependence: Mapping[int, Dependence] = field(default_factory=dict)
-    # Filled by decode: (label, band index) -> the model recomputed from the codes.
-    models: Mapping[tuple[int, int], Johnson] = field(default_factory=dict, compare=False, repr=False)
+    # Filled by decode: (label, band index) -> the record, its model recomputed from the codes.
+    fits: Mapping[tuple[int, int], FittedModel] = field(default_factory=dict, compare=False, repr=False)
+
+    @property
+    def models(self) -> dict[tuple[int, int], Johnson]:
+        """(label, band index) -> the decoded model."""
+        return {k: f.model for k, f in self.fits.items()}
 
     def _wire(self) -> list:
         return [self.robot_id, self.seq, float(self.time), self.feature_space, list(self.bands),
@@ -239,7 +258,7 @@ class ModelsPacket:
             for i, (label, count, z_index) in enumerate(heads))
         packet = cls(robot, seq, t, commanded, measured, space, bands, levels, records, extras, dependence)
         if compute:
-            object.__setattr__(packet, "models", _recompute(packet, codec))
+            object.__setattr__(packet, "fits", _recompute(packet, codec))
         return packet
 
 
@@ -277,7 +296,7 @@ class UnchangedPacket:
 
 
 def models_packet(
-    fits: Mapping[tuple[int, int], FitResult], *, robot_id: int, seq: int, time: float,
+    fits: Mapping[tuple[int, int], FittedModel], *, robot_id: int, seq: int, time: float,
     commanded: tuple[float, float], measured: tuple[float, float], feature_space: str,
     bands: Sequence[str], levels: int = 256,
     censored: Mapping[int, tuple[float, float]] | None = None,
@@ -322,11 +341,11 @@ def models_packet(
     )
 
 
-def _special(r: FitResult) -> bool:
+def _special(r: FittedModel) -> bool:
     return bool(r.shift or r.censored_low or r.censored_high or r.fallback or r.exact_family)
 
 
-def _tail_of(r: FitResult, label_z: float, override: tuple[float, float] | None) -> Tail | None:
+def _tail_of(r: FittedModel, label_z: float, override: tuple[float, float] | None) -> Tail | None:
     """The record a model needs beyond its label's fields, or None for a plain model. The
     `censored` override of models_packet annotates fits that measured no censoring."""
     low, high = r.censored_low, r.censored_high
@@ -434,23 +453,18 @@ def _tails(blob: bytes, pos: int, label_z: list[int], n_bands: int) -> list[tupl
     return [tuple(t) for t in out]
 
 
-def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, int], Johnson]:
+def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, int], FittedModel]:
     out = {}
     for rec in packet.labels:
         for band, codes in enumerate(rec.codes):
-            t = rec.tail(band)
-            z = Z_LADDER[rec.z_index if t is None else t.z_index]
-            kw: dict[str, Any] = {}
-            if t is not None:
-                kw["shift"] = t.shift_code / SHIFT_SCALE
-                kw["exact_family"] = t.exact_family
-                if t.fallback:
-                    kw["normal_probs"] = fallback_probs(t.censored_low, t.censored_high)
+            t = rec.tail(band) or Tail(rec.z_index)
             try:
-                model = model_from_percentiles(codec.decode(codes), z, rec.count, **kw)
+                out[(rec.label, band)] = FittedModel.solve(
+                    codec.decode(codes), Z_LADDER[t.z_index], rec.count, shift=t.shift_code / SHIFT_SCALE,
+                    censored_low=t.censored_low, censored_high=t.censored_high, fallback=t.fallback,
+                    exact_family=t.exact_family)
             except (ValueError, ArithmeticError) as exc:
                 raise FrameError(f"label {rec.label} band {band}: no model from codes {codes}: {exc}") from None
-            out[(rec.label, band)] = model
     return out
 
 

@@ -11,8 +11,7 @@ import sys
 import atheris
 
 with atheris.instrument_imports():
-    from radio import FrameError
-    from radio import packet
+    from radio import FrameError, packet
     from radio.auth import MemoryCounterStore
     from radio.frame import decode as decode_frame
     from radio.link import Delivered, Link

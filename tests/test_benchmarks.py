@@ -13,7 +13,7 @@ from benchmarks.johnson_moments import shape_moments, solve_shape
 from benchmarks.moments_johnson import MomentFitError, fit_moments
 from benchmarks.stability_grid import SATURATIONS, Point, Saturation, curve, grid
 from benchmarks.stability_score import METHODS, Cause, Size, Truth, diagnose, evaluate, fit_and_score, score
-from onboard.johnson import Family, Johnson
+from btf.johnson import Family, Johnson
 
 EXPECTED = {"core", "dependence", "hostmem", "ingest", "onboard", "peers", "runtime", "sampling", "scene", "stability",
             "startup",
@@ -108,7 +108,7 @@ def test_moments_reference_recovers_the_curve_from_its_exact_moments(family, gam
 
 
 def _standard_ppf(family, gamma, delta, u):
-    from onboard.johnson import Johnson
+    from btf.johnson import Johnson
     return Johnson(family, gamma, delta, 0.0, 1.0).ppf(u)
 
 

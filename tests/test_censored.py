@@ -6,11 +6,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from onboard.censor import (CENSOR_SCALE, censored_counts, expected_histogram, fallback_probs,
-                            histogram_l1, place, saturating)
-from onboard.fit import Z_LADDER, FrameFitter, fit_histogram, plain_fit, rebuild
-from onboard.johnson import Z_CLIP, Family, Johnson
+from btf.codec import CENSOR_SCALE, Z_LADDER, fallback_probs
+from btf.johnson import Family, Johnson
+from btf.record import rebuild
+from onboard.censor import censored_counts, expected_histogram, histogram_l1, place, saturating
+from onboard.fit import FrameFitter, fit_histogram, plain_fit
 from radio.packet import decode, encode_models
+
 
 def _scaled(family: Family, gamma: float, delta: float) -> Johnson:
     """The shape with its 0.1%..99.9% range 100 levels wide, as in the recovery grid."""
@@ -147,7 +149,7 @@ def test_beyond_what_four_percentiles_can_see_the_fallback_normal_keeps_both_pil
 
 
 def test_placement_never_reads_a_percentile_inside_the_censored_mass():
-    from onboard.johnson import normal_cdf
+    from btf.johnson import normal_cdf
     for low in (0.0, 0.05, 0.2, 0.4):
         for high in (0.0, 0.1, 0.3, 0.5):
             p = place(Z_LADDER[0], low, high, 100_000, Z_LADDER)

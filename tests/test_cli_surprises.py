@@ -4,11 +4,8 @@ chosen, pipes close quietly, and start-up loads no heavy library."""
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np

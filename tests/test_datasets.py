@@ -6,8 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from tools.datasets import (Angles, DatasetError, Layout, parse_utia_name, read_curet_table, scan,
-                            write_rendered)
+from tools.datasets import Angles, DatasetError, Layout, parse_utia_name, read_curet_table, scan, write_rendered
 
 VIEWS = [Angles(30.0, 0.0, 40.0, 0.0), Angles(60.0, 90.0, 70.0, 180.0), Angles(90.0, 0.0, 55.0, 45.0)]
 
@@ -59,7 +58,7 @@ def test_bad_curet_tables_name_the_problem(tmp_path, text, problem):
 
 def test_curet_image_missing_from_the_table_is_named(tmp_path):
     write_rendered(tmp_path, "curet", VIEWS[:2], size=(16, 16), masks=False)
-    (tmp_path / "angles.txt").write_text(f"1 0 0 0 0\n")
+    (tmp_path / "angles.txt").write_text("1 0 0 0 0\n")
     with pytest.raises(DatasetError, match="01-002.png.*not in the angle table"):
         scan(tmp_path, "curet")
 

@@ -5,13 +5,17 @@ import sys
 import textwrap
 
 import msgpack
-import numpy as np
 import pytest
 
 from radio import FrameError
 from radio import packet as pk
 from radio.packet_base import (
-    MAX_BANDS, MAX_FRAME_PIXELS, MAX_FRAME_SIDE, MAX_MASK_SIDE, SCHEMA_VERSION, Kind,
+    MAX_BANDS,
+    MAX_FRAME_PIXELS,
+    MAX_FRAME_SIDE,
+    MAX_MASK_SIDE,
+    SCHEMA_VERSION,
+    Kind,
 )
 from radio.packet_models import LabelModels, ModelsPacket
 

@@ -9,9 +9,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from onboard.dependence import LAGS, Dependence, measure
-from onboard.fit import FrameFitter, z_for_count
-from onboard.johnson import Johnson
+from btf.codec import z_for_count
+from btf.dependence import LAGS, Dependence
+from btf.johnson import Johnson
+from onboard.dependence import measure
+from onboard.fit import FrameFitter
 from radio import FrameError
 from radio import packet as pk
 from radio.packet_dependence import decode_dependence, encode_dependence, record_size

@@ -3,12 +3,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
-from onboard.dependence import LAGS, Dependence
-from onboard.johnson import Family, Johnson
+from btf.dependence import LAGS, Dependence
+from btf.johnson import Family, Johnson
 from tools.field import (
-    blend, empirical_autocorrelation, gaussian_fields, latent, latent_rho, nearest_correlation, spectrum,
+    blend,
+    empirical_autocorrelation,
+    gaussian_fields,
+    latent,
+    latent_rho,
+    nearest_correlation,
+    spectrum,
 )
 
 

@@ -4,11 +4,12 @@ import math
 import numpy as np
 import pytest
 
-from onboard.codec import COUNT_LADDER
+from btf.codec import COUNT_LADDER, Z_LADDER, PercentileCodec, z_for_count
+from btf.johnson import Family, Johnson
+from btf.percentile import model_from_percentiles
+from btf.record import FittedModel, rebuild
+from onboard.fit import FrameFitter, fit_histogram, fit_values
 from onboard.reads import GRID
-from onboard.fit import (Z_LADDER, FitResult, FrameFitter, PercentileCodec, fit_histogram,
-                         fit_values, model_from_percentiles, rebuild, z_for_count)
-from onboard.johnson import Family, Johnson
 
 HUGE = 2**53
 
@@ -223,7 +224,7 @@ def test_frame_fitter_matches_fitting_each_region_directly():
     assert f.empty_labels == (1,)
     assert set(results) == {(0, b) for b in range(3)} | {(2, b) for b in range(3)}
     for (label, band), r in results.items():
-        assert isinstance(r, FitResult)
+        assert isinstance(r, FittedModel)
         assert r == fit_values(frame[..., band][labels == label])
         assert np.array_equal(f.counts[label, band], np.bincount(frame[..., band][labels == label], minlength=256))
 

@@ -5,8 +5,10 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from onboard.fit import PercentileCodec, fit_histogram, rebuild
-from onboard.johnson import Family, Johnson, normal_ppf
+from btf.codec import PercentileCodec
+from btf.johnson import Family, Johnson, normal_ppf
+from btf.record import rebuild
+from onboard.fit import fit_histogram
 
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

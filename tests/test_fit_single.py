@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from btf.johnson import Family, Johnson, normal_cdf
 from onboard.censor import _censored_end, censored_end_one, histogram_l1
 from onboard.fit import FrameFitter, fit_histogram, fit_values
 from onboard.histfit import _percentile_rows, _percentiles_one
-from onboard.johnson import Family, Johnson, normal_cdf
 
 
 def _histograms(rng):

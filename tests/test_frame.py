@@ -7,8 +7,7 @@ from cobs import cobs
 
 from radio import FrameError
 from radio.auth import FileCounterStore, ReplayWindow
-from radio.frame import (OVERHEAD, Deframer, Frame, Kind, Reason, decode, decode_repaired, encode,
-                         max_payload, reason_of)
+from radio.frame import OVERHEAD, Deframer, Frame, Kind, Reason, decode, decode_repaired, encode, max_payload, reason_of
 from radio.keys import KeyFileError, load_key, write_key
 
 KEY = bytes(range(32))

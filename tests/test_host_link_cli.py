@@ -6,7 +6,6 @@ import tty
 import pytest
 
 from onboard.cli import CliError
-
 from radio import packet as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import write_key

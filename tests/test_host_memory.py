@@ -44,7 +44,7 @@ _LIBRARY = textwrap.dedent("""
     what, side = sys.argv[1], int(sys.argv[2])
     from benchmarks.scenes import field
     from onboard.dependence import Dependence
-    from onboard.johnson import Johnson
+    from btf.johnson import Johnson
     from tools import masks, synth
 
     models = {(lab, b): Johnson.normal(90.0 + 20 * b + 40 * lab, 12.0) for lab in (0, 1) for b in range(3)}

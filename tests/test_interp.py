@@ -8,13 +8,20 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from onboard.johnson import Johnson
+from btf.johnson import Johnson
 from tools.cli import main
 from tools.datasets import Angles, write_rendered
 from tools.images import read_image, read_mask
 from tools.ingest import ingest
-from tools.interp import (Direction, DirectionInterpolator, _plane, models_by_direction, parse_direction,
-                          synthesize_at_direction, synthesize_blend)
+from tools.interp import (
+    Direction,
+    DirectionInterpolator,
+    _plane,
+    models_by_direction,
+    parse_direction,
+    synthesize_at_direction,
+    synthesize_blend,
+)
 from tools.store import Store
 from tools.synth import ExtrapolationWarning, MissingModels, neighbours
 

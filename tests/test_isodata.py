@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from onboard import isodata as I
-from onboard.isodata import IsodataParams, assign, fit_centres, isodata
+from onboard.isodata import IsodataParams, assign, isodata
 
 CENTRES = np.array([[40, 40, 40], [200, 60, 60], [60, 200, 60], [60, 60, 200]], float)
 

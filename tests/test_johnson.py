@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from onboard.johnson import Family, Johnson, normal_cdf
+from btf.johnson import Family, Johnson, normal_cdf
 
 MODELS = [
     Johnson(Family.SU, 0.7, 1.3, 120.0, 14.0),

@@ -1,9 +1,56 @@
-"""The robot runtime must stay lean: importing it pulls in no scipy, matplotlib or host code."""
+"""The layers run one way, and the robot runtime stays lean.
+
+btf <- radio <- onboard (with hal, which stands alone) <- tools: a module may import only from
+its own package and the ones it stands on (read from the source with ast, function-level
+imports included), so no package cycle exists. Importing every onboard module pulls in no
+scipy, matplotlib, scikit-image, tqdm, OpenCV or host code.
+"""
+import ast
 import json
+import pathlib
 import subprocess
 import sys
 
-FORBIDDEN = ("scipy", "matplotlib", "tools", "skimage", "tqdm")
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parent.parent
+PACKAGES = ("btf", "radio", "hal", "onboard", "tools")
+ALLOWED = {
+    "btf": set(),
+    "radio": {"btf"},
+    "hal": set(),
+    "onboard": {"btf", "radio", "hal"},
+    "tools": {"btf", "radio", "hal", "onboard"},
+}
+FORBIDDEN_ONBOARD = ("scipy", "matplotlib", "tools", "skimage", "tqdm", "cv2")
+
+
+def imports_of(path: pathlib.Path) -> set[str]:
+    """The top-level packages of everything a module imports, anywhere in its body."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out |= {a.name.split(".")[0] for a in node.names}
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.add(node.module.split(".")[0])
+    return out
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_a_package_imports_only_what_it_stands_on(package):
+    wrong = {}
+    for path in sorted((ROOT / package).rglob("*.py")):
+        bad = (imports_of(path) & set(PACKAGES)) - ALLOWED[package] - {package}
+        if bad:
+            wrong[str(path.relative_to(ROOT))] = sorted(bad)
+    assert not wrong, f"{package} imports from a higher layer: {wrong}"
+
+
+def test_the_layers_have_no_cycle():
+    # each package's allowed set only names packages below it
+    order = {p: i for i, p in enumerate(("btf", "radio", "hal", "onboard", "tools"))}
+    for package, below in ALLOWED.items():
+        assert all(order[b] < order[package] for b in below), package
 
 
 def test_onboard_imports_nothing_from_the_host_side():
@@ -16,5 +63,12 @@ def test_onboard_imports_nothing_from_the_host_side():
     )
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
     loaded = json.loads(out.stdout.strip().splitlines()[-1])
-    bad = [m for m in loaded if m.split(".")[0] in FORBIDDEN]
-    assert not bad, f"onboard imported host-side modules: {bad}"
+    bad = [m for m in loaded if m.split(".")[0] in FORBIDDEN_ONBOARD]
+    assert not bad, f"onboard imported host-side or heavy modules: {bad}"
+
+
+def test_the_radio_packets_load_no_fitter():
+    code = "import json, sys, radio.packet, radio.link\nprint(json.dumps(sorted(sys.modules)))\n"
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    loaded = json.loads(out.stdout.strip().splitlines()[-1])
+    assert not [m for m in loaded if m.split(".")[0] in ("onboard", "hal", "tools")]

@@ -8,14 +8,34 @@ import msgpack
 import numpy as np
 import pytest
 
-from onboard.fit import Z_LADDER, FrameFitter, PercentileCodec, fit_histogram
+from btf.codec import Z_LADDER, PercentileCodec
+from btf.dependence import Dependence
+from onboard.fit import FrameFitter, fit_histogram
 from radio import FrameError
 from radio.packet import (
-    MAX_BODY, SCHEMA_VERSION, AckPacket, CommandName, CommandPacket, Kind, LabelModels,
-    LogLevel, LogPacket, MaskPacket, ModelsPacket, NackPacket, Reason, RobotState, StatusPacket,
-    UnchangedPacket, decode, downsample_labels, encode, encode_mask, encode_models, models_packet,
+    MAX_BODY,
+    SCHEMA_VERSION,
+    AckPacket,
+    CommandName,
+    CommandPacket,
+    Kind,
+    LabelModels,
+    LogLevel,
+    LogPacket,
+    MaskPacket,
+    ModelsPacket,
+    NackPacket,
+    Reason,
+    RobotState,
+    StatusPacket,
+    UnchangedPacket,
+    decode,
+    downsample_labels,
+    encode,
+    encode_mask,
+    encode_models,
+    models_packet,
 )
-from onboard.dependence import Dependence
 from radio.packet_base import MAX_FRAME_PIXELS, get_varint
 from radio.packet_dependence import record_size
 

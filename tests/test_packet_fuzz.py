@@ -11,12 +11,25 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from onboard.dependence import Dependence
+from btf.dependence import Dependence
 from onboard.fit import fit_histogram
 from radio import FrameError
 from radio.packet import (
-    AckPacket, CommandName, CommandPacket, LogLevel, LogPacket, ModelsPacket, NackPacket, Reason,
-    RobotState, StatusPacket, UnchangedPacket, decode, encode, encode_mask, encode_models,
+    AckPacket,
+    CommandName,
+    CommandPacket,
+    LogLevel,
+    LogPacket,
+    ModelsPacket,
+    NackPacket,
+    Reason,
+    RobotState,
+    StatusPacket,
+    UnchangedPacket,
+    decode,
+    encode,
+    encode_mask,
+    encode_models,
 )
 
 

@@ -39,7 +39,7 @@ def test_a_models_packet_is_stored_with_the_robots_models_and_only_once(store):
     assert first.kind is ItemKind.CAPTURE and first.stored and not again.stored
     (cap,) = store.captures(scene="mixed")
     assert (cap.robot, cap.sequence, cap.measured) == ("3", 5, (60.2, 0.1))
-    stored = {(m.label, m.band): m for m in store.models(cap.id)}
+    stored = store.models(cap.id)
     assert set(stored) == set(fits)
     for k, r in fits.items():
         assert stored[k].count == r.count
@@ -60,7 +60,7 @@ def test_censored_fractions_are_stored_per_band_as_the_robot_measured_them(store
                             measured=(90.0, 0.0), feature_space="raw", bands=("A", "B"))
     Receiver(store).handle(body)
     (cap,) = store.captures()
-    stored = {m.band: m for m in store.models(cap.id)}
+    stored = {band: m for (_, band), m in store.models(cap.id).items()}
     saturated = float(np.mean(frame[..., 0] == 255))
     assert fits[(0, 0)].censored_high > 0.1
     assert stored[0].censored_high == pytest.approx(fits[(0, 0)].censored_high, abs=2e-5)
@@ -77,7 +77,7 @@ def test_unchanged_marker_files_a_capture_with_the_reference_models(store):
     item = rx.handle(marker)
     assert item.kind is ItemKind.UNCHANGED and item.stored
     a, b = sorted(store.captures(), key=lambda c: c.sequence)
-    assert [m.model for m in store.models(a.id)] == [m.model for m in store.models(b.id)]
+    assert store.models(a.id) == store.models(b.id)
     orphan = rx.handle(pk.encode(pk.UnchangedPacket(3, 9, 300.0, (60.0, 0.0), (60.0, 0.0), 7)))
     assert not orphan.stored and "not stored" in orphan.text
 

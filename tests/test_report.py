@@ -1,8 +1,8 @@
 """The HTML report: images, histograms and tables from a database; bad databases refused."""
 import numpy as np
 
-from tests.test_receiver import models_body
 from radio import packet as pk
+from tests.test_receiver import models_body
 from tools.cli import main
 from tools.receiver import Receiver
 from tools.report import write_report
@@ -46,9 +46,9 @@ def test_report_cli_refuses_missing_corrupt_and_empty_databases(tmp_path, capsys
 
 
 def test_captures_with_dependence_show_independent_and_correlated_synthesis_beside_measured(tmp_path):
-    from tests.test_receiver import _dependence
     from hal.interfaces import ViewAngles
     from hal.scene import render
+    from tests.test_receiver import _dependence
 
     with Store.open(tmp_path / "scene.db") as s:
         rx = Receiver(s, scene="mixed")

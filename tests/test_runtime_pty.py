@@ -10,7 +10,7 @@ import pytest
 
 from radio import packet as pk
 from radio.auth import MemoryCounterStore
-from radio.keys import write_key, load_key
+from radio.keys import load_key, write_key
 from radio.link import Delivered, Link
 from radio.serial_port import FdPort
 

@@ -4,7 +4,7 @@ import pytest
 
 from onboard.features import FeatureSpace, FeatureSpec, compute
 from onboard.isodata import IsodataParams, Labeller, assign, fit_centres, spread
-from onboard.segment import SegmentConfig, SegmentMethod, Segmenter
+from onboard.segment import SegmentConfig, Segmenter, SegmentMethod
 
 CLUTTER = np.array([[194, 178, 128], [86, 125, 70], [112, 84, 62], [150, 150, 140]], float)
 

@@ -13,8 +13,8 @@ from onboard.isodata import IsodataParams
 from onboard.segment import (
     Palette,
     SegmentConfig,
-    SegmentMethod,
     Segmenter,
+    SegmentMethod,
     block_size,
     downsample_labels,
     load_mask,

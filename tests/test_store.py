@@ -1,11 +1,12 @@
 """The SQLite store: idempotent captures, queries, masks, and refusal of foreign files."""
+import dataclasses
 import sqlite3
 
 import numpy as np
 import pytest
 
+from btf.johnson import Family
 from onboard.fit import fit_histogram
-from onboard.johnson import Family
 from tools.store import CorruptDatabase, Store
 
 
@@ -34,7 +35,7 @@ def test_capture_round_trip_and_idempotent_insert(tmp_path):
         stored = s.models(cap.id)
         assert len(stored) == 6
         want = results()[(1, 2)]
-        got = s.models(cap.id, label=1, band=2)[0]
+        got = s.models(cap.id, label=1, band=2)[(1, 2)]
         assert got.model == want.model and got.count == want.count
         assert got.percentiles == pytest.approx(want.percentiles)
         assert isinstance(got.model.family, Family)
@@ -87,13 +88,12 @@ def test_foreign_sqlite_database_is_refused_and_untouched(tmp_path):
 def test_failed_insert_leaves_nothing_half_written(tmp_path):
     good = results()[(0, 0)]
 
-    class Bad:  # five percentiles: the models insert fails after the capture row went in
-        model, count, z, beta1, beta2 = good.model, good.count, good.z, good.beta1, good.beta2
-        percentiles = (1.0, 2.0, 3.0, 4.0, 5.0)
+    # five percentiles: the models insert fails after the capture row went in
+    bad = dataclasses.replace(good, percentiles=(1.0, 2.0, 3.0, 4.0, 5.0))
 
     with Store.open(tmp_path / "s.db") as s:
         with pytest.raises(sqlite3.Error):
-            s.add_capture("bot", 5, 0.0, None, 10.0, "rgb", ("R",), {(0, 0): good, (1, 0): Bad()})
+            s.add_capture("bot", 5, 0.0, None, 10.0, "rgb", ("R",), {(0, 0): good, (1, 0): bad})
         assert s.captures() == []
         assert add(s, 5, 10.0) is True  # the sequence number is still free
 
@@ -150,3 +150,22 @@ def test_a_directory_is_refused_as_a_database(tmp_path):
     with pytest.raises(CorruptDatabase, match="not a regular file"):
         Store.open(tmp_path / "d.db")
     assert list((tmp_path / "d.db").iterdir()) == []
+
+
+def test_a_record_reads_back_as_it_was_stored_its_read_included(tmp_path):
+    from btf.record import FittedModel, rebuild
+
+    h = np.bincount(np.clip(np.rint(np.random.default_rng(3).gamma(1.5, 9, 40_000)), 0, 255).astype(int),
+                    minlength=256)
+    fit = fit_histogram(h)
+    pct = fit.percentiles
+    shifted = FittedModel.solve(pct, 0.3, fit.count, shift=0.5, beta1=1.0, beta2=4.0)
+    exact = FittedModel.solve(pct, 0.524, fit.count, exact_family=True)
+    fallback = FittedModel.solve((0.0, 0.0, 255.0, 255.0), 0.1, 5000, censored_low=0.4, censored_high=0.3,
+                                 fallback=True)
+    records = {(0, 0): fit, (0, 1): shifted, (0, 2): exact, (1, 0): fallback, (1, 1): fit, (1, 2): fit}
+    with Store.open(tmp_path / "s.db") as s:
+        s.add_capture("bot", 1, 0.0, None, 30.0, "rgb", ("R", "G", "B"), records)
+        back = s.models(s.captures()[0].id)
+    assert back == records
+    assert all(rebuild(r) == r.model for r in back.values())

@@ -7,16 +7,17 @@ histograms; float32 sampling against float64 on the same deviates.
 from __future__ import annotations
 
 import math
-
-import numpy as np
 import os
 
+import numpy as np
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
+from btf.johnson import Family, Johnson
+from btf.percentile import model_from_percentiles
 from onboard.censor import histogram_l1
-from onboard.fit import fit_histogram, model_from_percentiles, plain_fit
-from onboard.johnson import Family, Johnson
+from onboard.fit import fit_histogram, plain_fit
 
 # Slow runs only under `make stress` (BTF_STRESS=1, the long hypothesis profile).
 stress = pytest.mark.skipif(not os.environ.get("BTF_STRESS"), reason="stress run only (make stress)")

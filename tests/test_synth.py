@@ -4,8 +4,8 @@ import warnings
 import numpy as np
 import pytest
 
+from btf.johnson import Family, Johnson
 from onboard.fit import fit_histogram
-from onboard.johnson import Family, Johnson
 from tools import metrics, synth
 
 

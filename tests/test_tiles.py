@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from benchmarks.scenes import field, voronoi_labels
-from onboard.dependence import Dependence
+from btf.dependence import Dependence
 from onboard.fit import FrameFitter, fit_histogram
 from tools import masks, metrics, pdfs, synth, tiles
 from tools.field import gaussian_fields, latent

@@ -5,9 +5,18 @@ import argparse
 import json
 
 from tools.cli import CliError
-from tools.resolve import (MIN_GRAINS_PER_PIXEL, PAPER_FACET_PER_WAVELENGTH2, PAPER_GRAIN_MM,
-                           PAPER_PIXEL_PER_FACET, PAPER_RAYS_PER_FACET, PAPER_WAVELENGTH_NM, Bounds,
-                           PaperView, bounds, paper_bounds)
+from tools.resolve import (
+    MIN_GRAINS_PER_PIXEL,
+    PAPER_FACET_PER_WAVELENGTH2,
+    PAPER_GRAIN_MM,
+    PAPER_PIXEL_PER_FACET,
+    PAPER_RAYS_PER_FACET,
+    PAPER_WAVELENGTH_NM,
+    Bounds,
+    PaperView,
+    bounds,
+    paper_bounds,
+)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:

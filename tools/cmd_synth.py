@@ -8,8 +8,7 @@ import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from tools.cli import (FEATURE_SPACES, CliError, add_force, add_source_filters, check_out, choose_source,
-                       elevation)
+from tools.cli import FEATURE_SPACES, CliError, add_force, add_source_filters, check_out, choose_source, elevation
 
 if TYPE_CHECKING:
     import numpy as np

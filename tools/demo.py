@@ -22,13 +22,13 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from btf.johnson import Johnson, normal_ppf
 from hal.interfaces import ViewAngles
 from hal.scene import render
 from onboard.fit import FrameFitter, fit_histogram
-from onboard.johnson import Johnson, normal_ppf
+from radio import FrameError
 from radio import packet as pk
 from radio.auth import MemoryCounterStore
-from radio import FrameError
 from radio.channel import Channel, ChannelConfig
 from radio.frame import Deframer, Kind, decode
 from radio.keys import load_key, write_key
@@ -38,7 +38,7 @@ from tools.metrics import compare_bands, correlation, histogram
 from tools.pdfs import table as pdf_table
 from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
 from tools.store import Store
-from tools.synth import interpolate, synthesize
+from tools.synth import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 PLATES = ("black", "white", "mixed")

@@ -18,8 +18,8 @@ from functools import lru_cache
 import numpy as np
 import scipy.fft as sfft
 
-from onboard.dependence import LAGS, Dependence
-from onboard.johnson import Family, Johnson
+from btf.dependence import LAGS, Dependence
+from btf.johnson import Family, Johnson
 from tools.tiles import Region, row_tiles
 
 _PROJECTIONS = 12

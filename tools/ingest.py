@@ -24,7 +24,7 @@ if TYPE_CHECKING:  # numpy and the fitter load with the first image, not with th
 
     import numpy as np
 
-    from onboard.fit import FitResult
+    from onboard.fit import FittedModel
     from tools.store import Store
 
 # Images per database commit, and the longest a fitted image waits for its commit.
@@ -53,7 +53,7 @@ class Job:
 class Fitted:
     name: str
     band_names: tuple[str, ...]
-    results: dict[tuple[int, int], FitResult]
+    results: dict[tuple[int, int], FittedModel]
     mask: np.ndarray | None  # the labels used, when they came from a per-image mask
 
 

@@ -21,7 +21,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from onboard.johnson import Johnson
+from btf.johnson import Johnson
 from tools.synth import ExtrapolationWarning, MissingModels, blend_pixels, fill
 from tools.tiles import Draws, label_counts, region
 
@@ -186,7 +186,7 @@ def models_by_direction(store, robot: str | None = None, space: str | None = Non
                       None if lel is None else round(lel, 6), None if laz is None else round(laz % 360.0, 6))
         if d not in latest or c.id > latest[d].id:
             latest[d] = c
-    return {d: {(m.label, m.band): m.model for m in store.models(c.id)} for d, c in latest.items()}
+    return {d: {k: m.model for k, m in store.models(c.id).items()} for d, c in latest.items()}
 
 
 def synthesize_blend(mask: np.ndarray, neighbours: Sequence[tuple[float, Models]],

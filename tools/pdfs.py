@@ -20,8 +20,8 @@ from typing import Callable
 import numpy as np
 from scipy import stats
 
+from btf.johnson import Johnson
 from onboard.fit import fit_histogram
-from onboard.johnson import Johnson
 from tools.metrics import normalized
 from tools.tiles import Region, label_counts, region, region_histograms
 

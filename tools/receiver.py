@@ -20,7 +20,6 @@ from typing import Any, Callable
 import numpy as np
 
 from onboard.features import PcaBasis
-from onboard.fit import PercentileCodec, Z_LADDER
 from radio import FrameError
 from radio import packet as pk
 from radio.link import Delivered, Link, LinkDown, LinkStats, LinkUp
@@ -58,20 +57,6 @@ class Item:
         if self.packet is not None:
             d["packet"] = packet_json(self.packet)
         return d
-
-
-@dataclass(frozen=True, slots=True)
-class _Fit:
-    """A received model in the shape Store.add_capture reads (FitResult's fields)."""
-
-    model: Any
-    count: int
-    z: float
-    percentiles: tuple[float, float, float, float]
-    beta1: float
-    beta2: float
-    censored_low: float = 0.0  # fraction of the band's pixels at the sensor's lower limit
-    censored_high: float = 0.0
 
 
 def mask_key(seq: int) -> str:
@@ -165,15 +150,7 @@ class Receiver:
         return item
 
     def _models(self, p: pk.ModelsPacket) -> Item:
-        codec = PercentileCodec.for_levels(p.levels)
-        fits = {}
-        for rec in p.labels:
-            for band, codes in enumerate(rec.codes):
-                m = p.models[(rec.label, band)]
-                tail = rec.tail(band)
-                z = Z_LADDER[rec.z_index if tail is None else tail.z_index]
-                fits[(rec.label, band)] = _Fit(m, rec.count, z, codec.decode(codes), 0.0, 0.0,
-                                               *rec.censored(band))
+        fits = dict(p.fits)  # the records as decoded: nothing re-derived here
         notes = []
         dependence = dict(p.dependence)
         pca = None
@@ -195,7 +172,7 @@ class Receiver:
         if ref is None:
             return Item(ItemKind.UNCHANGED, p.robot_id, p.seq, False,
                         f"unchanged marker refers to capture {p.ref_seq}, which is not stored", p)
-        fits = {(m.label, m.band): m for m in self.store.models(ref.id)}
+        fits = self.store.models(ref.id)
         # The marker stands for the reference's whole model: its dependence and basis too.
         basis = self.store.pca_basis(ref.id)
         new = self.store.add_capture(str(p.robot_id), p.seq, p.time, p.commanded, p.measured,

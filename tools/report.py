@@ -78,7 +78,7 @@ def _hist_plot(path: Path, image: np.ndarray | None, mask: np.ndarray, models: d
 def _demo_sections(demo: Any) -> list[str]:
     out = ["<h2>Mixed plate reproduction</h2><p>Correlation between the synthetic mixed plate "
            "(black and white models, mixed mask) and its capture, beside the ceiling: two captures "
-           f"of the same plate with different grain seeds. The paper reports 0.97.</p>"]
+           "of the same plate with different grain seeds. The paper reports 0.97.</p>"]
     rows = []
     for r in demo.mixed:
         for b in r["synthetic"]:
@@ -133,17 +133,17 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
                       f"{c.measured[0]:.2f}", c.space, len(store.models(c.id))] for c in caps])]
     rows = []
     for c in caps:
-        for m in store.models(c.id):
+        for (label, band), m in store.models(c.id).items():
             j = m.model
-            rows.append([c.scene, f"{c.elevation:.1f}", m.label, c.band_names[m.band] if m.band < len(c.band_names)
-                         else m.band, j.family.value, j.gamma, j.delta, j.xi, j.lam, m.count])
+            rows.append([c.scene, f"{c.elevation:.1f}", label, c.band_names[band] if band < len(c.band_names)
+                         else band, j.family.value, j.gamma, j.delta, j.xi, j.lam, m.count])
     parts += ["<h2>Models</h2>", _table(["scene", "angle", "label", "band", "family", "gamma", "delta",
                                          "xi", "lambda", "pixels"], rows) if rows else _note("No models stored.")]
     parts.append("<h2>Synthetic beside measured</h2>")
     shown, unmasked = len(parts), 0
     for c in tqdm(caps, desc="report", unit="capture", disable=not progress):
         mask = capture_mask(store, c)
-        models = {(m.label, m.band): m.model for m in store.models(c.id)}
+        models = {k: m.model for k, m in store.models(c.id).items()}
         unmasked += mask is None
         if mask is None or not models:
             continue

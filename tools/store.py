@@ -15,15 +15,16 @@ from typing import Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
-from onboard.dependence import Dependence
+from btf.dependence import Dependence
+from btf.johnson import Johnson
+from btf.record import FittedModel
 from onboard.features import PcaBasis
-from onboard.johnson import Johnson
 from tools.images import decode_png, encode_png
-from tools.store_rows import Capture, StoredModel, capture_from_row, mask_png, model_from_row
+from tools.store_rows import Capture, capture_from_row, mask_png, model_from_row
 
-__all__ = ["Store", "CorruptDatabase", "Capture", "StoredModel", "SCHEMA_VERSION"]
+__all__ = ["Store", "CorruptDatabase", "Capture", "SCHEMA_VERSION"]
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -70,6 +71,8 @@ CREATE TABLE models (
     z REAL, count INTEGER NOT NULL,
     beta1 REAL, beta2 REAL,
     censored_low REAL NOT NULL DEFAULT 0, censored_high REAL NOT NULL DEFAULT 0,
+    shift REAL NOT NULL DEFAULT 0, fallback INTEGER NOT NULL DEFAULT 0,
+    exact_family INTEGER NOT NULL DEFAULT 0,
     PRIMARY KEY (capture, label, band)
 );
 CREATE INDEX models_by_region ON models (label, band);
@@ -95,6 +98,10 @@ _MIGRATIONS: dict[int, str] = {
     2: _DEPENDENCE,
     # the PCA basis of a scene, to turn pca captures back into RGB
     3: _PCA,
+    # the rest of a model's read (btf.record), so a stored record rebuilds its model
+    4: "ALTER TABLE models ADD COLUMN shift REAL NOT NULL DEFAULT 0;"
+       "ALTER TABLE models ADD COLUMN fallback INTEGER NOT NULL DEFAULT 0;"
+       "ALTER TABLE models ADD COLUMN exact_family INTEGER NOT NULL DEFAULT 0;",
 }
 
 
@@ -116,6 +123,10 @@ def _angles(value: Any) -> tuple[float | None, float | None]:
         return (float(value), 0.0)
     elev, az = value
     return (float(elev), float(az))
+
+
+def _opt(value: float | None) -> float | None:
+    return None if value is None else float(value)
 
 
 def _family_name(family: Any) -> str:
@@ -243,7 +254,7 @@ class Store:
         measured: Any,
         space: str,
         band_names: Iterable[str],
-        results: Mapping[tuple[int, int], Any],
+        results: Mapping[tuple[int, int], FittedModel],
         scene: str = "",
         illumination: Any = None,
         source: str | None = None,
@@ -265,8 +276,9 @@ class Store:
             rows.append((
                 int(label), int(band), _family_name(m.family),
                 float(m.gamma), float(m.delta), float(m.xi), float(m.lam),
-                *pct, float(r.z), int(r.count), float(r.beta1), float(r.beta2),
-                float(getattr(r, "censored_low", 0.0)), float(getattr(r, "censored_high", 0.0)),
+                *pct, float(r.z), int(r.count), _opt(r.beta1), _opt(r.beta2),
+                float(r.censored_low), float(r.censored_high), float(r.shift), int(r.fallback),
+                int(r.exact_family),
             ))
         stored = False
         with self._write():
@@ -283,8 +295,8 @@ class Store:
             cid = cur.lastrowid
             self._conn.executemany(
                 "INSERT INTO models (capture, label, band, family, gamma, delta, xi, lam,"
-                " p0, p1, p2, p3, z, count, beta1, beta2, censored_low, censored_high)"
-                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                " p0, p1, p2, p3, z, count, beta1, beta2, censored_low, censored_high, shift, fallback,"
+                " exact_family) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 [(cid, *row) for row in rows],
             )
             self._conn.executemany(
@@ -390,9 +402,12 @@ class Store:
         """Distinct measured elevations, ascending."""
         return sorted({c.elevation for c in self.captures(robot, space, scene)})
 
-    def models(self, capture: int, label: int | None = None, band: int | None = None) -> list[StoredModel]:
+    def models(self, capture: int, label: int | None = None,
+               band: int | None = None) -> dict[tuple[int, int], FittedModel]:
+        """A capture's records by (label, band), as add_capture took them."""
         sql = ("SELECT capture, label, band, family, gamma, delta, xi, lam, p0, p1, p2, p3, z, count,"
-               " beta1, beta2, censored_low, censored_high FROM models WHERE capture = ?")
+               " beta1, beta2, censored_low, censored_high, shift, fallback, exact_family"
+               " FROM models WHERE capture = ?")
         args: list = [capture]
         if label is not None:
             sql += " AND label = ?"
@@ -400,8 +415,8 @@ class Store:
         if band is not None:
             sql += " AND band = ?"
             args.append(band)
-        return [self._checked(model_from_row, r, f"capture {r[0]!r}")
-                for r in self._conn.execute(sql + " ORDER BY label, band", args)]
+        return dict(self._checked(model_from_row, r, f"capture {r[0]!r}")
+                    for r in self._conn.execute(sql + " ORDER BY label, band", args))
 
     def _latest(self, robot: str | None, space: str | None, scene: str | None) -> dict[float, Capture]:
         latest: dict[float, Capture] = {}
@@ -413,7 +428,7 @@ class Store:
     def models_by_angle(self, robot: str | None = None, space: str | None = None,
                         scene: str | None = None) -> dict[float, dict[tuple[int, int], Johnson]]:
         """For every measured elevation, the models of its latest capture."""
-        return {a: {(m.label, m.band): m.model for m in self.models(c.id)}
+        return {a: {k: m.model for k, m in self.models(c.id).items()}
                 for a, c in self._latest(robot, space, scene).items()}
 
     def dependence(self, capture: int) -> dict[int, Dependence]:

@@ -13,7 +13,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from onboard.johnson import Family, Johnson
+from btf.johnson import Family, Johnson
+from btf.record import FittedModel
 from radio.packet_base import MAX_BANDS, MAX_FRAME_SIDE, MAX_LABELS
 
 MAX_ROW_INT = 2**63 - 1
@@ -38,21 +39,6 @@ class Capture:
         return self.measured[0]
 
 
-@dataclass(frozen=True, slots=True)
-class StoredModel:
-    capture: int
-    label: int
-    band: int
-    model: Johnson
-    percentiles: tuple[float, float, float, float]
-    z: float
-    count: int
-    beta1: float
-    beta2: float
-    censored_low: float = 0.0  # fractions of the region's pixels piled at each sensor limit
-    censored_high: float = 0.0
-
-
 def capture_from_row(r: tuple) -> Capture:
     """(id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space,
     bands, scene, light_elevation, light_azimuth, source) -> Capture."""
@@ -65,19 +51,20 @@ def capture_from_row(r: tuple) -> Capture:
                    text(r[10], "scene"), (n[5], n[6]), None if r[13] is None else text(r[13], "source"))
 
 
-def model_from_row(r: tuple) -> StoredModel:
+def model_from_row(r: tuple) -> tuple[tuple[int, int], FittedModel]:
     """(capture, label, band, family, gamma, delta, xi, lam, p0..p3, z, count, beta1, beta2,
-    censored_low, censored_high) -> StoredModel."""
+    censored_low, censored_high, shift, fallback, exact_family) -> ((label, band), record)."""
     label = integer(r[1], "label", 0, MAX_LABELS - 1)
     band = integer(r[2], "band", 0, MAX_BANDS - 1)
     try:
         opt = [number(v, name, True) for v, name in zip(
             (*r[8:13], r[14], r[15]), ("p0", "p1", "p2", "p3", "z", "beta1", "beta2"))]
-        low, high = (number(v, name) for v, name in zip(r[16:18], ("censored_low", "censored_high")))
+        low, high, shift = (number(v, name) for v, name in zip(r[16:19], ("censored_low", "censored_high", "shift")))
         if not (0.0 <= low <= 1.0 and 0.0 <= high <= 1.0):
             raise ValueError(f"censored fractions {low}, {high} outside [0, 1]")
-        return StoredModel(integer(r[0], "capture"), label, band, johnson(*r[3:8]), tuple(opt[:4]), opt[4],
-                           integer(r[13], "count"), opt[5], opt[6], low, high)
+        fallback, exact = (bool(integer(v, name, 0, 1)) for v, name in zip(r[19:21], ("fallback", "exact_family")))
+        return (label, band), FittedModel(johnson(*r[3:8]), integer(r[13], "count"), opt[4], tuple(opt[:4]),
+                                          opt[5], opt[6], shift, low, high, fallback, exact)
     except ValueError as exc:
         raise ValueError(f"model (label {label}, band {band}): {exc}") from None
 

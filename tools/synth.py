@@ -13,8 +13,8 @@ from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
-from onboard.dependence import Dependence
-from onboard.johnson import Johnson
+from btf.dependence import Dependence
+from btf.johnson import Johnson
 from tools.field import blend, latent, region_fields
 from tools.tiles import Draws, Region, label_counts, region
 
@@ -219,7 +219,7 @@ def models_document(space: str, band_names: tuple[str, ...], levels: int, angle:
 
 def models_from_document(doc: object) -> tuple[float | None, dict[tuple[int, int], Johnson], dict]:
     """(angle, models, the document) from one parsed MODELS.json document; ValueError says what is wrong."""
-    from onboard.johnson import Family
+    from btf.johnson import Family
 
     if not isinstance(doc, dict) or not isinstance(doc.get("models"), list):
         raise ValueError("not a models document (expected an object with a 'models' list)")

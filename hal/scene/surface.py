@@ -12,8 +12,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from hal.scene.materials import (GREY_REFERENCE_REFLECTANCE, GREY_REFERENCE_SIDE, MATERIALS, Label, Material,
-                                  Shape)
+from hal.scene.materials import GREY_REFERENCE_REFLECTANCE, GREY_REFERENCE_SIDE, MATERIALS, Label, Material, Shape
 
 BLADE_POINTS = 8  # spheres along one grass blade
 

@@ -10,6 +10,11 @@ import math
 
 import numpy as np
 
+# Wire scales: censored fractions travel as 1/65535 fixed point, read shifts as int8 multiples
+# of 1/32 (onboard.censor places them).
+CENSOR_SCALE = 65535
+SHIFT_SCALE = 32
+MAX_SHIFT_CODE = 127
 # z values; the packet sends the index of the one used. z_for_count tries the first ten from
 # the top; 0.7, after them, is a wider read the fitter may choose (onboard.reads).
 Z_LADDER: tuple[float, ...] = (0.524, 0.5, 0.45, 0.4, 0.35, 0.3, 0.25, 0.2, 0.15, 0.1, 0.7)
@@ -110,3 +115,18 @@ class PercentileCodec:
 def default_codec(lo: float, bin_width: float, bins: int) -> PercentileCodec:
     """The range of bins centred on lo + k * bin_width, at 16 bits (32 above 256 bins)."""
     return PercentileCodec(lo - 0.5 * bin_width, lo + (bins - 0.5) * bin_width, 16 if bins <= 256 else 32)
+
+
+def quantize(fraction: float) -> float:
+    """A censored fraction as it travels (1/65535 fixed point)."""
+    if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
+        raise ValueError(f"censored fraction {fraction} outside [0, 1]")
+    return round(fraction * CENSOR_SCALE) / CENSOR_SCALE
+
+
+def fallback_probs(low: float, high: float) -> tuple[float, float]:
+    """(pa, pe): the probabilities below the fallback normal's two points. A censored end uses
+    its limit; an uncensored end the middle of the uncensored mass."""
+    pa = low if low > 0.0 else 0.5 * (1.0 - high)
+    pe = 1.0 - high if high > 0.0 else 1.0 - 0.5 * (1.0 - low)
+    return pa, pe

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from onboard.johnson import Family, Johnson, normal_ppf_one
+from btf.johnson import Family, Johnson, normal_ppf_one
 
 # ln d has a sampling sd of roughly 4 / sqrt(count); the SL band is one such sd wide on each
 # side, never narrower than the floor that keeps the SU/SB forms well conditioned.
