@@ -1,4 +1,4 @@
-"""Label maps: mask files, ISODATA with a persistent palette, and the small MASK map.
+"""Label maps: mask files, ISODATA with a persistent palette, and when the MASK map changed.
 
 A `Segmenter` turns each feature frame into an H x W uint8 label map and says
 when that map has changed enough that the host needs a new MASK packet.
@@ -14,6 +14,7 @@ import numpy as np
 from onboard.features import FeatureFrame
 from onboard.imageio import read_png
 from onboard.isodata import IsodataParams, Labeller, fit_centres, spread, subsample
+from radio.packet_mask import MAX_SIDE, downsample_labels
 
 MAX_LABEL = 255
 
@@ -80,45 +81,6 @@ def _colours_to_labels(rgb: np.ndarray, colours, p: Path) -> np.ndarray:
         k = int(key[~found].flat[0])
         raise ValueError(f"mask: {p} has colour {(k >> 16, (k >> 8) & 255, k & 255)} not in the colour table")
     return order[pos]
-
-
-# --- the small label map for the MASK packet ------------------------------------------
-def block_size(shape: tuple[int, int], max_side: int = 64) -> int:
-    if max_side < 1:
-        raise ValueError(f"max_side must be >= 1, got {max_side}")
-    return max(1, -(-max(shape) // max_side))
-
-
-def downsample_labels(labels: np.ndarray, max_side: int = 64) -> np.ndarray:
-    """Mode of each square block (ties to the lower label), longest side <= max_side."""
-    labels = np.asarray(labels)
-    if labels.ndim != 2 or labels.size == 0 or labels.dtype != np.uint8:
-        raise ValueError(f"labels must be a non-empty 2-D uint8 array, got {labels.dtype} {labels.shape}")
-    h, w = labels.shape
-    b = block_size((h, w), max_side)
-    sh, sw = -(-h // b), -(-w // b)
-    out = np.empty((sh, sw), dtype=np.uint8)
-    col_block = (np.arange(w) // b) << 8
-    for i in range(sh):  # one band of blocks at a time: memory is b rows, not the frame
-        band = labels[i * b:(i + 1) * b]
-        counts = np.bincount((col_block[None, :] | band).ravel(), minlength=sw * 256)
-        out[i] = counts.reshape(sw, 256).argmax(axis=1)
-    return out
-
-
-def upsample_labels(small: np.ndarray, shape: tuple[int, int], max_side: int = 64) -> np.ndarray:
-    """Nearest-block inverse of `downsample_labels` for a frame of `shape`."""
-    small = np.asarray(small)
-    h, w = shape
-    if small.ndim != 2 or small.size == 0:
-        raise ValueError(f"small label map must be non-empty 2-D, got {small.shape}")
-    b = block_size((h, w), max_side)
-    if small.shape == (-(-h // b), -(-w // b)):
-        rows, cols = np.arange(h) // b, np.arange(w) // b
-    else:  # made with another max_side: scale proportionally
-        rows = np.arange(h) * small.shape[0] // h
-        cols = np.arange(w) * small.shape[1] // w
-    return small[rows[:, None], cols[None, :]]
 
 
 # --- palette of clutter types ---------------------------------------------------------
@@ -202,7 +164,7 @@ class SegmentConfig:
     isodata: IsodataParams = IsodataParams()
     palette_threshold: float = 30.0
     palette_size: int = 16
-    mask_side: int = 64  # longest side of the MASK packet's label map
+    mask_side: int = MAX_SIDE  # longest side of the MASK packet's label map
     change_fraction: float = 0.02  # share of MASK cells that must differ to resend
     # Centres are refitted when the mean distance to the nearest centre on a small sample
     # grows past (1 + refit_drift) times its value when they were fitted; 0: every frame.
@@ -214,6 +176,8 @@ class SegmentConfig:
             object.__setattr__(self, "method", SegmentMethod(self.method))
         if self.method is SegmentMethod.MASK and not self.mask_path:
             raise ValueError("segmentation: method 'mask' needs mask_path")
+        if not 1 <= self.mask_side <= MAX_SIDE:
+            raise ValueError(f"segmentation: mask_side must be in 1..{MAX_SIDE}, got {self.mask_side}")
         if not 0 <= self.change_fraction <= 1:
             raise ValueError(f"segmentation: change_fraction must be in 0..1, got {self.change_fraction}")
         if not (np.isfinite(self.refit_drift) and self.refit_drift >= 0) or self.drift_sample < 1:
@@ -285,7 +249,8 @@ class Segmenter:
         self._sent = None
 
     def note(self, labels: np.ndarray) -> None:
-        """Record this frame's label map (from any source) and set `changed`."""
+        """Record this frame's label map (from any source) and set `changed`: the map compared
+        is the one the MASK packet carries (radio.packet_mask.downsample_labels)."""
         small = downsample_labels(labels, self.config.mask_side)
         sent = self._sent
         self.changed = (

@@ -1,4 +1,5 @@
-"""Mask files, MASK-map down/upsampling, the persistent palette and the Segmenter."""
+"""Mask files, the MASK map the Segmenter compares and the packet carries, the persistent palette
+and the Segmenter."""
 import cv2
 import msgpack
 import numpy as np
@@ -15,11 +16,10 @@ from onboard.segment import (
     SegmentConfig,
     Segmenter,
     SegmentMethod,
-    block_size,
-    downsample_labels,
     load_mask,
-    upsample_labels,
 )
+from radio import packet as pk
+from radio.packet_mask import downsample_labels
 
 COLOURS = np.array([[40, 40, 40], [200, 60, 60], [60, 200, 60], [60, 60, 200]], np.uint8)
 
@@ -79,6 +79,11 @@ def test_mask_errors_name_the_problem(tmp_path):
         load_mask(tmp_path / "f.npy")
 
 
+def _sent(labels, side=pk.MAX_SIDE):
+    """The MASK packet the robot would send for `labels`, as the host decodes it."""
+    return pk.decode(pk.encode_mask(labels, robot_id=1, seq=1, max_side=side))
+
+
 def test_downsample_takes_the_block_mode():
     lab = np.zeros((6, 6), np.uint8)
     lab[:3, :3] = [[1, 1, 2], [1, 2, 2], [1, 1, 0]]  # mode 1 (5 of 9)
@@ -92,8 +97,8 @@ def test_downsample_bounds_the_size_and_keeps_blocky_maps_exactly():
     yy, xx = np.mgrid[0:480, 0:640]
     lab = ((xx // 40 + yy // 30 * 3) % 5).astype(np.uint8)  # region edges on the 10-pixel grid
     small = downsample_labels(lab, 64)
-    assert max(small.shape) <= 64 and block_size(lab.shape, 64) == 10
-    np.testing.assert_array_equal(upsample_labels(small, lab.shape, 64), lab)
+    assert max(small.shape) <= 64 and small.shape == (48, 64)  # cells of 10 x 10 pixels
+    np.testing.assert_array_equal(_sent(lab, 64).full_size(), lab)
 
 
 @settings(max_examples=60, deadline=None)
@@ -103,15 +108,20 @@ def test_downsample_upsample_shapes_and_values(lab, side):
     small = downsample_labels(lab, side)
     assert max(small.shape) <= side
     assert set(np.unique(small)) <= set(np.unique(lab))
-    big = upsample_labels(small, lab.shape, side)
+    packet = _sent(lab, side)
+    np.testing.assert_array_equal(packet.label_map(), small)
+    big = packet.full_size()
     assert big.shape == lab.shape and big.dtype == np.uint8
-    b = block_size(lab.shape, side)
-    np.testing.assert_array_equal(big[::b, ::b], small)
+    (h, w), (fh, fw) = small.shape, lab.shape
+    if fh % h == 0 and fw % w == 0:  # whole cells: each cell's first pixel carries its label
+        np.testing.assert_array_equal(big[::fh // h, ::fw // w], small)
 
 
 def test_upsample_with_a_foreign_size_scales_proportionally():
     small = np.array([[0, 1], [2, 3]], np.uint8)
-    big = upsample_labels(small, (4, 6), max_side=64)  # 64 would give a 4x6 map, not 2x2
+    packet = pk.MaskPacket(1, 1, (4, 6), (2, 2), bytes([0, 1, 2, 3]), (1, 1, 1, 1))
+    np.testing.assert_array_equal(packet.label_map(), small)
+    big = packet.full_size()  # a 4x6 frame would pool to 4x6 at 64, not 2x2
     np.testing.assert_array_equal(big[:, :3], [[0] * 3, [0] * 3, [2] * 3, [2] * 3])
 
 
@@ -203,3 +213,29 @@ def test_segmenter_config_errors_are_clear(tmp_path):
     seg = Segmenter(SegmentConfig("mask", mask_path=str(tmp_path / "m.npy")))
     with pytest.raises(ValueError, match="the frame is 10x10"):
         seg.labels_for(compute(np.zeros((10, 10, 3), np.uint8), FeatureSpec(FeatureSpace.RGB)))
+
+
+def test_the_change_check_compares_the_map_the_mask_packet_sends(tmp_path):
+    # 100 x 130 pools to 49 x 64 on the wire; the change check used to pool it to 34 x 44.
+    yy, xx = np.mgrid[0:100, 0:130]
+    lab = ((xx // 13 + yy // 9) % 4).astype(np.uint8)
+    np.save(tmp_path / "m.npy", lab)
+    seg = Segmenter(SegmentConfig("mask", mask_path=str(tmp_path / "m.npy")))
+    seg.labels_for(compute(np.zeros((100, 130, 3), np.uint8), FeatureSpec(FeatureSpace.RGB)))
+    assert seg.changed
+    sent = _sent(lab).label_map()
+    assert sent.shape == (49, 64)
+    np.testing.assert_array_equal(seg.small, sent)
+
+
+def test_a_change_the_sent_map_shows_is_a_change():
+    # Moving a boundary by 2 pixels changes one column of the 49 x 64 map that is sent (1.6 %, under
+    # the 2 % threshold); by 10 pixels, five columns (7.8 %).
+    yy, xx = np.mgrid[0:100, 0:130]
+    seg = Segmenter(SegmentConfig(SegmentMethod.ISODATA))
+    for edge, expect in ((60, True), (62, False), (70, True)):
+        lab = (xx >= edge).astype(np.uint8)
+        seg.note(lab)
+        sent = _sent(lab).label_map()
+        np.testing.assert_array_equal(seg.small, sent)
+        assert bool(seg.changed) is expect, edge
