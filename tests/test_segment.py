@@ -11,13 +11,10 @@ from PIL import Image
 
 from onboard.features import FeatureSpace, FeatureSpec, compute
 from onboard.isodata import IsodataParams
-from onboard.segment import (
-    Palette,
-    SegmentConfig,
-    Segmenter,
-    SegmentMethod,
-    load_mask,
-)
+from onboard.config import SegmentConfig
+from onboard.mask_file import load_mask
+from onboard.palette import Palette
+from onboard.segmentation import Segmenter, SegmentMethod
 from radio import packet as pk
 from radio.packet_mask import downsample_labels
 
@@ -165,8 +162,7 @@ def _scene(which, seed):
 
 
 def test_isodata_segmenter_keeps_labels_consistent_across_views():
-    cfg = SegmentConfig(SegmentMethod.ISODATA, isodata=IsodataParams(k=4), palette_threshold=30)
-    seg = Segmenter(cfg)
+    seg = Segmenter(SegmentMethod.ISODATA, isodata=IsodataParams(k=4), palette_threshold=30)
     truth = _labels()
     spec = FeatureSpec(FeatureSpace.RGB)
     first = seg.labels_for(compute(_scene(truth, 1), spec))
@@ -183,7 +179,7 @@ def test_isodata_segmenter_keeps_labels_consistent_across_views():
 def test_changed_only_when_the_map_differs_enough(tmp_path):
     lab = _labels(64, 64)
     np.save(tmp_path / "m.npy", lab)
-    seg = Segmenter.from_config(SegmentConfig("mask", mask_path=str(tmp_path / "m.npy"), mask_side=16))
+    seg = Segmenter("mask", mask_path=str(tmp_path / "m.npy"), mask_side=16)
     ff = compute(np.zeros((64, 64, 3), np.uint8), FeatureSpec(FeatureSpace.GRAY))
     np.testing.assert_array_equal(seg.labels_for(ff), lab)
     assert seg.changed and seg.small.shape == (16, 16)
@@ -195,8 +191,7 @@ def test_changed_only_when_the_map_differs_enough(tmp_path):
 
 
 def test_small_label_jitter_does_not_trigger_a_new_mask():
-    cfg = SegmentConfig(SegmentMethod.ISODATA, isodata=IsodataParams(k=2), mask_side=32, change_fraction=0.05)
-    seg = Segmenter(cfg)
+    seg = Segmenter(SegmentMethod.ISODATA, isodata=IsodataParams(k=2), mask_side=32, change_fraction=0.05)
     truth = (np.arange(128)[None, :] >= 64).repeat(96, 0).astype(np.uint8)
     spec = FeatureSpec(FeatureSpace.RGB)
     seg.labels_for(compute(_scene(truth, 3), spec))
@@ -206,11 +201,11 @@ def test_small_label_jitter_does_not_trigger_a_new_mask():
 
 def test_segmenter_config_errors_are_clear(tmp_path):
     with pytest.raises(ValueError, match="needs mask_path"):
-        SegmentConfig(SegmentMethod.MASK)
+        Segmenter(SegmentMethod.MASK)
     with pytest.raises(ValueError, match="no such file"):
-        Segmenter(SegmentConfig("mask", mask_path=str(tmp_path / "none.png")))
+        Segmenter("mask", mask_path=str(tmp_path / "none.png"))
     np.save(tmp_path / "m.npy", _labels())
-    seg = Segmenter(SegmentConfig("mask", mask_path=str(tmp_path / "m.npy")))
+    seg = Segmenter("mask", mask_path=str(tmp_path / "m.npy"))
     with pytest.raises(ValueError, match="the frame is 10x10"):
         seg.labels_for(compute(np.zeros((10, 10, 3), np.uint8), FeatureSpec(FeatureSpace.RGB)))
 
@@ -220,7 +215,7 @@ def test_the_change_check_compares_the_map_the_mask_packet_sends(tmp_path):
     yy, xx = np.mgrid[0:100, 0:130]
     lab = ((xx // 13 + yy // 9) % 4).astype(np.uint8)
     np.save(tmp_path / "m.npy", lab)
-    seg = Segmenter(SegmentConfig("mask", mask_path=str(tmp_path / "m.npy")))
+    seg = Segmenter("mask", mask_path=str(tmp_path / "m.npy"))
     seg.labels_for(compute(np.zeros((100, 130, 3), np.uint8), FeatureSpec(FeatureSpace.RGB)))
     assert seg.changed
     sent = _sent(lab).label_map()
@@ -232,10 +227,24 @@ def test_a_change_the_sent_map_shows_is_a_change():
     # Moving a boundary by 2 pixels changes one column of the 49 x 64 map that is sent (1.6 %, under
     # the 2 % threshold); by 10 pixels, five columns (7.8 %).
     yy, xx = np.mgrid[0:100, 0:130]
-    seg = Segmenter(SegmentConfig(SegmentMethod.ISODATA))
+    seg = Segmenter(SegmentMethod.ISODATA)
     for edge, expect in ((60, True), (62, False), (70, True)):
         lab = (xx >= edge).astype(np.uint8)
         seg.note(lab)
         sent = _sent(lab).label_map()
         np.testing.assert_array_equal(seg.small, sent)
         assert bool(seg.changed) is expect, edge
+
+
+def test_the_segment_section_builds_its_segmenter(tmp_path):
+    np.save(tmp_path / "m.npy", _labels())
+    seg = Segmenter.from_config(SegmentConfig(method="mask", mask=tmp_path / "m.npy", n_labels=4))
+    assert seg.method is SegmentMethod.MASK and seg.palette is None
+    with pytest.raises(ValueError, match="label 3, above the 3 labels"):
+        Segmenter.from_config(SegmentConfig(method="mask", mask=tmp_path / "m.npy", n_labels=3))
+    iso = Segmenter.from_config(SegmentConfig(k=3, split_std=12.0, refit_drift=0.5, n_labels=8), seed=7)
+    assert iso.method is SegmentMethod.ISODATA and iso.refit_drift == 0.5 and iso.palette.max_entries == 8
+    assert iso.isodata == IsodataParams(k=3, min_samples=50, split_std=12.0, merge_distance=15.0, max_merges=2,
+                                        iterations=10, subsample=20_000, seed=7)
+    # the fake camera's ground truth keeps a palette too, as isodata's would
+    assert Segmenter.from_config(SegmentConfig(method="scene")).palette is not None
