@@ -16,7 +16,8 @@ from benchmarks.common import Context, Saving, Section, paired_rounds, paired_ti
 from hal.interfaces import ViewAngles
 from hal.scene import render
 from onboard import config
-from onboard.capture import Pipeline, models_body
+from onboard.capture import Pipeline
+from onboard.packet_bodies import models_body
 from onboard.isodata import IsodataParams, isodata
 from onboard.segmentation import Segmenter, SegmentMethod
 

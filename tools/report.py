@@ -14,7 +14,7 @@ import numpy as np
 
 from tools.images import write_image
 from tools.receiver import mask_key
-from tools.store import Capture, Store
+from tools.store import Store, StoredCapture
 from tools.synth import MissingModels, synthesize
 
 Measured = Callable[[str, float], np.ndarray | None]
@@ -36,7 +36,7 @@ def _figure(src: str, caption: str) -> str:
             f"<figcaption>{html.escape(caption)}</figcaption></figure>")
 
 
-def capture_mask(store: Store, cap: Capture) -> np.ndarray | None:
+def capture_mask(store: Store, cap: StoredCapture) -> np.ndarray | None:
     """A capture's label map: the robot's MASK for it, the one `fit --mask` or `ingest --mask`
     stored with it, an ingested dataset's common mask, or the robot's latest MASK before it."""
     for key in (mask_key(cap.sequence), f"{cap.robot}/{cap.sequence}", cap.robot):

@@ -20,9 +20,9 @@ from btf.johnson import Johnson
 from btf.record import FittedModel
 from onboard.features import PcaBasis
 from tools.images import decode_png, encode_png
-from tools.store_rows import Capture, capture_from_row, mask_png, model_from_row
+from tools.store_rows import StoredCapture, capture_from_row, mask_png, model_from_row
 
-__all__ = ["Store", "CorruptDatabase", "Capture", "SCHEMA_VERSION"]
+__all__ = ["Store", "CorruptDatabase", "StoredCapture", "SCHEMA_VERSION"]
 
 SCHEMA_VERSION = 5
 # PRAGMA application_id: marks the file as ours ("BTFS").
@@ -347,11 +347,11 @@ class Store:
         return (" WHERE " + " AND ".join(where)) if where else "", args
 
     def captures(self, robot: str | None = None, space: str | None = None,
-                 scene: str | None = None) -> list[Capture]:
+                 scene: str | None = None) -> list[StoredCapture]:
         sql, args = self._capture_filter(robot, space, scene)
         return self._select_captures(sql, args)
 
-    def _select_captures(self, where: str, args: list) -> list[Capture]:
+    def _select_captures(self, where: str, args: list) -> list[StoredCapture]:
         rows = self._conn.execute(
             "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
             " space, bands, scene, light_elevation, light_azimuth, source FROM captures"
@@ -366,7 +366,7 @@ class Store:
         except ValueError as exc:  # ImageError too
             raise CorruptDatabase(f"database {self.path}: {what}: {exc}; left untouched") from None
 
-    def capture_by_seq(self, robot: str, sequence: int) -> Capture | None:
+    def capture_by_seq(self, robot: str, sequence: int) -> StoredCapture | None:
         """The capture (robot, sequence), or None when it is not stored."""
         sql, args = self._capture_filter(robot, None, None)
         found = self._select_captures(sql + " AND sequence = ?", [*args, int(sequence)])
@@ -418,8 +418,8 @@ class Store:
         return dict(self._checked(model_from_row, r, f"capture {r[0]!r}")
                     for r in self._conn.execute(sql + " ORDER BY label, band", args))
 
-    def _latest(self, robot: str | None, space: str | None, scene: str | None) -> dict[float, Capture]:
-        latest: dict[float, Capture] = {}
+    def _latest(self, robot: str | None, space: str | None, scene: str | None) -> dict[float, StoredCapture]:
+        latest: dict[float, StoredCapture] = {}
         for c in self.captures(robot, space, scene):
             if c.elevation not in latest or c.id > latest[c.elevation].id:
                 latest[c.elevation] = c
