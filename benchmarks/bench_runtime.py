@@ -17,8 +17,8 @@ from hal.interfaces import ViewAngles
 from hal.scene import render
 from onboard import config
 from onboard.capture import Pipeline
-from onboard.packet_bodies import models_body
 from onboard.isodata import IsodataParams, isodata
+from onboard.packet_bodies import models_body
 from onboard.segmentation import Segmenter, SegmentMethod
 
 
