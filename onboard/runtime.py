@@ -32,9 +32,9 @@ from pathlib import Path
 from typing import Any, Callable
 
 from hal.interfaces import ViewAngles
+from onboard import config as config_mod
 from onboard import packet_bodies as wire
 from onboard import skip
-from onboard import config as config_mod
 from onboard.capture import FittedView, Pipeline, PoseSkipped, remember
 from onboard.config import Config, ConfigError
 from onboard.outbox import Outbox, OutboxFull, Reply
