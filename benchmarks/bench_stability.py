@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.common import Context, Section, figure, save
-from benchmarks.johnson_moments import lognormal_beta2
+from benchmarks.curve_moments import lognormal_beta2
 from benchmarks.stability_grid import NEAR_BOUNDARY, SATURATIONS, Point, Saturation, curve, grid
 from benchmarks.stability_score import METHODS, Cause, Diagnosis, Size, Truth, diagnose, evaluate, fit_and_score
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from benchmarks.johnson_moments import lognormal_beta2, lognormal_omega, solve_shape
+from benchmarks.curve_moments import lognormal_beta2, lognormal_omega, solve_shape
 from benchmarks.model_histograms import saturating
 from btf.johnson import Family, Johnson
 

@@ -19,7 +19,7 @@ from enum import Enum
 import numpy as np
 from scipy.optimize import minimize
 
-from benchmarks import moments_johnson
+from benchmarks import as99_moment_fit
 from benchmarks.model_histograms import expected_histogram, histogram_l1
 from benchmarks.stability_grid import SATURATIONS, Point, Saturation
 from btf.codec import z_for_count
@@ -79,10 +79,10 @@ def fit_and_score(method: str, counts: np.ndarray, truth: Truth) -> Score:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
             if method == "moments":
-                return score(moments_johnson.fit_counts(counts), truth)
+                return score(as99_moment_fit.fit_counts(counts), truth)
             r = fit_histogram(counts, censor=method == "percentile")
             return score(r.model, truth, r.fallback)
-    except moments_johnson.MomentFitError as exc:
+    except as99_moment_fit.MomentFitError as exc:
         why = "sample at beta2 <= beta1 + 1" if "beta1 + 1" in str(exc) else "SB solve failed"
         return Score(failure=f"no curve ({why})")
     except Exception as exc:  # any failure of the fit is the finding
