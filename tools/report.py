@@ -109,18 +109,13 @@ def _note(text: str) -> str:
 
 
 def write_report(store: Store, out: Path, measured: Measured | None = None, demo: Any = None,
-                 size: tuple[int, int] | None = None, seed: int = 0, robot: str | None = None,
+                 seed: int = 0, robot: str | None = None,
                  scene: str | None = None, progress: bool = False) -> Path:
     """Writes out/index.html and its PNGs for the captures of `robot` and `scene` (all when None);
     returns the HTML path. `progress` shows a tqdm bar over the captures on stderr."""
     from tqdm import tqdm
 
     out.mkdir(parents=True, exist_ok=True)
-    if measured is None and demo is not None and size is not None:
-        from tools.demo import capture
-
-        def measured(scene: str, angle: float) -> np.ndarray | None:
-            return capture(scene, angle, size).image if scene else None
     rng = np.random.default_rng(seed)
     caps = store.captures(robot=robot, scene=scene)
     chosen = " ".join(f"{k} {v}" for k, v in (("robot", robot), ("scene", scene)) if v is not None)
