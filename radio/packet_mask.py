@@ -34,12 +34,11 @@ class MaskPacket:
         return np.repeat(np.frombuffer(self.values, dtype=np.uint8), self.runs).reshape(self.shape)
 
     def full_size(self) -> np.ndarray:
-        """The label map stretched back to the frame size by nearest neighbour."""
+        """The label map stretched back to the frame size: each cell over exactly the frame
+        rows and columns it was pooled from (downsample_labels)."""
         small = self.label_map()
         (fh, fw), (h, w) = self.frame_shape, self.shape
-        rows = np.minimum((np.arange(fh) * h) // fh, h - 1)
-        cols = np.minimum((np.arange(fw) * w) // fw, w - 1)
-        return small[rows[:, None], cols[None, :]]
+        return small[cell_of(fh, h)[:, None], cell_of(fw, w)[None, :]]
 
     def _wire(self) -> list:
         runs = np.asarray(self.runs, dtype=np.int64)
@@ -89,8 +88,7 @@ def downsample_labels(labels: np.ndarray, max_side: int = MAX_SIDE) -> np.ndarra
     if scale <= 1.0:
         return labels.astype(np.uint8)
     h, w = max(1, min(max_side, round(H / scale))), max(1, min(max_side, round(W / scale)))
-    rows = np.linspace(0, H, h + 1).round().astype(np.intp)
-    cols = np.linspace(0, W, w + 1).round().astype(np.intp)
+    rows, cols = cell_edges(H, h), cell_edges(W, w)
     col_cell = np.repeat(np.arange(w, dtype=np.intp), np.diff(cols)) << 8
     out = np.empty((h, w), dtype=np.uint8)
     for i in range(h):  # one row of cells at a time: memory is a few frame rows, not the frame
@@ -98,6 +96,16 @@ def downsample_labels(labels: np.ndarray, max_side: int = MAX_SIDE) -> np.ndarra
         counts = np.bincount((col_cell[None, :] | band).ravel(), minlength=w * 256)
         out[i] = counts.reshape(w, 256).argmax(axis=1)  # first maximum: the lower label on ties
     return out
+
+
+def cell_edges(full: int, cells: int) -> np.ndarray:
+    """The first frame row (or column) of each of `cells` cells, and `full` at the end."""
+    return np.linspace(0, full, cells + 1).round().astype(np.intp)
+
+
+def cell_of(full: int, cells: int) -> np.ndarray:
+    """The cell each of `full` frame rows (or columns) was pooled into."""
+    return np.searchsorted(cell_edges(full, cells), np.arange(full), side="right") - 1
 
 
 def mask_packet(

@@ -248,3 +248,15 @@ def test_the_segment_section_builds_its_segmenter(tmp_path):
                                         iterations=10, subsample=20_000, seed=7)
     # the fake camera's ground truth keeps a palette too, as isodata's would
     assert Segmenter.from_config(SegmentConfig(method="scene")).palette is not None
+
+
+@pytest.mark.parametrize("shape", [(100, 130), (120, 160), (480, 640), (7, 300), (64, 64)])
+def test_a_mask_stretched_back_covers_each_cell_with_exactly_the_pixels_it_was_pooled_from(shape):
+    from radio.packet_mask import cell_of, mask_packet
+
+    full_h, full_w = shape
+    probe = mask_packet(np.zeros(shape, np.uint8), robot_id=1, seq=1)
+    h, w = probe.shape
+    small = np.random.default_rng(h * w).integers(0, 6, (h, w)).astype(np.uint8)
+    frame = small[cell_of(full_h, h)[:, None], cell_of(full_w, w)[None, :]]
+    assert np.array_equal(mask_packet(frame, robot_id=1, seq=1).full_size(), frame)
