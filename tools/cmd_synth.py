@@ -67,6 +67,8 @@ def _from_json(path: str) -> tuple[dict, dict, str, int, dict | None]:
     levels = first.get("levels") or 256
     if type(levels) is not int or not 2 <= levels <= 65536:
         raise CliError(f"models {path}: levels {levels!r} is not an integer in 2..65536")
+    if levels > 256 and first.get("space") not in ("rgb", "gray"):
+        raise CliError(f"models {path}: {levels} levels in space {first.get('space')!r}; deep models are rgb or gray")
     if parsed[0][0] is None:  # one document without an angle serves every angle
         by_angle, deps = {float("-inf"): parsed[0][1]}, {float("-inf"): found[0]}
     return by_angle, deps, str(first.get("space") or "rgb"), levels, first.get("pca")
@@ -140,6 +142,7 @@ def _run_direction(args: argparse.Namespace, direction) -> int:
         source = _source(store, args)
         by_direction = models_by_direction(store, **source)
         levels = store.levels(**source)
+    _check_depth(args.out, levels)
     mask = _read_mask(args.mask)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ExtrapolationWarning)
@@ -149,6 +152,14 @@ def _run_direction(args: argparse.Namespace, direction) -> int:
             raise CliError(str(exc)) from None
     _warn(caught)
     return _write(args, bands, source["space"])
+
+
+def _check_depth(out: str, levels: int) -> None:
+    """Refuses, before any work, an output file that cannot hold the models' depth."""
+    from tools.images import DEEP_SUFFIXES
+
+    if levels > 256 and Path(out).suffix.lower() not in DEEP_SUFFIXES:
+        raise CliError(f"image {out}: 16-bit pixels need a .png or .tif file (the models have {levels} levels)")
 
 
 def _warn(caught) -> None:
@@ -189,6 +200,7 @@ def run(args: argparse.Namespace) -> int:
         if not args.independent:
             dependence = found
         pca = PcaBasis.from_record(pca_rec) if pca_rec else None
+    _check_depth(args.out, levels)
     mask = _read_mask(args.mask)
     angle = args.angle
     if float("-inf") in by_angle:

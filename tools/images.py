@@ -68,6 +68,21 @@ def read_image(path: str | Path) -> np.ndarray:
     return cv2.cvtColor(raw, cv2.COLOR_BGR2RGB, dst=raw)
 
 
+def stretched_8bit(image: np.ndarray) -> np.ndarray:
+    """A 16-bit image as 8 bits over the levels it occupies (all channels alike, so colours keep
+    their order): what segmentation needs, which looks at differences, not absolute levels."""
+    if image.dtype == np.uint8:
+        return image
+    from tools.tiles import row_tiles
+
+    lo, hi = int(image.min()), int(image.max())
+    scale = 255.0 / max(1, hi - lo)
+    out = np.empty(image.shape, np.uint8)
+    for r in row_tiles(image.shape[0], image.shape[1] * (image.shape[2] if image.ndim == 3 else 1)):
+        out[r] = np.rint((image[r].astype(np.float32) - lo) * np.float32(scale))
+    return out
+
+
 def read_mask(path: str | Path, shape: tuple[int, int] | None = None) -> np.ndarray:
     """A label mask (H, W) uint8; `shape` (H, W) is the image it must match."""
     p = Path(path)
