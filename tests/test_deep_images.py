@@ -182,3 +182,21 @@ def test_a_schema_5_database_is_upgraded_with_8_bit_levels(tmp_path):
         assert [c.levels for c in store.captures()] == [256]
         assert store.add_capture("bot", 2, 0.0, None, (50.0, 0.0), "gray", ("Y",), {}, levels=65536)
         assert store.levels() == 65536
+
+
+def test_report_shows_16_bit_captures_at_their_depth(host, tmp_path):
+    folder = tmp_path / "imgs"
+    folder.mkdir()
+    image, mask = thermal_camera("mixed", (60, 80), 1)
+    cv2.imwrite(str(folder / "t.png"), image)
+    write_mask(tmp_path / "mask.png", mask)
+    db = tmp_path / "r.db"
+    assert host("ingest", folder, "--layout", "folder", "--db", db, "--mask", tmp_path / "mask.png",
+                "--space", "gray", "--workers", 0, "--quiet")[0] == 0
+    code, _, err = host("report", "--db", db, "--out", tmp_path / "rep", "--quiet")
+    assert code == 0, err
+    for kind in ("synthetic", "correlated"):
+        (shown,) = (tmp_path / "rep").glob(f"*_{kind}.png")
+        pixels = cv2.imread(str(shown), cv2.IMREAD_UNCHANGED)
+        # the hot black sand (left) and the cool white sand (right), stretched for viewing
+        assert pixels[:, :40].mean() > pixels[:, 40:].mean() + 60, kind

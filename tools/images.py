@@ -68,18 +68,18 @@ def read_image(path: str | Path) -> np.ndarray:
     return cv2.cvtColor(raw, cv2.COLOR_BGR2RGB, dst=raw)
 
 
-def stretched_8bit(image: np.ndarray) -> np.ndarray:
-    """A 16-bit image as 8 bits over the levels it occupies (all channels alike, so colours keep
-    their order): what segmentation needs, which looks at differences, not absolute levels."""
+def stretched_8bit(image: np.ndarray, span: tuple[int, int] | None = None) -> np.ndarray:
+    """A 16-bit image as 8 bits over the levels it occupies, or `span` (all channels alike, so
+    colours keep their order): what segmentation and viewing need, not the absolute levels."""
     if image.dtype == np.uint8:
         return image
     from tools.tiles import row_tiles
 
-    lo, hi = int(image.min()), int(image.max())
+    lo, hi = (int(image.min()), int(image.max())) if span is None else span
     scale = 255.0 / max(1, hi - lo)
     out = np.empty(image.shape, np.uint8)
     for r in row_tiles(image.shape[0], image.shape[1] * (image.shape[2] if image.ndim == 3 else 1)):
-        out[r] = np.rint((image[r].astype(np.float32) - lo) * np.float32(scale))
+        out[r] = np.clip(np.rint((image[r].astype(np.float32) - lo) * np.float32(scale)), 0, 255)
     return out
 
 
