@@ -65,6 +65,7 @@ def run(ctx: Context) -> list[Section]:
         "Before tiling (issue 18, 20000x20000 unless said): compare about 37 bytes per pixel "
         "(3.8 GB at 10000x10000, MemoryError at 20000x20000), mask isodata 8.2 GB, pdfs 5.7 GB, "
         "synth 4.5 GB. k-means stays global (cv2.kmeans on float32 pixels: 12 bytes a pixel and "
-        "its own labels and distances); Felzenszwalb and SLIC segment 1024-pixel tiles.",
+        "its own labels and distances); Felzenszwalb and SLIC segment tiles of at most 1024 and 2048 "
+        "pixels a side.",
     ]
     return [Section("Host memory: compare, synth, pdfs, mask on large images", lines)]

@@ -16,7 +16,7 @@ import numpy as np
 from benchmarks.common import Context, Section
 from onboard.features import FeatureSpace, FeatureSpec, PcaBasis, compute
 from onboard.isodata import IsodataParams, isodata
-from onboard.segment import downsample_labels
+from radio.packet_mask import downsample_labels
 
 SIDE = 1000
 REPEATS = 5

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
-from benchmarks import moments_johnson
+from benchmarks import as99_moment_fit
 from benchmarks.common import Context, Section, figure, save
 from benchmarks.scenes import field
 from btf.johnson import Family, Johnson
@@ -89,7 +89,7 @@ def evaluate(method: str, values: np.ndarray, rng: np.random.Generator, repeat: 
                     fit_values(values)
                 seconds = (time.perf_counter() - t0) / repeat
             else:
-                model = moments_johnson.fit(values) if method.startswith("moments") else _scipy(values, rng, method)
+                model = as99_moment_fit.fit(values) if method.startswith("moments") else _scipy(values, rng, method)
                 seconds = time.perf_counter() - t0
             if isinstance(model, Johnson):
                 probs, ppf = model.level_probabilities(), model.ppf

@@ -16,9 +16,10 @@ from benchmarks.common import Context, Saving, Section, paired_rounds, paired_ti
 from hal.interfaces import ViewAngles
 from hal.scene import render
 from onboard import config
-from onboard.capture import Pipeline, models_body
+from onboard.capture import Pipeline
 from onboard.isodata import IsodataParams, isodata
-from onboard.segment import SegmentConfig, Segmenter, SegmentMethod
+from onboard.packet_bodies import models_body
+from onboard.segmentation import Segmenter, SegmentMethod
 
 
 def _cfg(**skip) -> config.Config:
@@ -62,7 +63,7 @@ def run(ctx: Context) -> list[Section]:
     cfg = _cfg(min_pixels=64)
     # ISODATA centres belong to the scene: fitted on the first frame, then each frame is a
     # drift check and a table lookup. The per-frame refit row is the old behaviour.
-    seg = Segmenter(SegmentConfig(SegmentMethod.ISODATA, n_labels=16, isodata=params))
+    seg = Segmenter(SegmentMethod.ISODATA, n_labels=16, isodata=params)
     iso = Pipeline(cfg, None, lambda feats, fr, m: (seg.labels_for(feats), seg.changed))
     iso.process(frame, view, view)
     refit = Pipeline(cfg, None, lambda feats, fr, m: (isodata(feats.data, params).labels, False))

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from benchmarks.common import Context, Section, figure, save
-from benchmarks.johnson_moments import lognormal_beta2
+from benchmarks.curve_moments import lognormal_beta2
 from benchmarks.stability_grid import NEAR_BOUNDARY, SATURATIONS, Point, Saturation, curve, grid
 from benchmarks.stability_score import METHODS, Cause, Diagnosis, Size, Truth, diagnose, evaluate, fit_and_score
 
@@ -234,7 +234,7 @@ def _boundary_profile(ctx: Context) -> list[str]:
     out = ["**Near the boundary**: percentile fit of noise-free counts (10^6 pixels, unsaturated) at "
            "beta2 = beta1 + 1 + gap; worst quantile error / W1 (gray).", "",
            "| beta1 | " + " | ".join(f"gap {g:g}" for g in gaps) + " |", "|---:|" + "---:|" * len(gaps)]
-    from onboard.censor import expected_histogram
+    from benchmarks.model_histograms import expected_histogram
     for b1 in b1s:
         cells = []
         for g in gaps:

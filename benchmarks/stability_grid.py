@@ -3,7 +3,7 @@ the 8-bit range, and the saturations applied to them.
 
 Each point's curve has that (beta1, beta2) (SB and SU shapes solved numerically, SL on the
 lognormal line, SN at the normal point) and is scaled so its 0.1%..99.9% range spans gray
-levels 20..235; a saturation then translates it (onboard.censor.saturating) until the given
+levels 20..235; a saturation then translates it (benchmarks.model_histograms.saturating) until the given
 fraction lies beyond level 254.5 (at 255) or below 0.5 (at 0).
 """
 from __future__ import annotations
@@ -11,9 +11,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from benchmarks.johnson_moments import lognormal_beta2, lognormal_omega, solve_shape
+from benchmarks.curve_moments import lognormal_beta2, lognormal_omega, solve_shape
+from benchmarks.model_histograms import saturating
 from btf.johnson import Family, Johnson
-from onboard.censor import saturating
 
 # Below beta2 = beta1 + 1 + NEAR_BOUNDARY the curves are U- or J-shaped, close to two-point
 # distributions: the quantile function is nearly a step, and any shift of the step's u shows

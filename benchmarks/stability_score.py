@@ -7,7 +7,7 @@ Three figures, all in what an 8-bit sensor sees:
   |Q_fit(u) - Q_true(u)| (midpoint rule, 2000 points), in gray levels.
 - histogram L1: sum over levels of |p_fit - p_true| (tails folded into the end levels), 0..2.
 Sampled histograms draw n pixels; the "expected" size uses the noise-free counts
-(onboard.censor.expected_histogram) of the largest n.
+(benchmarks.model_histograms.expected_histogram) of the largest n.
 """
 from __future__ import annotations
 
@@ -19,12 +19,12 @@ from enum import Enum
 import numpy as np
 from scipy.optimize import minimize
 
-from benchmarks import moments_johnson
+from benchmarks import as99_moment_fit
+from benchmarks.model_histograms import expected_histogram, histogram_l1
 from benchmarks.stability_grid import SATURATIONS, Point, Saturation
 from btf.codec import z_for_count
 from btf.johnson import Family, Johnson, normal_cdf
 from btf.percentile import model_from_percentiles
-from onboard.censor import expected_histogram, histogram_l1
 from onboard.fit import fit_histogram, histogram_percentiles, plain_fit
 
 U = np.linspace(0.01, 0.99, 99)
@@ -79,10 +79,10 @@ def fit_and_score(method: str, counts: np.ndarray, truth: Truth) -> Score:
         with warnings.catch_warnings(), np.errstate(all="ignore"):
             warnings.simplefilter("ignore")
             if method == "moments":
-                return score(moments_johnson.fit_counts(counts), truth)
+                return score(as99_moment_fit.fit_counts(counts), truth)
             r = fit_histogram(counts, censor=method == "percentile")
             return score(r.model, truth, r.fallback)
-    except moments_johnson.MomentFitError as exc:
+    except as99_moment_fit.MomentFitError as exc:
         why = "sample at beta2 <= beta1 + 1" if "beta1 + 1" in str(exc) else "SB solve failed"
         return Score(failure=f"no curve ({why})")
     except Exception as exc:  # any failure of the fit is the finding

@@ -12,26 +12,11 @@ import math
 import termios
 import threading
 import time
-from enum import IntEnum
 
 import dynamixel_sdk as sdk
 
+from hal.dynamixel_table import ALERT, CENTER_TICKS, SIZE, TICKS_PER_TURN, Reg
 from hal.interfaces import DeviceTimeout, HalError, LimitError, ServoRecovery
-
-TICKS_PER_TURN = 4096
-CENTER_TICKS = 2048
-ALERT = 0x80
-
-
-class Reg(IntEnum):
-    """X-series control table: (address); sizes are given where used."""
-
-    TORQUE_ENABLE = 64
-    HARDWARE_ERROR_STATUS = 70
-    PROFILE_VELOCITY = 112
-    GOAL_POSITION = 116
-    MOVING = 122
-    PRESENT_POSITION = 132
 
 
 def deg_to_ticks(deg: float) -> int:
@@ -132,8 +117,8 @@ class DynamixelServoBus:
             for sid in servo_ids:
                 self._torque[sid] = enabled
                 if enabled and self.profile_velocity:
-                    self._write(sid, Reg.PROFILE_VELOCITY, 4, self.profile_velocity)
-                self._write(sid, Reg.TORQUE_ENABLE, 1, int(enabled))
+                    self._write(sid, Reg.PROFILE_VELOCITY, self.profile_velocity)
+                self._write(sid, Reg.TORQUE_ENABLE, int(enabled))
                 if not enabled:
                     self._goals.pop(sid, None)
 
@@ -143,22 +128,23 @@ class DynamixelServoBus:
             return
         with self._lock:
             self._goals.update(ticks)
-            group = sdk.GroupSyncWrite(self._port, self._ph, Reg.GOAL_POSITION, 4)
+            size = SIZE[Reg.GOAL_POSITION]
+            group = sdk.GroupSyncWrite(self._port, self._ph, Reg.GOAL_POSITION, size)
             for sid, t in ticks.items():
-                group.addParam(sid, list(t.to_bytes(4, "little")))
+                group.addParam(sid, list(t.to_bytes(size, "little")))
             # Broadcast: no status comes back, so only a transmit failure is visible.
             self._call(min(ticks), "sync write goal", lambda: (group.txPacket(), 0), alerts=False)
 
     def positions(self, servo_ids: list[int]) -> dict[int, float]:
-        raw = self._sync_read(servo_ids, Reg.PRESENT_POSITION, 4)
+        raw = self._sync_read(servo_ids, Reg.PRESENT_POSITION)
         return {sid: ticks_to_deg(v) for sid, v in raw.items()}
 
     def is_moving(self, servo_ids: list[int]) -> bool:
-        return any(self._sync_read(servo_ids, Reg.MOVING, 1).values())
+        return any(self._sync_read(servo_ids, Reg.MOVING).values())
 
     def hardware_error(self, servo_id: int) -> int:
         with self._lock:
-            return self._read(servo_id, Reg.HARDWARE_ERROR_STATUS, 1, alerts=False)
+            return self._read(servo_id, Reg.HARDWARE_ERROR_STATUS, alerts=False)
 
     def reboot(self, servo_id: int) -> None:
         """Reboot a servo, wait until it answers again, and restore its torque and goal."""
@@ -171,10 +157,10 @@ class DynamixelServoBus:
                 time.sleep(0.005)
             if self._torque.get(servo_id):
                 if self.profile_velocity:
-                    self._write(servo_id, Reg.PROFILE_VELOCITY, 4, self.profile_velocity, alerts=False)
-                self._write(servo_id, Reg.TORQUE_ENABLE, 1, 1, alerts=False)
+                    self._write(servo_id, Reg.PROFILE_VELOCITY, self.profile_velocity, alerts=False)
+                self._write(servo_id, Reg.TORQUE_ENABLE, 1, alerts=False)
             if servo_id in self._goals:
-                self._write(servo_id, Reg.GOAL_POSITION, 4, self._goals[servo_id], alerts=False)
+                self._write(servo_id, Reg.GOAL_POSITION, self._goals[servo_id], alerts=False)
 
     def close(self) -> None:
         with self._lock:
@@ -182,11 +168,13 @@ class DynamixelServoBus:
                 self._port.closePort()
 
     # -- transactions ---------------------------------------------------------------
-    def _write(self, sid: int, reg: Reg, size: int, value: int, alerts: bool = True) -> None:
-        fn = {1: self._ph.write1ByteTxRx, 4: self._ph.write4ByteTxRx}[size]
+    def _write(self, sid: int, reg: Reg, value: int, alerts: bool = True) -> None:
+        fn = {1: self._ph.write1ByteTxRx, 4: self._ph.write4ByteTxRx}[SIZE[reg]]
         self._call(sid, f"write {reg.name.lower()}", lambda: fn(self._port, sid, reg, value), alerts)
 
-    def _read(self, sid: int, reg: Reg, size: int, alerts: bool = True) -> int:
+    def _read(self, sid: int, reg: Reg, alerts: bool = True) -> int:
+        size = SIZE[reg]
+
         def attempt() -> tuple[int, int]:
             data, result, error = self._ph.readTxRx(self._port, sid, reg, size)
             if result == sdk.COMM_SUCCESS and len(data) != size:
@@ -195,8 +183,9 @@ class DynamixelServoBus:
 
         return self._call(sid, f"read {reg.name.lower()}", attempt, alerts)
 
-    def _sync_read(self, servo_ids: list[int], reg: Reg, size: int) -> dict[int, int]:
+    def _sync_read(self, servo_ids: list[int], reg: Reg) -> dict[int, int]:
         """Read one register of several servos in one SYNC_READ, retried as a whole."""
+        size = SIZE[reg]
         ids = list(dict.fromkeys(servo_ids))
         if not ids:
             return {}

@@ -1,5 +1,7 @@
 """One pose, end to end: move, settle, read the tracker, capture, features, segment, fit.
 
+The result is a `FittedView`; `onboard.packet_bodies` turns it into the bodies sent.
+
 The measured view (from the tracker) is what a capture is filed under. Each device
 step gets bounded retries; when they run out the pose is skipped with a reason
 (`PoseSkipped`) and the caller records it. The fitter is preallocated once and reset
@@ -9,7 +11,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Callable, TypeVar
 
 import numpy as np
@@ -21,7 +22,6 @@ from onboard import dependence, skip
 from onboard.config import Config
 from onboard.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from onboard.fit import FrameFitter
-from radio import packet as pk
 
 T = TypeVar("T")
 MAX_POSES_REMEMBERED = 512  # previous models kept per pose for the UNCHANGED rule
@@ -36,7 +36,7 @@ class PoseSkipped(Exception):
 
 
 @dataclass(frozen=True, slots=True)
-class Capture:
+class FittedView:
     """The fitted models of one view, ready to encode."""
 
     commanded: ViewAngles
@@ -145,7 +145,7 @@ class Pipeline:
             self._fitter = FrameFitter(n_labels, n_bands, bins=bins, value_range=span)
         return self._fitter
 
-    def process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles) -> Capture:
+    def process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles) -> FittedView:
         """Features, segmentation, skip rules and the fit for one frame."""
         try:
             if self.spec.space is FeatureSpace.PCA and self.pca is None:
@@ -181,10 +181,10 @@ class Pipeline:
         dep = None
         if self.cfg.features.dependence and results and not same:  # a bounded second pass
             dep = dependence.measure(data, labels, {k: r.model for k, r in results.items()}, feats.levels)
-        return Capture(commanded, measured, feats.band_names, feats.levels, results, dropped,
+        return FittedView(commanded, measured, feats.band_names, feats.levels, results, dropped,
                        labels, changed, same, stride, pca, dep)
 
-    def rollback(self, cap: Capture) -> None:
+    def rollback(self, cap: FittedView) -> None:
         """`cap` could not be queued: the next capture carries what it would have sent."""
         if cap.pca is not None:
             self.pca_pending = True
@@ -192,48 +192,12 @@ class Pipeline:
             getattr(self.segmenter, "force_send", lambda: None)()
         self._previous.pop(skip.pose_key(cap.commanded), None)  # next one sends full MODELS
 
-    def capture(self, commanded: ViewAngles, move: bool = True) -> Capture:
+    def capture(self, commanded: ViewAngles, move: bool = True) -> FittedView:
         if move:
             self.move(commanded)
         measured = self.measure_view()
         frame = self.frame()
         return self.process(frame, commanded, measured)
-
-
-# -- packets: every body the robot sends, as (outbox kind, body) ------------------------
-
-
-class SeqCounter:
-    """Capture sequence numbers that never repeat across restarts.
-
-    The next number is a state entry of the outbox database, committed in the same
-    transaction as the packets that use it (`entry`), then `taken`: a kill before the
-    commit reuses the number for the same pose, a kill after it never reuses it.
-    """
-
-    KEY = "next_seq"
-
-    def __init__(self, db: Any, legacy: Path | None = None) -> None:
-        text = db.state(self.KEY)
-        try:
-            if text is None and legacy is not None and legacy.exists():
-                text = legacy.read_text()  # the file this counter used to live in
-            self._next = max(1, int(text.strip())) if text is not None else 1
-        except (OSError, ValueError):
-            self._next = int(time.time())  # unreadable: jump ahead rather than reuse
-        self.last: int | None = self._next - 1 if self._next > 1 else None
-
-    def peek(self) -> int:
-        """The number the next committed capture gets."""
-        return self._next
-
-    def entry(self, seq: int) -> dict[str, str]:
-        return {self.KEY: str(seq + 1)}
-
-    def taken(self, seq: int) -> None:
-        """`seq` was committed with its packets."""
-        self._next = max(self._next, seq + 1)
-        self.last = seq
 
 
 def remember(table: dict, key: Any, value: Any, limit: int = MAX_POSES_REMEMBERED) -> None:
@@ -243,57 +207,3 @@ def remember(table: dict, key: Any, value: Any, limit: int = MAX_POSES_REMEMBERE
     table[key] = value
     while len(table) > limit:
         del table[next(iter(table))]
-
-
-def _pose(v: ViewAngles) -> tuple[float, float]:
-    return (float(v.elevation), float(v.azimuth))
-
-
-def models_body(robot_id: int, seq: int, now: float, space: str, cap: Capture) -> tuple[int, bytes]:
-    """MODELS for a capture, with its dependence when measured; the first capture of a PCA
-    scene carries the basis in its extras."""
-    extras = dict(cap.pca.to_extras()) if cap.pca is not None else {}
-    body = pk.encode_models(cap.results, robot_id=robot_id, seq=seq, time=now,
-                            commanded=_pose(cap.commanded), measured=_pose(cap.measured),
-                            feature_space=space, bands=cap.band_names, levels=cap.levels,
-                            extras=extras, dependence=cap.dependence)
-    return int(pk.Kind.MODELS), body
-
-
-def unchanged_body(robot_id: int, seq: int, ref_seq: int, now: float, cap: Capture) -> tuple[int, bytes]:
-    packet = pk.UnchangedPacket(robot_id, seq, now, _pose(cap.commanded), _pose(cap.measured), ref_seq)
-    return int(pk.Kind.UNCHANGED), pk.encode(packet)
-
-
-def mask_body(robot_id: int, seq: int, labels: np.ndarray) -> tuple[int, bytes]:
-    return int(pk.Kind.MASK), pk.encode_mask(labels, robot_id=robot_id, seq=seq)
-
-
-def status_body(robot_id: int, now: float, state: pk.RobotState, pose: ViewAngles | None,
-                pending: int, used: int, last_seq: int | None, text: str,
-                extras: dict | None = None) -> tuple[int, bytes]:
-    packet = pk.StatusPacket(robot_id, now, state, None if pose is None else _pose(pose),
-                             pending, used, last_seq, text[:500], _extras(extras or {}))
-    return int(pk.Kind.STATUS), pk.encode(packet)
-
-
-def reply_body(command_id: int, ok: bool, text: str, extras: dict | None = None,
-               reason: pk.Reason = pk.Reason.INTERNAL) -> tuple[int, bytes]:
-    if ok:
-        packet: Any = pk.AckPacket(command_id, text[:500], _extras(extras or {}))
-        return int(pk.Kind.ACK), pk.encode(packet)
-    return int(pk.Kind.NACK), pk.encode(pk.NackPacket(command_id, reason, text[:500]))
-
-
-def _extras(d: dict) -> dict:
-    """Fit a result map into the packet's extension fields (16 keys, scalars or short lists)."""
-    out: dict[str, Any] = {}
-    for k, v in list(d.items())[:16]:
-        if isinstance(v, (list, tuple)):
-            v = [x if isinstance(x, (int, float, str, bool)) or x is None else str(x) for x in v][:64]
-        elif not (isinstance(v, (int, float, str, bool)) or v is None):
-            v = str(v)
-        if isinstance(v, str):
-            v = v[:500]
-        out[str(k)[:32]] = v
-    return out

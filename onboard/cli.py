@@ -1,66 +1,18 @@
 """`btf-robot`: the robot's command line.
 
 Each subcommand lives in its own module `onboard/cmd_<name>.py`, exposing
-`add_parser(subparsers)` and `run(args) -> int`. A configuration or usage problem
-raises `CliError`: one line, exit status 2. `btf-host` shares this runner.
+`add_parser(subparsers)` and `run(args) -> int`, run by `onboard.cli_runner`
+(shared with `btf-host`). A configuration or usage problem raises `CliError`:
+one line, exit status 2.
 """
 from __future__ import annotations
 
-import argparse
-import importlib
-import os
 import sys
+
+from onboard.cli_runner import build_parser, run_cli
 
 PROG = "btf-robot"
 COMMANDS: tuple[str, ...] = ("selftest", "run", "calibrate")
-
-
-class CliError(Exception):
-    """A problem with the user's input or configuration: one line, exit status 2."""
-
-
-def build_parser(prog: str, package: str, commands: tuple[str, ...], description: str) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=prog, description=description)
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in commands:
-        module = importlib.import_module(f"{package}.cmd_{name.replace('-', '_')}")
-        sub_parser = module.add_parser(sub)
-        sub_parser.set_defaults(_run=module.run)
-    return parser
-
-
-# Exit status of a command whose reader went away (`... | head`): 128 + SIGPIPE, as the shell's tools.
-BROKEN_PIPE = 141
-
-
-def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None) -> int:
-    try:
-        try:
-            args = parser.parse_args(argv)
-        except SystemExit:  # --help or a usage error: its text too may meet a closed pipe
-            sys.stdout.flush()
-            raise
-        code = int(args._run(args) or 0)
-        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
-        return code
-    except CliError as exc:
-        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        return 130
-    except BrokenPipeError:
-        _silence_stdout()
-        return BROKEN_PIPE
-
-
-def _silence_stdout() -> None:
-    """Point stdout at /dev/null so the interpreter's last flush does not hit the closed pipe."""
-    try:
-        devnull = os.open(os.devnull, os.O_WRONLY)
-        os.dup2(devnull, sys.stdout.fileno())
-        os.close(devnull)
-    except (OSError, ValueError, AttributeError):  # stdout replaced by something without a descriptor
-        pass
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from onboard.cli import CliError
+from onboard.cli_runner import CliError
 from onboard.cmd_selftest import _hal_options
 
 

@@ -9,7 +9,7 @@ import sys
 import time
 
 from onboard import config as config_mod
-from onboard.cli import CliError
+from onboard.cli_runner import CliError
 from onboard.config import ConfigError
 
 

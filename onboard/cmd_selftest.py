@@ -15,7 +15,7 @@ import numpy as np
 
 from hal.controls import describe
 from hal.interfaces import CameraControls, ViewAngles, view_from_orientation
-from onboard.cli import CliError
+from onboard.cli_runner import CliError
 
 POSES = (ViewAngles(60.0, 0.0), ViewAngles(90.0, 0.0))
 POSE_TOLERANCE_DEG = 2.0

@@ -26,7 +26,7 @@ from btf.codec import MIN_TAIL_PIXELS, Z_LADDER, percentile_probs
 from btf.percentile import GAP_FLOOR
 
 # The reads of every region after its plain read: three spreads z by three centres s (shift
-# codes in 1/32, onboard.censor.SHIFT_SCALE), the plain read's own z and centre excepted.
+# codes in 1/32, btf.codec.SHIFT_SCALE), the plain read's own z and centre excepted.
 GRID: tuple[tuple[float, int], ...] = (
     (0.524, -16), (0.524, 16), (0.3, 0), (0.3, -16), (0.3, 16), (0.7, 0), (0.7, -16), (0.7, 16))
 # Template columns: 0 the plain read (exact family), 1 the same with the SL band, 2.. the grid;

@@ -32,9 +32,10 @@ from pathlib import Path
 from typing import Any, Callable
 
 from hal.interfaces import ViewAngles
-from onboard import capture as wire
 from onboard import config as config_mod
-from onboard.capture import Capture, Pipeline, PoseSkipped
+from onboard import packet_bodies as wire
+from onboard import skip
+from onboard.capture import FittedView, Pipeline, PoseSkipped, remember
 from onboard.config import Config, ConfigError
 from onboard.outbox import Outbox, OutboxFull, Reply
 from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore
@@ -335,7 +336,7 @@ class Runtime:
                                  f"{len(nxt.skipped)} skipped")
         return result
 
-    def capture_packets(self, cap: Capture) -> tuple[int, list[tuple[int, bytes]], dict[str, str]]:
+    def capture_packets(self, cap: FittedView) -> tuple[int, list[tuple[int, bytes]], dict[str, str]]:
         """The packets of one capture and the state entries to commit with them."""
         seq = self._seq.peek()
         state = self._seq.entry(seq)
@@ -344,21 +345,21 @@ class Runtime:
         packets = []
         if cap.mask_changed:
             packets.append(wire.mask_body(self.cfg.robot_id, seq, cap.labels))
-        ref = self._last_models.get(wire.skip.pose_key(cap.commanded))
+        ref = self._last_models.get(skip.pose_key(cap.commanded))
         if cap.unchanged and ref is not None:
             packets.append(wire.unchanged_body(self.cfg.robot_id, seq, ref, self.wall(), cap))
         else:
             packets.append(wire.models_body(self.cfg.robot_id, seq, self.wall(), self.cfg.features.space, cap))
         return seq, packets, state
 
-    def captured(self, cap: Capture, seq: int) -> None:
+    def captured(self, cap: FittedView, seq: int) -> None:
         """`cap` was committed under `seq`."""
         self._seq.taken(seq)
         self.pose = cap.measured
         self._last_labels = cap.labels
-        key = wire.skip.pose_key(cap.commanded)
+        key = skip.pose_key(cap.commanded)
         if not (cap.unchanged and key in self._last_models):
-            wire.remember(self._last_models, key, seq)
+            remember(self._last_models, key, seq)
 
     # -- commands --------------------------------------------------------------------
 

@@ -22,7 +22,7 @@ The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
   codes    per label, per band, four codes (>H up to 256 levels, else >I)
   dependence  when flagged: per label, its grain and band correlation in int8
            (`radio.packet_dependence`, 11 bytes per RGB label); never flagged empty
-  records  absent when every model is plain; else 2 bits per model (model i at bits 2(i%4) of
+  records  (`radio.packet_records`) absent when every model is plain; else 2 bits per model (model i at bits 2(i%4) of
            byte i//4): 0 plain, 1 a read byte, 2 never, 3 a flagged record; then, for each
            non-plain model in order, for 1 the read byte (bits 0-3 z index, bits 4-5 the
            shift: 0, -1/2, +1/2, bit 6 the exact family rule, bit 7 zero), for 3 a flag byte
@@ -37,8 +37,6 @@ section pushes it past 255 bytes.
 """
 from __future__ import annotations
 
-import enum
-import math
 import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -46,7 +44,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from btf.codec import CENSOR_SCALE, MAX_SHIFT_CODE, SHIFT_SCALE, Z_LADDER, PercentileCodec
+from btf.codec import SHIFT_SCALE, Z_LADDER, PercentileCodec
 from btf.dependence import Dependence
 from btf.johnson import Johnson
 from btf.record import FittedModel
@@ -70,46 +68,12 @@ from radio.packet_base import (
     want_str,
 )
 from radio.packet_dependence import decode_dependence, encode_dependence, quantized, section_size
+from radio.packet_records import Tail, censor_code, read_tails, tail_bytes, tail_of
 
 _HEAD = struct.Struct(">hHhHH")  # angles, levels - 1
-_U8, _I8, _U16 = struct.Struct(">B"), struct.Struct(">b"), struct.Struct(">H")
 _Z_BITS = 4  # z index in the low bits of a label's count varint
 _HAS_DEPENDENCE = 0x80  # in the bitmap length byte
 _NB_MASK = 0x3F
-
-
-class TailFlag(enum.IntFlag):
-    CENSORED_LOW = 1
-    CENSORED_HIGH = 2
-    SHIFT = 4
-    FALLBACK = 8
-    Z = 16
-    EXACT = 32
-
-
-class TailCode(enum.IntEnum):
-    """A model's 2-bit entry in the records bitmap."""
-
-    PLAIN = 0
-    READ = 1
-    FLAGGED = 3
-
-
-# The read byte's shifts (codes in 1/32): the centres onboard.reads tries.
-READ_SHIFTS: tuple[int, ...] = (0, -16, 16)
-_READ_EXACT = 0x40
-
-
-@dataclass(frozen=True, slots=True)
-class Tail:
-    """A model's placement when it differs from its label's plain one (see module doc)."""
-
-    z_index: int
-    shift_code: int = 0
-    censored_low: float = 0.0
-    censored_high: float = 0.0
-    fallback: bool = False
-    exact_family: bool = False  # the family from the sign of ln d alone (btf.percentile)
 
 
 @dataclass(frozen=True, slots=True)
@@ -195,7 +159,7 @@ class ModelsPacket:
         out += codes.astype(dtype).tobytes()
         if self.dependence:
             out += encode_dependence(self.dependence, ids, len(self.bands))
-        entries = [_tail_bytes(t, lab.z_index) for lab in self.labels
+        entries = [tail_bytes(t, lab.z_index) for lab in self.labels
                    for t in (lab.tails + (None,) * len(self.bands))[:len(self.bands)]]
         if any(c for c, _ in entries):
             marks = bytearray((len(entries) + 3) // 4)
@@ -252,7 +216,7 @@ class ModelsPacket:
             if not dependence:
                 raise FrameError("dependence section flagged but no label has a measurement")
             pos = end
-        tails = _tails(blob, pos, [z for _, _, z in heads], n_bands)
+        tails = read_tails(blob, pos, [z for _, _, z in heads], n_bands)
         records = tuple(
             LabelModels(label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]), tails[i])
             for i, (label, count, z_index) in enumerate(heads))
@@ -325,11 +289,11 @@ def models_packet(
         override = censored.get(label)
         if override is not None:
             for v in override:
-                _censor_code(v)
+                censor_code(v)
         records.append(LabelModels(
             label, int(per_band[0].count), Z_LADDER.index(z),
             tuple(tuple(int(c) for c in codec.encode(r.percentiles)) for r in per_band),
-            tuple(_tail_of(r, z, override) for r in per_band),
+            tuple(tail_of(r, z, override) for r in per_band),
         ))
     if len(fits) != len(records) * len(bands):
         raise ValueError("fits hold band indices outside the band list")
@@ -345,48 +309,6 @@ def _special(r: FittedModel) -> bool:
     return bool(r.shift or r.censored_low or r.censored_high or r.fallback or r.exact_family)
 
 
-def _tail_of(r: FittedModel, label_z: float, override: tuple[float, float] | None) -> Tail | None:
-    """The record a model needs beyond its label's fields, or None for a plain model. The
-    `censored` override of models_packet annotates fits that measured no censoring."""
-    low, high = r.censored_low, r.censored_high
-    if override is not None and not (low or high or r.fallback):
-        low, high = override
-    if not (r.z != label_z or r.shift or low or high or r.fallback or r.exact_family):
-        return None
-    code = round(r.shift * SHIFT_SCALE)
-    if code / SHIFT_SCALE != r.shift or abs(code) > MAX_SHIFT_CODE:
-        raise ValueError(f"shift {r.shift} is not a multiple of 1/{SHIFT_SCALE} within the int8 range")
-    if r.fallback and (_censor_code(low) / CENSOR_SCALE, _censor_code(high) / CENSOR_SCALE) != (low, high):
-        raise ValueError("a fallback model needs its censored fractions in 1/65535 fixed point")
-    return Tail(Z_LADDER.index(r.z), code, float(low), float(high), bool(r.fallback), bool(r.exact_family))
-
-
-def _tail_bytes(t: Tail | None, label_z: int) -> tuple[int, bytes]:
-    """(TailCode, bytes) of one model's record (see module doc)."""
-    if t is None:
-        return TailCode.PLAIN, b""
-    low, high = _censor_code(t.censored_low), _censor_code(t.censored_high)
-    if not (low or high or t.fallback) and t.shift_code in READ_SHIFTS:
-        return TailCode.READ, bytes([t.z_index | READ_SHIFTS.index(t.shift_code) << 4
-                                     | (_READ_EXACT if t.exact_family else 0)])
-    fields = [(TailFlag.Z, _U8, t.z_index if t.z_index != label_z else None),
-              (TailFlag.SHIFT, _I8, t.shift_code or None),
-              (TailFlag.CENSORED_LOW, _U16, low or None), (TailFlag.CENSORED_HIGH, _U16, high or None)]
-    flags = TailFlag(0)
-    out = b""
-    for flag, fmt, value in fields:
-        if value is not None:
-            flags |= flag
-            out += fmt.pack(value)
-    if t.fallback:
-        flags |= TailFlag.FALLBACK
-    if t.exact_family:
-        flags |= TailFlag.EXACT
-    if not flags:
-        return TailCode.PLAIN, b""
-    return TailCode.FLAGGED, bytes([flags]) + out
-
-
 def _label_ids(blob: bytes, pos: int) -> tuple[list[int], int]:
     if blob[pos] & ~(_NB_MASK | _HAS_DEPENDENCE):
         raise FrameError(f"label bitmap length byte {blob[pos]:#x} has a reserved bit set")
@@ -396,61 +318,6 @@ def _label_ids(blob: bytes, pos: int) -> tuple[list[int], int]:
         raise FrameError(f"label bitmap of {nb} bytes: too long, cut short or not canonical")
     ids = [8 * j + i for j in range(nb) for i in range(8) if blob[pos + j] >> i & 1]
     return ids, pos + nb
-
-
-def _take(blob: bytes, pos: int, fmt: struct.Struct) -> tuple[int, int]:
-    if pos + fmt.size > len(blob):
-        raise FrameError("model records end inside a record")
-    return fmt.unpack_from(blob, pos)[0], pos + fmt.size
-
-
-def _tails(blob: bytes, pos: int, label_z: list[int], n_bands: int) -> list[tuple[Tail | None, ...]]:
-    n = len(label_z) * n_bands
-    out: list[list[Tail | None]] = [[None] * n_bands for _ in label_z]
-    if pos == len(blob):
-        return [tuple(t) for t in out]
-    marks_end = pos + (n + 3) // 4
-    if marks_end > len(blob):
-        raise FrameError("model records end inside their bitmap")
-    marks, pos = blob[pos:marks_end], marks_end
-    for i in range(n):
-        code = marks[i // 4] >> (2 * (i % 4)) & 3
-        if code == TailCode.PLAIN:
-            continue
-        if code == TailCode.READ:
-            byte, pos = _take(blob, pos, _U8)
-            slot, z_index = byte >> 4 & 3, byte & 0x0F
-            if byte & 0x80 or slot >= len(READ_SHIFTS) or z_index >= len(Z_LADDER):
-                raise FrameError(f"read byte {byte:#x} of model {i} is not a read")
-            out[i // n_bands][i % n_bands] = Tail(z_index, READ_SHIFTS[slot], exact_family=bool(byte & _READ_EXACT))
-            continue
-        if code != TailCode.FLAGGED:
-            raise FrameError(f"model {i} has record code {code}, which no record uses")
-        flags, pos = _take(blob, pos, _U8)
-        if not flags or flags & ~0x3F or (flags & TailFlag.FALLBACK and not flags & (
-                TailFlag.CENSORED_LOW | TailFlag.CENSORED_HIGH)):
-            raise FrameError(f"record of model {i} has bad flags {flags:#x}")
-        z_index, shift, low, high = label_z[i // n_bands], 0, 0, 0
-        if flags & TailFlag.Z:
-            z_index, pos = _take(blob, pos, _U8)
-            if z_index >= len(Z_LADDER):
-                raise FrameError(f"record: z ladder index {z_index} outside 0..{len(Z_LADDER) - 1}")
-        if flags & TailFlag.SHIFT:
-            shift, pos = _take(blob, pos, _I8)
-            if abs(shift) > MAX_SHIFT_CODE:
-                raise FrameError(f"record: shift code {shift} outside +-{MAX_SHIFT_CODE}")
-        if flags & TailFlag.CENSORED_LOW:
-            low, pos = _take(blob, pos, _U16)
-        if flags & TailFlag.CENSORED_HIGH:
-            high, pos = _take(blob, pos, _U16)
-        if low + high > CENSOR_SCALE + 1:  # two halves may each round up
-            raise FrameError("censored fractions of a model add up to more than 1")
-        out[i // n_bands][i % n_bands] = Tail(
-            z_index, shift, low / CENSOR_SCALE, high / CENSOR_SCALE, bool(flags & TailFlag.FALLBACK),
-            bool(flags & TailFlag.EXACT))
-    if pos != len(blob):
-        raise FrameError(f"models blob has {len(blob) - pos} bytes after its records")
-    return [tuple(t) for t in out]
 
 
 def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, int], FittedModel]:
@@ -466,9 +333,3 @@ def _recompute(packet: ModelsPacket, codec: PercentileCodec) -> dict[tuple[int, 
             except (ValueError, ArithmeticError) as exc:
                 raise FrameError(f"label {rec.label} band {band}: no model from codes {codes}: {exc}") from None
     return out
-
-
-def _censor_code(fraction: float) -> int:
-    if not (math.isfinite(fraction) and 0.0 <= fraction <= 1.0):
-        raise ValueError(f"censored fraction {fraction} outside [0, 1]")
-    return round(fraction * CENSOR_SCALE)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from benchmarks.__main__ import discover, main, run_one
+from benchmarks.as99_moment_fit import MomentFitError, fit_moments
 from benchmarks.common import Context, Saving, Section, paired_rounds
-from benchmarks.johnson_moments import shape_moments, solve_shape
-from benchmarks.moments_johnson import MomentFitError, fit_moments
+from benchmarks.curve_moments import shape_moments, solve_shape
 from benchmarks.stability_grid import SATURATIONS, Point, Saturation, curve, grid
 from benchmarks.stability_score import METHODS, Cause, Size, Truth, diagnose, evaluate, fit_and_score, score
 from btf.johnson import Family, Johnson

@@ -6,10 +6,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from benchmarks.model_histograms import expected_histogram, histogram_l1, saturating
 from btf.codec import CENSOR_SCALE, Z_LADDER, fallback_probs
 from btf.johnson import Family, Johnson
 from btf.record import rebuild
-from onboard.censor import censored_counts, expected_histogram, histogram_l1, place, saturating
+from onboard.censor import censored_counts, place
 from onboard.fit import FrameFitter, fit_histogram, plain_fit
 from radio.packet import decode, encode_models
 

@@ -204,7 +204,7 @@ def _pipeline(tmp_path, on: bool):
 @pytest.mark.parametrize("on", [True, False])
 def test_capture_sends_dependence_only_when_configured(tmp_path, on):
     from hal.interfaces import ViewAngles
-    from onboard.capture import models_body
+    from onboard.packet_bodies import models_body
 
     img = _ar_image(96, 128, phi=0.8, mix=0.6, seed=8)
     labels = np.zeros(img.shape[:2], dtype=np.uint8)

@@ -10,11 +10,23 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hal.dynamixel import DynamixelServoBus, deg_to_ticks, ticks_to_deg
-from hal.emulators.dxl import DxlEmulator, Reg, crc16, instruction_packet, status_packet, stuff, unstuff
+from hal.dynamixel_table import ALERT, SIZE, TABLE_SIZE, TICKS_PER_TURN, VELOCITY_UNIT_RPM, Reg
+from hal.emulators.dxl import DxlEmulator, crc16, instruction_packet, status_packet, stuff, unstuff
 from hal.fakes import Faults
 from hal.interfaces import DeviceTimeout, HalError, LimitError, ServoBus, ServoRecovery
 
 TICK_DEG = 360.0 / 4096
+
+
+def test_the_control_table_is_the_datasheets():
+    # Driver and emulator share one table, so it is checked against the e-Manual's X-series
+    # (XL430-W250) control table here: (address, bytes) of each entry used.
+    datasheet = {"MODEL_NUMBER": (0, 2), "ID": (7, 1), "TORQUE_ENABLE": (64, 1), "HARDWARE_ERROR_STATUS": (70, 1),
+                 "PROFILE_VELOCITY": (112, 4), "GOAL_POSITION": (116, 4), "MOVING": (122, 1),
+                 "PRESENT_POSITION": (132, 4)}
+    assert {r.name: (int(r), SIZE[r]) for r in Reg} == datasheet
+    assert TABLE_SIZE == 146 + 1  # the last entry, Present Temperature, is one byte at 146
+    assert (TICKS_PER_TURN, VELOCITY_UNIT_RPM, ALERT) == (4096, 0.229, 0x80)
 
 
 @pytest.fixture

@@ -7,8 +7,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from benchmarks.model_histograms import histogram_l1
 from btf.johnson import Family, Johnson, normal_cdf
-from onboard.censor import _censored_end, censored_end_one, histogram_l1
+from onboard.censor import _censored_end, censored_end_one
 from onboard.fit import FrameFitter, fit_histogram, fit_values
 from onboard.histfit import _percentile_rows, _percentiles_one
 

@@ -5,7 +5,7 @@ import tty
 
 import pytest
 
-from onboard.cli import CliError
+from onboard.cli_runner import CliError
 from radio import packet as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import write_key

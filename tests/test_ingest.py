@@ -144,7 +144,7 @@ CREATE TABLE masks (id INTEGER PRIMARY KEY, robot TEXT NOT NULL DEFAULT '', key 
 
 
 def test_schema_1_database_is_upgraded_in_place(utia, tmp_path):
-    from tools.store import APPLICATION_ID
+    from tools.store_schema import APPLICATION_ID
 
     db = tmp_path / "old.db"
     con = sqlite3.connect(db)

@@ -7,6 +7,9 @@ import struct
 import msgpack
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra.numpy import arrays
 
 from btf.codec import Z_LADDER, PercentileCodec
 from btf.dependence import Dependence
@@ -257,6 +260,24 @@ def test_mode_pooling_keeps_the_majority_and_breaks_ties_low():
     assert downsample_labels(labels, 2).tolist() == [[1, 2], [4, 6]]
     tie = np.array([[5, 2], [2, 5]], np.uint8)
     assert downsample_labels(tie, 1).tolist() == [[2]]
+
+
+@settings(max_examples=80, deadline=None)
+@given(arrays(np.int64, st.tuples(st.integers(1, 90), st.integers(1, 90)), elements=st.integers(0, 7)),
+       st.integers(1, 64))
+def test_mode_pooling_gives_each_cell_the_mode_of_its_pixels(labels, side):
+    small = downsample_labels(labels, side)
+    (H, W), (h, w) = labels.shape, small.shape
+    if max(H, W) <= side:
+        assert np.array_equal(small, labels)
+        return
+    assert max(h, w) == side
+    rows = np.linspace(0, H, h + 1).round().astype(int)  # cells: an even split, rounded
+    cols = np.linspace(0, W, w + 1).round().astype(int)
+    for i in range(h):
+        for j in range(w):
+            cell = labels[rows[i]:rows[i + 1], cols[j]:cols[j + 1]]
+            assert small[i, j] == np.bincount(cell.ravel()).argmax()  # argmax: the lowest of equals
 
 
 def test_small_masks_travel_exactly():

@@ -7,11 +7,11 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from benchmarks.model_histograms import expected_histogram, histogram_l1, saturating
 from btf.codec import Z_LADDER, default_codec, percentile_probs
 from btf.johnson import Family, Johnson
 from btf.percentile import model_from_percentiles
 from btf.record import rebuild
-from onboard.censor import expected_histogram, histogram_l1, saturating
 from onboard.fit import FrameFitter, fit_histogram, histogram_percentiles, plain_fit
 from onboard.reads import GRID, TEMPLATE, min_count, phi, solve, template
 from radio.packet import decode, encode_models

@@ -86,6 +86,8 @@ def test_mask_is_sent_when_the_label_map_changes_and_on_request(tmp_path):
     command(rt, tr, 2, C.CAPTURE)
     command(rt, tr, 3, C.CAPTURE)  # same view, same map: not sent again
     assert len(masks()) == 1
+    # the change check compares the very map the MASK packet carried
+    np.testing.assert_array_equal(masks()[0].label_map(), rt.pipeline.segmenter.segmenter.small)
     command(rt, tr, 4, C.SEND_MASK, seq=1)
     assert len(masks()) == 2 and masks()[-1].seq == 1
     command(rt, tr, 5, C.GOTO, elevation=30.0, azimuth=40.0)

@@ -4,7 +4,7 @@ import pytest
 
 from onboard.features import FeatureSpace, FeatureSpec, compute
 from onboard.isodata import IsodataParams, Labeller, assign, fit_centres, spread
-from onboard.segment import SegmentConfig, Segmenter, SegmentMethod
+from onboard.segmentation import Segmenter, SegmentMethod
 
 CLUTTER = np.array([[194, 178, 128], [86, 125, 70], [112, 84, 62], [150, 150, 140]], float)
 
@@ -46,7 +46,7 @@ def test_spread_is_the_mean_distance_to_the_nearest_centre():
 
 def _segmenter(drift=0.25):
     params = IsodataParams(k=4, split_std=12, merge_distance=25, subsample=4000)
-    return Segmenter(SegmentConfig(SegmentMethod.ISODATA, n_labels=16, isodata=params, refit_drift=drift))
+    return Segmenter(SegmentMethod.ISODATA, n_labels=16, isodata=params, refit_drift=drift)
 
 
 def _feats(img):
@@ -97,4 +97,4 @@ def test_zero_drift_refits_every_frame_and_new_scene_forces_a_refit():
 
 def test_bad_refit_settings_are_refused():
     with pytest.raises(ValueError, match="refit_drift"):
-        SegmentConfig(SegmentMethod.ISODATA, refit_drift=-1)
+        Segmenter(SegmentMethod.ISODATA, refit_drift=-1)

@@ -1,4 +1,5 @@
-"""Mask files, MASK-map down/upsampling, the persistent palette and the Segmenter."""
+"""Mask files, the MASK map the Segmenter compares and the packet carries, the persistent palette
+and the Segmenter."""
 import cv2
 import msgpack
 import numpy as np
@@ -10,16 +11,12 @@ from PIL import Image
 
 from onboard.features import FeatureSpace, FeatureSpec, compute
 from onboard.isodata import IsodataParams
-from onboard.segment import (
-    Palette,
-    SegmentConfig,
-    Segmenter,
-    SegmentMethod,
-    block_size,
-    downsample_labels,
-    load_mask,
-    upsample_labels,
-)
+from onboard.config import SegmentConfig
+from onboard.mask_file import load_mask
+from onboard.palette import Palette
+from onboard.segmentation import Segmenter, SegmentMethod
+from radio import packet as pk
+from radio.packet_mask import downsample_labels
 
 COLOURS = np.array([[40, 40, 40], [200, 60, 60], [60, 200, 60], [60, 60, 200]], np.uint8)
 
@@ -79,6 +76,11 @@ def test_mask_errors_name_the_problem(tmp_path):
         load_mask(tmp_path / "f.npy")
 
 
+def _sent(labels, side=pk.MAX_SIDE):
+    """The MASK packet the robot would send for `labels`, as the host decodes it."""
+    return pk.decode(pk.encode_mask(labels, robot_id=1, seq=1, max_side=side))
+
+
 def test_downsample_takes_the_block_mode():
     lab = np.zeros((6, 6), np.uint8)
     lab[:3, :3] = [[1, 1, 2], [1, 2, 2], [1, 1, 0]]  # mode 1 (5 of 9)
@@ -92,8 +94,8 @@ def test_downsample_bounds_the_size_and_keeps_blocky_maps_exactly():
     yy, xx = np.mgrid[0:480, 0:640]
     lab = ((xx // 40 + yy // 30 * 3) % 5).astype(np.uint8)  # region edges on the 10-pixel grid
     small = downsample_labels(lab, 64)
-    assert max(small.shape) <= 64 and block_size(lab.shape, 64) == 10
-    np.testing.assert_array_equal(upsample_labels(small, lab.shape, 64), lab)
+    assert max(small.shape) <= 64 and small.shape == (48, 64)  # cells of 10 x 10 pixels
+    np.testing.assert_array_equal(_sent(lab, 64).full_size(), lab)
 
 
 @settings(max_examples=60, deadline=None)
@@ -103,15 +105,20 @@ def test_downsample_upsample_shapes_and_values(lab, side):
     small = downsample_labels(lab, side)
     assert max(small.shape) <= side
     assert set(np.unique(small)) <= set(np.unique(lab))
-    big = upsample_labels(small, lab.shape, side)
+    packet = _sent(lab, side)
+    np.testing.assert_array_equal(packet.label_map(), small)
+    big = packet.full_size()
     assert big.shape == lab.shape and big.dtype == np.uint8
-    b = block_size(lab.shape, side)
-    np.testing.assert_array_equal(big[::b, ::b], small)
+    (h, w), (fh, fw) = small.shape, lab.shape
+    if fh % h == 0 and fw % w == 0:  # whole cells: each cell's first pixel carries its label
+        np.testing.assert_array_equal(big[::fh // h, ::fw // w], small)
 
 
 def test_upsample_with_a_foreign_size_scales_proportionally():
     small = np.array([[0, 1], [2, 3]], np.uint8)
-    big = upsample_labels(small, (4, 6), max_side=64)  # 64 would give a 4x6 map, not 2x2
+    packet = pk.MaskPacket(1, 1, (4, 6), (2, 2), bytes([0, 1, 2, 3]), (1, 1, 1, 1))
+    np.testing.assert_array_equal(packet.label_map(), small)
+    big = packet.full_size()  # a 4x6 frame would pool to 4x6 at 64, not 2x2
     np.testing.assert_array_equal(big[:, :3], [[0] * 3, [0] * 3, [2] * 3, [2] * 3])
 
 
@@ -155,8 +162,7 @@ def _scene(which, seed):
 
 
 def test_isodata_segmenter_keeps_labels_consistent_across_views():
-    cfg = SegmentConfig(SegmentMethod.ISODATA, isodata=IsodataParams(k=4), palette_threshold=30)
-    seg = Segmenter(cfg)
+    seg = Segmenter(SegmentMethod.ISODATA, isodata=IsodataParams(k=4), palette_threshold=30)
     truth = _labels()
     spec = FeatureSpec(FeatureSpace.RGB)
     first = seg.labels_for(compute(_scene(truth, 1), spec))
@@ -173,7 +179,7 @@ def test_isodata_segmenter_keeps_labels_consistent_across_views():
 def test_changed_only_when_the_map_differs_enough(tmp_path):
     lab = _labels(64, 64)
     np.save(tmp_path / "m.npy", lab)
-    seg = Segmenter.from_config(SegmentConfig("mask", mask_path=str(tmp_path / "m.npy"), mask_side=16))
+    seg = Segmenter("mask", mask_path=str(tmp_path / "m.npy"), mask_side=16)
     ff = compute(np.zeros((64, 64, 3), np.uint8), FeatureSpec(FeatureSpace.GRAY))
     np.testing.assert_array_equal(seg.labels_for(ff), lab)
     assert seg.changed and seg.small.shape == (16, 16)
@@ -185,8 +191,7 @@ def test_changed_only_when_the_map_differs_enough(tmp_path):
 
 
 def test_small_label_jitter_does_not_trigger_a_new_mask():
-    cfg = SegmentConfig(SegmentMethod.ISODATA, isodata=IsodataParams(k=2), mask_side=32, change_fraction=0.05)
-    seg = Segmenter(cfg)
+    seg = Segmenter(SegmentMethod.ISODATA, isodata=IsodataParams(k=2), mask_side=32, change_fraction=0.05)
     truth = (np.arange(128)[None, :] >= 64).repeat(96, 0).astype(np.uint8)
     spec = FeatureSpec(FeatureSpace.RGB)
     seg.labels_for(compute(_scene(truth, 3), spec))
@@ -196,10 +201,50 @@ def test_small_label_jitter_does_not_trigger_a_new_mask():
 
 def test_segmenter_config_errors_are_clear(tmp_path):
     with pytest.raises(ValueError, match="needs mask_path"):
-        SegmentConfig(SegmentMethod.MASK)
+        Segmenter(SegmentMethod.MASK)
     with pytest.raises(ValueError, match="no such file"):
-        Segmenter(SegmentConfig("mask", mask_path=str(tmp_path / "none.png")))
+        Segmenter("mask", mask_path=str(tmp_path / "none.png"))
     np.save(tmp_path / "m.npy", _labels())
-    seg = Segmenter(SegmentConfig("mask", mask_path=str(tmp_path / "m.npy")))
+    seg = Segmenter("mask", mask_path=str(tmp_path / "m.npy"))
     with pytest.raises(ValueError, match="the frame is 10x10"):
         seg.labels_for(compute(np.zeros((10, 10, 3), np.uint8), FeatureSpec(FeatureSpace.RGB)))
+
+
+def test_the_change_check_compares_the_map_the_mask_packet_sends(tmp_path):
+    # 100 x 130 pools to 49 x 64 on the wire; the change check used to pool it to 34 x 44.
+    yy, xx = np.mgrid[0:100, 0:130]
+    lab = ((xx // 13 + yy // 9) % 4).astype(np.uint8)
+    np.save(tmp_path / "m.npy", lab)
+    seg = Segmenter("mask", mask_path=str(tmp_path / "m.npy"))
+    seg.labels_for(compute(np.zeros((100, 130, 3), np.uint8), FeatureSpec(FeatureSpace.RGB)))
+    assert seg.changed
+    sent = _sent(lab).label_map()
+    assert sent.shape == (49, 64)
+    np.testing.assert_array_equal(seg.small, sent)
+
+
+def test_a_change_the_sent_map_shows_is_a_change():
+    # Moving a boundary by 2 pixels changes one column of the 49 x 64 map that is sent (1.6 %, under
+    # the 2 % threshold); by 10 pixels, five columns (7.8 %).
+    yy, xx = np.mgrid[0:100, 0:130]
+    seg = Segmenter(SegmentMethod.ISODATA)
+    for edge, expect in ((60, True), (62, False), (70, True)):
+        lab = (xx >= edge).astype(np.uint8)
+        seg.note(lab)
+        sent = _sent(lab).label_map()
+        np.testing.assert_array_equal(seg.small, sent)
+        assert bool(seg.changed) is expect, edge
+
+
+def test_the_segment_section_builds_its_segmenter(tmp_path):
+    np.save(tmp_path / "m.npy", _labels())
+    seg = Segmenter.from_config(SegmentConfig(method="mask", mask=tmp_path / "m.npy", n_labels=4))
+    assert seg.method is SegmentMethod.MASK and seg.palette is None
+    with pytest.raises(ValueError, match="label 3, above the 3 labels"):
+        Segmenter.from_config(SegmentConfig(method="mask", mask=tmp_path / "m.npy", n_labels=3))
+    iso = Segmenter.from_config(SegmentConfig(k=3, split_std=12.0, refit_drift=0.5, n_labels=8), seed=7)
+    assert iso.method is SegmentMethod.ISODATA and iso.refit_drift == 0.5 and iso.palette.max_entries == 8
+    assert iso.isodata == IsodataParams(k=3, min_samples=50, split_std=12.0, merge_distance=15.0, max_merges=2,
+                                        iterations=10, subsample=20_000, seed=7)
+    # the fake camera's ground truth keeps a palette too, as isodata's would
+    assert Segmenter.from_config(SegmentConfig(method="scene")).palette is not None

@@ -14,9 +14,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from benchmarks.model_histograms import histogram_l1
 from btf.johnson import Family, Johnson
 from btf.percentile import model_from_percentiles
-from onboard.censor import histogram_l1
 from onboard.fit import fit_histogram, plain_fit
 
 # Slow runs only under `make stress` (BTF_STRESS=1, the long hypothesis profile).

@@ -140,7 +140,7 @@ def test_masks_below_one_segment_tile_are_segmented_whole():
     image, _ = field(90, 120, seed=1)
     for method in ("felzenszwalb", "slic"):
         a = masks.segment(image, method, 4, 3, tile=120)
-        b = masks.segment(image, method, 4, 3, tile=masks.SEGMENT_TILE)
+        b = masks.segment(image, method, 4, 3)
         assert np.array_equal(a, b)
 
 
@@ -159,3 +159,16 @@ def test_relabel_maps_through_the_table_in_tiles(tiny_tiles):
     labels = np.random.default_rng(0).integers(0, 5, (19, 23)).astype(np.int32)
     table = np.array([4, 3, 2, 1, 0])
     assert np.array_equal(masks.relabel(labels, table), table[labels].astype(np.uint8))
+
+
+def test_the_cli_offers_the_methods_tools_masks_has():
+    from tools import cmd_mask
+
+    assert cmd_mask.METHODS == masks.METHODS
+
+
+def test_segment_tiles_are_even_and_snapped_to_the_superpixel_grid():
+    assert masks._bounds(1000, 1024, 30.0) == [0, 1000]
+    cuts = masks._bounds(2200, 1024, 90.8)
+    assert len(cuts) == 4 and all(abs(c / 90.8 - round(c / 90.8)) < 0.01 for c in cuts[1:-1])
+    assert max(b - a for a, b in zip(cuts, cuts[1:])) <= 1024

@@ -14,8 +14,8 @@ import sys
 from collections import Counter
 from pathlib import Path
 
-from onboard import cli as onboard_cli
-from onboard.cli import CliError  # noqa: F401  (subcommands raise it)
+from onboard import cli_runner
+from onboard.cli_runner import CliError  # noqa: F401  (subcommands raise it)
 
 PROG = "btf-host"
 # Subcommand modules, in the order --help lists them.
@@ -105,11 +105,11 @@ def choose_source(captures, db, robot: str | None, scene: str | None) -> tuple[s
 
 
 def build_parser() -> argparse.ArgumentParser:
-    return onboard_cli.build_parser(PROG, "tools", COMMANDS, __doc__.splitlines()[0])
+    return cli_runner.build_parser(PROG, "tools", COMMANDS, __doc__.splitlines()[0])
 
 
 def main(argv: list[str] | None = None) -> int:
-    return onboard_cli.run_cli(build_parser(), argv)
+    return cli_runner.run_cli(build_parser(), argv)
 
 
 if __name__ == "__main__":

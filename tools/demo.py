@@ -414,6 +414,7 @@ def run_demo(out: Path, cfg: DemoConfig = DemoConfig(), progress: bool = True) -
 
         # The report states the run time, so it is taken before the report is written.
         res.seconds = time.monotonic() - t0
-        write_report(store, out / "report", demo=res, size=cfg.size, progress=progress)
+        write_report(store, out / "report", demo=res, progress=progress,
+                     measured=lambda scene, angle: capture(scene, angle, cfg.size).image if scene else None)
     res.report_seconds = time.monotonic() - t0 - res.seconds
     return res

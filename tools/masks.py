@@ -3,12 +3,15 @@
 Labels 0..K-1 are ordered darkest first, so masks are stable across runs and methods.
 Memory beyond the image stays near the mask itself: ISODATA labels in bounded chunks, every
 relabelling goes through a lookup table row tile by row tile, and the bottom-up methods
-(Felzenszwalb, SLIC), whose working memory is hundreds of bytes per pixel, segment square
-tiles of at most `SEGMENT_TILE` pixels a side. Their segments are merged into K classes by
-k-means on mean colours over the whole image; an image within one tile is segmented whole,
-a larger one has no segment crossing a tile border (the classes do cross it).
+(Felzenszwalb, SLIC), whose working memory is hundreds of bytes per pixel, segment even
+tiles of at most `SEGMENT_TILE` pixels a side (1024 and 2048). Their segments are merged into K
+classes by k-means on mean colours over the whole image; an image within one tile is segmented
+whole; in a larger one no segment crosses a tile border (Felzenszwalb's classes show no seam,
+SLIC's class borders partly follow the tile borders where its superpixels are cut).
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -16,7 +19,9 @@ from onboard.isodata import IsodataParams, isodata
 from tools.tiles import label_counts, row_tiles
 
 METHODS = ("isodata", "kmeans", "felzenszwalb", "slic")
-SEGMENT_TILE = 1024
+# Tile sides: Felzenszwalb holds ~340 bytes a pixel and its tiles do not show; SLIC ~130, and
+# its class borders follow tile borders where superpixels are cut, so it gets larger tiles.
+SEGMENT_TILE = {"felzenszwalb": 1024, "slic": 2048}
 
 
 def relabel(labels: np.ndarray, table: np.ndarray) -> np.ndarray:
@@ -61,23 +66,36 @@ def _kmeans(image: np.ndarray, k: int, seed: int) -> np.ndarray:
     return relabel(lab, _compact_rank(lab, centres.astype(np.float64)))
 
 
+def _bounds(size: int, tile: int, step: float) -> list[int]:
+    """Tile borders along one axis: as few even tiles as fit `tile`, snapped to multiples of
+    `step` (SLIC's grid of superpixel seeds) so no superpixel's seed cell is cut in two."""
+    parts = math.ceil(size / tile)
+    cuts = {0, size}
+    for k in range(1, parts):
+        cut = round(round(size * k / parts / step) * step)
+        if 0 < cut < size:
+            cuts.add(cut)
+    return sorted(cuts)
+
+
 def _segment_tiles(image: np.ndarray, method: str, scale: float, segments: int, tile: int) -> np.ndarray:
     """int32 segment ids over the image, segmented tile by tile (ids unique across tiles)."""
     from skimage.segmentation import felzenszwalb, slic
 
     h, w = image.shape[:2]
+    step = math.sqrt(h * w / segments)  # SLIC's superpixel side over the whole image
+    rows, cols = _bounds(h, tile, step), _bounds(w, tile, step)
     out = np.empty((h, w), np.int32)
-    tile_h, tile_w = min(h, tile), min(w, tile)
     n = 0
-    for r in range(0, h, tile_h):
-        for c in range(0, w, tile_w):
-            part = image[r:r + tile_h, c:c + tile_w]
+    for r0, r1 in zip(rows, rows[1:]):
+        for c0, c1 in zip(cols, cols[1:]):
+            part = image[r0:r1, c0:c1]
             if method == "felzenszwalb":
                 seg = felzenszwalb(part, scale=scale, sigma=0.8, min_size=20)
-            else:  # as many superpixels per tile as its share of the image
-                share = max(1, round(segments * part.shape[0] * part.shape[1] / (h * w)))
+            else:  # superpixels of the whole image's size
+                share = max(1, round(segments * (r1 - r0) * (c1 - c0) / (h * w)))
                 seg = slic(part, n_segments=share, compactness=10, start_label=0)
-            out[r:r + tile_h, c:c + tile_w] = seg + n
+            out[r0:r1, c0:c1] = seg + n
             n += int(seg.max()) + 1
     return out
 
@@ -111,15 +129,16 @@ def _merge_segments(image: np.ndarray, segments: np.ndarray, k: int, seed: int) 
 
 
 def segment(image: np.ndarray, method: str, k: int, seed: int = 0, scale: float = 100.0,
-            segments: int = 400, tile: int = SEGMENT_TILE) -> np.ndarray:
+            segments: int = 400, tile: int | None = None) -> np.ndarray:
     """A uint8 mask of `image` (H x W x 3 uint8) with classes 0..K-1, darkest first;
-    Felzenszwalb and SLIC segment squares of `tile` pixels a side."""
+    Felzenszwalb and SLIC segment tiles of at most `tile` (default SEGMENT_TILE) pixels a side."""
     if method == "isodata":
         return _isodata(image, k, seed)
     if method == "kmeans":
         return _kmeans(image, k, seed)
     if method not in METHODS:
         raise ValueError(f"unknown mask method {method!r}; expected one of {', '.join(METHODS)}")
+    tile = SEGMENT_TILE[method] if tile is None else tile
     if tile < 16:
         raise ValueError(f"segment tiles must be at least 16 pixels a side, got {tile}")
     return _merge_segments(image, _segment_tiles(image, method, scale, segments, tile), k, seed)

@@ -15,7 +15,7 @@ import numpy as np
 from tools.grid import Grid
 from tools.images import stretched_8bit, write_image
 from tools.receiver import mask_key
-from tools.store import Capture, Store
+from tools.store import Store, StoredCapture
 from tools.synth import MissingModels, synthesize
 
 Measured = Callable[[str, float], np.ndarray | None]
@@ -37,7 +37,7 @@ def _figure(src: str, caption: str) -> str:
             f"<figcaption>{html.escape(caption)}</figcaption></figure>")
 
 
-def capture_mask(store: Store, cap: Capture) -> np.ndarray | None:
+def capture_mask(store: Store, cap: StoredCapture) -> np.ndarray | None:
     """A capture's label map: the robot's MASK for it, the one `fit --mask` or `ingest --mask`
     stored with it, an ingested dataset's common mask, or the robot's latest MASK before it."""
     for key in (mask_key(cap.sequence), f"{cap.robot}/{cap.sequence}", cap.robot):
@@ -122,18 +122,13 @@ def _note(text: str) -> str:
 
 
 def write_report(store: Store, out: Path, measured: Measured | None = None, demo: Any = None,
-                 size: tuple[int, int] | None = None, seed: int = 0, robot: str | None = None,
+                 seed: int = 0, robot: str | None = None,
                  scene: str | None = None, progress: bool = False) -> Path:
     """Writes out/index.html and its PNGs for the captures of `robot` and `scene` (all when None);
     returns the HTML path. `progress` shows a tqdm bar over the captures on stderr."""
     from tqdm import tqdm
 
     out.mkdir(parents=True, exist_ok=True)
-    if measured is None and demo is not None and size is not None:
-        from tools.demo import capture
-
-        def measured(scene: str, angle: float) -> np.ndarray | None:
-            return capture(scene, angle, size).image if scene else None
     rng = np.random.default_rng(seed)
     caps = store.captures(robot=robot, scene=scene)
     chosen = " ".join(f"{k} {v}" for k, v in (("robot", robot), ("scene", scene)) if v is not None)

@@ -3,7 +3,8 @@
 One capture is one view of one robot: (robot, sequence) is unique, so a packet
 received twice is stored once. Every write runs in a transaction; `with store.batch():`
 groups many writes in one. A file that is not a btfscout database (or is damaged)
-raises `CorruptDatabase` and is never rewritten.
+raises `CorruptDatabase` and is never rewritten (`tools.store_schema` opens and upgrades
+the file; `tools.store_rows` checks every row read back).
 """
 from __future__ import annotations
 
@@ -20,97 +21,10 @@ from btf.johnson import Johnson
 from btf.record import FittedModel
 from onboard.features import PcaBasis
 from tools.images import decode_png, encode_png
-from tools.store_rows import Capture, capture_from_row, mask_png, model_from_row
+from tools.store_rows import StoredCapture, capture_from_row, mask_png, model_from_row
+from tools.store_schema import SCHEMA_VERSION, CorruptDatabase, connect
 
-__all__ = ["Store", "CorruptDatabase", "Capture", "SCHEMA_VERSION"]
-
-SCHEMA_VERSION = 6
-# PRAGMA application_id: marks the file as ours ("BTFS").
-APPLICATION_ID = 0x42544653
-_SQLITE_MAGIC = b"SQLite format 3\x00"
-
-# Per region: band correlations and autocorrelation at onboard.dependence.LAGS (JSON lists).
-_DEPENDENCE = """
-CREATE TABLE dependence (
-    capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
-    label INTEGER NOT NULL,
-    corr TEXT NOT NULL, dx TEXT NOT NULL, dy TEXT NOT NULL,
-    PRIMARY KEY (capture, label)
-);
-"""
-# The PCA basis a robot sent with a capture (PcaBasis.to_record as JSON); later captures of
-# the same robot use it until a newer one arrives.
-_PCA = """
-CREATE TABLE pca_bases (
-    capture INTEGER PRIMARY KEY REFERENCES captures(id) ON DELETE CASCADE,
-    record TEXT NOT NULL
-);
-"""
-_SCHEMA = """
-CREATE TABLE captures (
-    id INTEGER PRIMARY KEY,
-    robot TEXT NOT NULL,
-    sequence INTEGER NOT NULL,
-    time REAL NOT NULL,
-    cmd_elevation REAL, cmd_azimuth REAL,
-    elevation REAL NOT NULL, azimuth REAL NOT NULL,
-    space TEXT NOT NULL,
-    bands TEXT NOT NULL,
-    scene TEXT NOT NULL DEFAULT '',
-    light_elevation REAL, light_azimuth REAL,
-    source TEXT,
-    levels INTEGER NOT NULL DEFAULT 256,
-    UNIQUE (robot, sequence)
-);
-CREATE INDEX captures_by_source ON captures (robot, source);
-CREATE TABLE models (
-    capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
-    label INTEGER NOT NULL, band INTEGER NOT NULL,
-    family TEXT NOT NULL,
-    gamma REAL NOT NULL, delta REAL NOT NULL, xi REAL NOT NULL, lam REAL NOT NULL,
-    p0 REAL, p1 REAL, p2 REAL, p3 REAL,
-    z REAL, count INTEGER NOT NULL,
-    beta1 REAL, beta2 REAL,
-    censored_low REAL NOT NULL DEFAULT 0, censored_high REAL NOT NULL DEFAULT 0,
-    shift REAL NOT NULL DEFAULT 0, fallback INTEGER NOT NULL DEFAULT 0,
-    exact_family INTEGER NOT NULL DEFAULT 0,
-    PRIMARY KEY (capture, label, band)
-);
-CREATE INDEX models_by_region ON models (label, band);
-CREATE TABLE masks (
-    id INTEGER PRIMARY KEY,
-    robot TEXT NOT NULL DEFAULT '',
-    key TEXT NOT NULL,
-    height INTEGER NOT NULL, width INTEGER NOT NULL,
-    encoding TEXT NOT NULL,
-    data BLOB NOT NULL,
-    UNIQUE (robot, key)
-);
-""" + _DEPENDENCE + _PCA
-_TABLES = {"captures", "models", "masks"}
-# Upgrades from the keyed version to the next; each keeps every existing row.
-_MIGRATIONS: dict[int, str] = {
-    # illumination angles and the source file of a capture (dataset ingest)
-    1: "ALTER TABLE captures ADD COLUMN light_elevation REAL;"
-       "ALTER TABLE captures ADD COLUMN light_azimuth REAL;"
-       "ALTER TABLE captures ADD COLUMN source TEXT;"
-       "CREATE INDEX captures_by_source ON captures (robot, source);",
-    # grain and band correlation per region (onboard.dependence)
-    2: _DEPENDENCE,
-    # the PCA basis of a scene, to turn pca captures back into RGB
-    3: _PCA,
-    # the rest of a model's read (btf.record), so a stored record rebuilds its model
-    4: "ALTER TABLE models ADD COLUMN shift REAL NOT NULL DEFAULT 0;"
-       "ALTER TABLE models ADD COLUMN fallback INTEGER NOT NULL DEFAULT 0;"
-       "ALTER TABLE models ADD COLUMN exact_family INTEGER NOT NULL DEFAULT 0;",
-    # the sensor's levels (256 for 8-bit, 65536 for 16-bit images), so synthesis keeps the depth
-    5: "ALTER TABLE captures ADD COLUMN levels INTEGER NOT NULL DEFAULT 256;",
-}
-
-
-class CorruptDatabase(Exception):
-    """The file is damaged or is not a btfscout database; it has not been touched."""
-
+__all__ = ["Store", "CorruptDatabase", "StoredCapture", "SCHEMA_VERSION"]
 
 class _Undo(Exception):
     """Drops the current write (e.g. a capture that was already stored)."""
@@ -146,64 +60,10 @@ class Store:
     # -- opening ---------------------------------------------------------
     @classmethod
     def open(cls, path: str | Path, create: bool = True) -> "Store":
+        """The database at `path`, created when absent (and `create`), upgraded when older;
+        CorruptDatabase, with the file untouched, when it is not ours or is damaged."""
         p = Path(path)
-        if p.exists() and not p.is_file():
-            raise CorruptDatabase(f"database {p}: not a regular file")
-        fresh = not p.exists() or p.stat().st_size == 0
-        if not fresh:
-            try:
-                with open(p, "rb") as fh:
-                    magic = fh.read(16)
-            except OSError as exc:
-                raise CorruptDatabase(f"database {p}: cannot read ({exc.strerror})") from None
-            if magic != _SQLITE_MAGIC:
-                raise CorruptDatabase(f"database {p}: not an SQLite file; left untouched")
-        elif not create:
-            raise CorruptDatabase(f"database {p}: no such database")
-        if not p.parent.exists():
-            raise CorruptDatabase(f"database {p}: directory {p.parent} does not exist")
-        try:
-            conn = sqlite3.connect(str(p), isolation_level=None)
-        except sqlite3.Error as exc:
-            raise CorruptDatabase(f"database {p}: cannot open ({exc})") from None
-        try:
-            conn.execute("PRAGMA foreign_keys = ON")
-            app_id = conn.execute("PRAGMA application_id").fetchone()[0]
-            version = conn.execute("PRAGMA user_version").fetchone()[0]
-            tables = {r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
-            if app_id == 0 and version == 0 and not tables:
-                conn.executescript("BEGIN;" + _SCHEMA + f"PRAGMA user_version = {SCHEMA_VERSION};"
-                                   f"PRAGMA application_id = {APPLICATION_ID}; COMMIT;")
-            elif app_id != APPLICATION_ID or not _TABLES <= tables:
-                raise CorruptDatabase(f"database {p}: not a btfscout database; left untouched")
-            elif version < SCHEMA_VERSION and all(v in _MIGRATIONS for v in range(version, SCHEMA_VERSION)):
-                script = "".join(_MIGRATIONS[v] for v in range(version, SCHEMA_VERSION))
-                conn.executescript(f"BEGIN;{script}PRAGMA user_version = {SCHEMA_VERSION}; COMMIT;")
-            elif version != SCHEMA_VERSION:
-                raise CorruptDatabase(
-                    f"database {p}: schema version {version}, this tool reads {SCHEMA_VERSION}; left untouched"
-                )
-            else:
-                check = conn.execute("PRAGMA quick_check").fetchone()[0]
-                if check != "ok":
-                    raise CorruptDatabase(f"database {p}: damaged ({check}); left untouched")
-        except sqlite3.DatabaseError as exc:
-            conn.close()
-            raise CorruptDatabase(f"database {p}: damaged ({exc}); left untouched") from None
-        except CorruptDatabase:
-            conn.close()
-            raise
-        # Only once the file is known to be ours. The host is not the durable side: the
-        # robot keeps every packet in its outbox until it is acknowledged, and a capture is
-        # acknowledged only after its commit, so a power cut that loses the last WAL
-        # commits makes the robot send them again. NORMAL skips an fsync per commit.
-        try:
-            conn.execute("PRAGMA journal_mode = WAL")
-            conn.execute("PRAGMA synchronous = NORMAL")
-        except sqlite3.DatabaseError as exc:
-            conn.close()
-            raise CorruptDatabase(f"database {p}: cannot open for writing ({exc}); left untouched") from None
-        return cls(conn, p)
+        return cls(connect(p, create), p)
 
     def close(self) -> None:
         self._conn.close()
@@ -354,11 +214,11 @@ class Store:
         return (" WHERE " + " AND ".join(where)) if where else "", args
 
     def captures(self, robot: str | None = None, space: str | None = None,
-                 scene: str | None = None) -> list[Capture]:
+                 scene: str | None = None) -> list[StoredCapture]:
         sql, args = self._capture_filter(robot, space, scene)
         return self._select_captures(sql, args)
 
-    def _select_captures(self, where: str, args: list) -> list[Capture]:
+    def _select_captures(self, where: str, args: list) -> list[StoredCapture]:
         rows = self._conn.execute(
             "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
             " space, bands, scene, light_elevation, light_azimuth, source, levels FROM captures"
@@ -373,7 +233,7 @@ class Store:
         except ValueError as exc:  # ImageError too
             raise CorruptDatabase(f"database {self.path}: {what}: {exc}; left untouched") from None
 
-    def capture_by_seq(self, robot: str, sequence: int) -> Capture | None:
+    def capture_by_seq(self, robot: str, sequence: int) -> StoredCapture | None:
         """The capture (robot, sequence), or None when it is not stored."""
         sql, args = self._capture_filter(robot, None, None)
         found = self._select_captures(sql + " AND sequence = ?", [*args, int(sequence)])
@@ -425,8 +285,8 @@ class Store:
         return dict(self._checked(model_from_row, r, f"capture {r[0]!r}")
                     for r in self._conn.execute(sql + " ORDER BY label, band", args))
 
-    def _latest(self, robot: str | None, space: str | None, scene: str | None) -> dict[float, Capture]:
-        latest: dict[float, Capture] = {}
+    def _latest(self, robot: str | None, space: str | None, scene: str | None) -> dict[float, StoredCapture]:
+        latest: dict[float, StoredCapture] = {}
         for c in self.captures(robot, space, scene):
             if c.elevation not in latest or c.id > latest[c.elevation].id:
                 latest[c.elevation] = c

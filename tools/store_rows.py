@@ -21,7 +21,9 @@ MAX_ROW_INT = 2**63 - 1
 
 
 @dataclass(frozen=True, slots=True)
-class Capture:
+class StoredCapture:
+    """A capture row as the database holds it (its models are read separately: Store.models)."""
+
     id: int
     robot: str
     sequence: int
@@ -40,14 +42,14 @@ class Capture:
         return self.measured[0]
 
 
-def capture_from_row(r: tuple) -> Capture:
+def capture_from_row(r: tuple) -> StoredCapture:
     """(id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space,
-    bands, scene, light_elevation, light_azimuth, source, levels) -> Capture."""
+    bands, scene, light_elevation, light_azimuth, source, levels) -> StoredCapture."""
     n = [number(v, name, nullable) for v, name, nullable in (
         (r[3], "time", False), (r[4], "commanded elevation", True), (r[5], "commanded azimuth", True),
         (r[6], "elevation", False), (r[7], "azimuth", False),
         (r[11], "light elevation", True), (r[12], "light azimuth", True))]
-    return Capture(integer(r[0], "id"), text(r[1], "robot"), integer(r[2], "sequence"), n[0],
+    return StoredCapture(integer(r[0], "id"), text(r[1], "robot"), integer(r[2], "sequence"), n[0],
                    (n[1], n[2]), (n[3], n[4]), text(r[8], "space"), band_names(r[9]),
                    text(r[10], "scene"), (n[5], n[6]), None if r[13] is None else text(r[13], "source"),
                    integer(r[14], "levels", 2, 65536))

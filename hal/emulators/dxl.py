@@ -16,14 +16,12 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Callable
 
+from hal.dynamixel_table import ALERT, CENTER_TICKS, READ_ONLY, SIZE, TABLE_SIZE, TICKS_PER_TURN, VELOCITY_UNIT_RPM, Reg
 from hal.fakes import Call, Faults
 
 HEADER = b"\xff\xff\xfd\x00"
 BROADCAST_ID = 0xFE
-ALERT = 0x80
-TICKS_PER_TURN = 4096
-# Profile velocity unit of the X series: 0.229 rev/min; 0 means "as fast as possible".
-VELOCITY_UNIT_TICKS_S = 0.229 * TICKS_PER_TURN / 60.0
+VELOCITY_UNIT_TICKS_S = VELOCITY_UNIT_RPM * TICKS_PER_TURN / 60.0
 MAX_SPEED_TICKS_S = 1023 * VELOCITY_UNIT_TICKS_S
 
 
@@ -50,25 +48,6 @@ class PacketError(IntEnum):
     ACCESS = 7
 
 
-class Reg(IntEnum):
-    """X-series control table addresses used here.
-
-    Written from the datasheet, not imported from the driver: a wrong address in the
-    driver must fail against the emulator, not agree with it.
-    """
-
-    MODEL_NUMBER = 0
-    ID = 7
-    TORQUE_ENABLE = 64
-    HARDWARE_ERROR_STATUS = 70
-    PROFILE_VELOCITY = 112
-    GOAL_POSITION = 116
-    MOVING = 122
-    PRESENT_POSITION = 132
-
-
-TABLE_SIZE = 147
-READ_ONLY = {*range(0, 7), Reg.HARDWARE_ERROR_STATUS, Reg.MOVING, *range(124, TABLE_SIZE)}
 XL430_MODEL = 1060
 MIN_PACKET = 10  # header 4, id, length 2, instruction, CRC 2
 MAX_PACKET = 1024
@@ -136,7 +115,7 @@ class EmulatedServo:
 
     servo_id: int
     table: bytearray = field(default_factory=lambda: bytearray(TABLE_SIZE))
-    position: float = 2048.0
+    position: float = float(CENTER_TICKS)
     offline_until: float = 0.0
 
     def __post_init__(self) -> None:
@@ -144,28 +123,30 @@ class EmulatedServo:
 
     def reset(self) -> None:
         self.table[:] = bytes(TABLE_SIZE)
-        self.set(Reg.MODEL_NUMBER, 2, XL430_MODEL)
-        self.set(Reg.ID, 1, self.servo_id)
-        self.set(Reg.GOAL_POSITION, 4, round(self.position))
-        self.set(Reg.PRESENT_POSITION, 4, round(self.position))
+        self.set(Reg.MODEL_NUMBER, XL430_MODEL)
+        self.set(Reg.ID, self.servo_id)
+        self.set(Reg.GOAL_POSITION, round(self.position))
+        self.set(Reg.PRESENT_POSITION, round(self.position))
 
-    def get(self, addr: int, size: int) -> int:
-        return int.from_bytes(self.table[addr:addr + size], "little", signed=size == 4)
+    def get(self, reg: Reg) -> int:
+        size = SIZE[reg]
+        return int.from_bytes(self.table[reg:reg + size], "little", signed=size == 4)
 
-    def set(self, addr: int, size: int, value: int) -> None:
-        self.table[addr:addr + size] = value.to_bytes(size, "little", signed=size == 4)
+    def set(self, reg: Reg, value: int) -> None:
+        size = SIZE[reg]
+        self.table[reg:reg + size] = value.to_bytes(size, "little", signed=size == 4)
 
     def advance(self, dt: float) -> None:
         """Move toward the goal for `dt` seconds (only while torque is on)."""
-        goal = self.get(Reg.GOAL_POSITION, 4)
+        goal = self.get(Reg.GOAL_POSITION)
         torque = self.table[Reg.TORQUE_ENABLE] == 1
         if torque and dt > 0.0:
-            velocity = self.get(Reg.PROFILE_VELOCITY, 4)
+            velocity = self.get(Reg.PROFILE_VELOCITY)
             speed = velocity * VELOCITY_UNIT_TICKS_S if velocity > 0 else MAX_SPEED_TICKS_S
             step = speed * dt
             delta = goal - self.position
             self.position = float(goal) if abs(delta) <= step else self.position + step * (1 if delta > 0 else -1)
-        self.set(Reg.PRESENT_POSITION, 4, round(self.position))
+        self.set(Reg.PRESENT_POSITION, round(self.position))
         self.table[Reg.MOVING] = int(torque and round(self.position) != goal)
 
 
@@ -227,7 +208,7 @@ class DxlEmulator:
     def position_deg(self, servo_id: int) -> float:
         with self._lock:
             self._advance()
-            return (self.servos[servo_id].position - 2048.0) * 360.0 / TICKS_PER_TURN
+            return (self.servos[servo_id].position - CENTER_TICKS) * 360.0 / TICKS_PER_TURN
 
     def close(self) -> None:
         self._stop.set()
@@ -364,12 +345,12 @@ class DxlEmulator:
             return PacketError.DATA_RANGE
         if any(a in READ_ONLY for a in range(addr, addr + len(data))):
             return PacketError.ACCESS
-        if addr == Reg.GOAL_POSITION and len(data) == 4:
+        if addr == Reg.GOAL_POSITION and len(data) == SIZE[Reg.GOAL_POSITION]:
             if not 0 <= int.from_bytes(data, "little", signed=True) < TICKS_PER_TURN:
                 return PacketError.DATA_LIMIT
         if addr == Reg.TORQUE_ENABLE and data[:1] == b"\x01" and servo.table[Reg.HARDWARE_ERROR_STATUS]:
             return PacketError.RESULT_FAIL  # torque stays off until a reboot clears the error
         servo.table[addr:addr + len(data)] = data
         if addr <= Reg.TORQUE_ENABLE < addr + len(data) and servo.table[Reg.TORQUE_ENABLE] == 0:
-            servo.set(Reg.GOAL_POSITION, 4, round(servo.position))
+            servo.set(Reg.GOAL_POSITION, round(servo.position))
         return PacketError.NONE

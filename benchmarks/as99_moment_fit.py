@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from benchmarks.johnson_moments import lognormal_omega, shape_moments, solve_shape
+from benchmarks.curve_moments import lognormal_omega, shape_moments, solve_shape
 from btf.johnson import Family, Johnson
 
 TOL = 0.01  # AS 99's tolerance for the normal point and the lognormal line
