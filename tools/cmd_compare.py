@@ -12,7 +12,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("ref")
     p.add_argument("test")
     p.add_argument("--mask", help="label mask: histogram metrics per region")
-    p.add_argument("--space", choices=("rgb", "hsv"), default="rgb", help="hsv treats H as circular")
+    p.add_argument("--space", choices=("rgb", "hsv", "gray"), default="rgb",
+                   help="hsv treats H as circular; gray compares one band (e.g. a thermal image)")
     p.add_argument("--json", action="store_true")
     return p
 
@@ -24,6 +25,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         ref = read_image(args.ref)
         test = read_image(args.test)
+        if ref.dtype != test.dtype:
+            raise ImageError(f"image {args.test}: {test.dtype.itemsize * 8}-bit pixels, {args.ref} has "
+                             f"{ref.dtype.itemsize * 8}-bit; compare images of one depth")
         if ref.shape != test.shape:
             raise ImageError(f"image {args.test}: size {test.shape[1]}x{test.shape[0]} differs from "
                              f"{args.ref}'s {ref.shape[1]}x{ref.shape[0]}")

@@ -26,6 +26,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786")
     p.add_argument("--keep-going", action="store_true",
                    help="skip images that cannot be fitted, name them at the end and exit with status 1")
+    p.add_argument("--independent-only", action="store_true",
+                   help="skip measuring grain and band correlation (synthesis then draws independent pixels)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -50,7 +52,8 @@ def run(args: argparse.Namespace) -> int:
                         workers=args.workers, scheduler=args.scheduler, table=args.table,
                         default_elevation=args.angle,
                         on_total=lambda n: bar.append(tqdm(total=n, unit="img", disable=args.quiet)),
-                        on_image=lambda _name: bar[0].update(1), keep_going=args.keep_going)
+                        on_image=lambda _name: bar[0].update(1), keep_going=args.keep_going,
+                        dependence=not args.independent_only)
     except (DatasetError, IngestError, CorruptDatabase) as exc:
         raise CliError(str(exc)) from None
     finally:

@@ -35,7 +35,7 @@ def segment(image: np.ndarray, method: str, k: int, seed: int = 0, scale: float 
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.images import ImageError, read_image, write_mask
+    from tools.images import ImageError, read_image, stretched_8bit, write_mask
 
     if not 1 <= args.k <= 255:
         raise CliError(f"--k {args.k}: must lie in 1..255")
@@ -45,7 +45,7 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"--scale {args.scale}: felzenszwalb needs a positive number")
     check_out(args.out, (args.image,), args.force)
     try:
-        image = read_image(args.image)
+        image = stretched_8bit(read_image(args.image))  # 16-bit: segmented on its own range
         if image.shape[0] * image.shape[1] < args.k:
             raise CliError(f"image {args.image}: fewer pixels than --k {args.k} classes")
         write_mask(args.out, segment(image, args.method, args.k, args.seed, args.scale, args.segments))

@@ -35,8 +35,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     return p
 
 
-def _from_json(path: str) -> tuple[dict, str, int, dict | None]:
-    from tools.synth import models_from_document
+def _from_json(path: str) -> tuple[dict, dict, str, int, dict | None]:
+    """(models by angle, dependence by angle, space, levels, pca record) of a models file."""
+    from tools.synth import dependence_from_document, models_from_document
 
     try:
         raw = json.loads(Path(path).read_text())
@@ -46,8 +47,10 @@ def _from_json(path: str) -> tuple[dict, str, int, dict | None]:
         raise CliError(f"models {path}: not readable JSON ({exc})") from None
     docs = raw if isinstance(raw, list) else [raw]
     by_angle: dict = {}
+    deps: dict = {}
     try:
         parsed = [models_from_document(d) for d in docs]
+        found = [dependence_from_document(d, 1 + max((b for _, b in m), default=0)) for _, m, d in parsed]
     except ValueError as exc:
         raise CliError(f"models {path}: {exc}") from None
     if not parsed:
@@ -55,17 +58,20 @@ def _from_json(path: str) -> tuple[dict, str, int, dict | None]:
     spaces = {d.get("space") for _, _, d in parsed}
     if len(spaces) != 1:
         raise CliError(f"models {path}: documents mix feature spaces {sorted(map(str, spaces))}")
-    for angle, models, _ in parsed:
+    for (angle, models, _), dep in zip(parsed, found):
         if angle is None and len(parsed) > 1:
             raise CliError(f"models {path}: with several documents each needs its angle")
         by_angle[0.0 if angle is None else angle] = models
+        deps[0.0 if angle is None else angle] = dep
     first = parsed[0][2]
     levels = first.get("levels") or 256
     if type(levels) is not int or not 2 <= levels <= 65536:
         raise CliError(f"models {path}: levels {levels!r} is not an integer in 2..65536")
+    if levels > 256 and first.get("space") not in ("rgb", "gray"):
+        raise CliError(f"models {path}: {levels} levels in space {first.get('space')!r}; deep models are rgb or gray")
     if parsed[0][0] is None:  # one document without an angle serves every angle
-        by_angle = {float("-inf"): parsed[0][1]}
-    return by_angle, str(first.get("space") or "rgb"), levels, first.get("pca")
+        by_angle, deps = {float("-inf"): parsed[0][1]}, {float("-inf"): found[0]}
+    return by_angle, deps, str(first.get("space") or "rgb"), levels, first.get("pca")
 
 
 def _source(store, args: argparse.Namespace) -> dict:
@@ -111,12 +117,11 @@ def _read_mask(path: str) -> np.ndarray:
 
 
 def _write(args: argparse.Namespace, bands: np.ndarray, space: str, pca=None) -> int:
-    import numpy as np
-
+    """The image at the models' depth: uint8 up to 256 levels, else 16-bit (PNG or TIFF)."""
     from tools.images import ImageError, to_rgb, write_image
 
     try:
-        write_image(args.out, to_rgb(bands.astype(np.uint8, copy=False), space, pca))
+        write_image(args.out, to_rgb(bands, space, pca))
     except ImageError as exc:
         raise CliError(str(exc)) from None
     return 0
@@ -136,15 +141,25 @@ def _run_direction(args: argparse.Namespace, direction) -> int:
     with _open_db(args.db) as store:
         source = _source(store, args)
         by_direction = models_by_direction(store, **source)
+        levels = store.levels(**source)
+    _check_depth(args.out, levels)
     mask = _read_mask(args.mask)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ExtrapolationWarning)
         try:
-            bands = synthesize_at_direction(by_direction, mask, direction, np.random.default_rng(args.seed))
+            bands = synthesize_at_direction(by_direction, mask, direction, np.random.default_rng(args.seed), levels)
         except (MissingModels, ValueError) as exc:
             raise CliError(str(exc)) from None
     _warn(caught)
     return _write(args, bands, source["space"])
+
+
+def _check_depth(out: str, levels: int) -> None:
+    """Refuses, before any work, an output file that cannot hold the models' depth."""
+    from tools.images import DEEP_SUFFIXES
+
+    if levels > 256 and Path(out).suffix.lower() not in DEEP_SUFFIXES:
+        raise CliError(f"image {out}: 16-bit pixels need a .png or .tif file (the models have {levels} levels)")
 
 
 def _warn(caught) -> None:
@@ -171,22 +186,26 @@ def run(args: argparse.Namespace) -> int:
     pca = None
     dependence: dict = {}
     if args.db:
-        levels = 256
         with _open_db(args.db) as store:
             source = _source(store, args)
             space = source["space"]
             by_angle = store.models_by_angle(**source)
+            levels = store.levels(**source)
             if not args.independent:
                 dependence = store.dependence_by_angle(**source)
             if space == "pca":
                 pca = _stored_basis(store.pca_by_angle(**source), args.db)
     else:
-        by_angle, space, levels, pca_rec = _from_json(args.model)
+        by_angle, found, space, levels, pca_rec = _from_json(args.model)
+        if not args.independent:
+            dependence = found
         pca = PcaBasis.from_record(pca_rec) if pca_rec else None
+    _check_depth(args.out, levels)
     mask = _read_mask(args.mask)
     angle = args.angle
     if float("-inf") in by_angle:
         by_angle, angle = {angle: by_angle[float("-inf")]}, angle
+        dependence = {angle: d for d in dependence.values()}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ExtrapolationWarning)
         try:

@@ -24,6 +24,7 @@ if TYPE_CHECKING:  # numpy and the fitter load with the first image, not with th
 
     import numpy as np
 
+    from btf.dependence import Dependence
     from onboard.fit import FittedModel
     from tools.store import Store
 
@@ -47,6 +48,7 @@ class Job:
     path: str
     mask: str | None
     space: str
+    dependence: bool = True  # measure grain and band correlation (onboard.dependence)
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,6 +57,8 @@ class Fitted:
     band_names: tuple[str, ...]
     results: dict[tuple[int, int], FittedModel]
     mask: np.ndarray | None  # the labels used, when they came from a per-image mask
+    dependence: dict[int, Dependence] | None = None
+    levels: int = 256
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,11 +88,11 @@ def fit_job(job: Job) -> Fitted:
     from tools.images import fit_image
 
     try:
-        fitted = fit_image(job.path, job.mask, job.space)
+        fitted = fit_image(job.path, job.mask, job.space, dependence=job.dependence)
     except ValueError as exc:  # ImageError too
         raise IngestError(str(exc)) from None
     return Fitted(job.name, tuple(fitted.feats.band_names), fitted.results,
-                  fitted.labels if job.mask else None)
+                  fitted.labels if job.mask else None, fitted.dependence, fitted.feats.levels)
 
 
 def fit_or_damaged(job: Job) -> Fitted | Damaged:
@@ -148,13 +152,15 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
            space: str = "rgb", workers: int | None = None, scheduler: str | None = None,
            table: str | Path | None = None, default_elevation: float = NADIR,
            on_total: Callable[[int], None] | None = None,
-           on_image: Callable[[str], None] | None = None, keep_going: bool = False) -> IngestReport:
+           on_image: Callable[[str], None] | None = None, keep_going: bool = False,
+           dependence: bool = True) -> IngestReport:
     """Fit and store every not-yet-stored image of the dataset at `root`.
 
     `workers=0` fits in this process; otherwise a process pool of `workers` (default: the
     CPU count), or the Dask cluster at `scheduler` (e.g. tcp://host:8786). An image that
     cannot be fitted stops the run (IngestError), or with `keep_going` is skipped and
-    listed in the report's `damaged`.
+    listed in the report's `damaged`. Each region's grain and band correlation is measured
+    and stored with its models unless `dependence` is False.
     """
     from tools.images import ImageError, read_mask
     from tools.store import Store
@@ -171,7 +177,7 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
     with Store.open(db) as store:
         done = store.sources(robot)
         todo = [im for im in images if im.name not in done]
-        jobs = [Job(im.name, str(im.path), _mask_for(im, mask_path), space) for im in todo]
+        jobs = [Job(im.name, str(im.path), _mask_for(im, mask_path), space, dependence) for im in todo]
         if mask_path is not None and mask_path.is_file() and jobs:
             try:
                 store.add_mask(robot, read_mask(mask_path), robot)
@@ -243,7 +249,8 @@ def _store(store: Store, robot: str, image: DatasetImage, fitted: Fitted, space:
     mtime = image.path.stat().st_mtime
     light = (a.light_elevation, a.light_azimuth) if a.has_light else None
     if not store.add_capture(robot, seq, mtime, None, (a.elevation, a.azimuth), space, fitted.band_names,
-                             fitted.results, scene=scene, illumination=light, source=image.name):
+                             fitted.results, scene=scene, illumination=light, source=image.name,
+                             dependence=fitted.dependence, levels=fitted.levels):
         return False
     if fitted.mask is not None:
         store.add_mask(f"{robot}/{seq}", fitted.mask, robot)

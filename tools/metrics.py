@@ -6,6 +6,8 @@ levels (0 .. levels-1), so they are exact for integer pixels:
 - chi2: symmetric chi-squared sum (h_ref - h_test)^2 / (h_ref + h_test) over non-empty bins, in [0, 2];
 - ks: Kolmogorov-Smirnov, max |F_ref - F_test|, in [0, 1];
 - w1: Wasserstein-1 in levels, sum |F_ref - F_test| (bins are one level wide).
+A deep (16-bit) band takes hist_diff and chi2 over at most 256 equal bins of the levels the two
+images occupy (tools.grid: per level they would count noise); KS and W1 stay per level.
 A circular band (hue) has no first bin: its KS and W1 are minimised over where
 the circle is cut, and its correlation is the circular correlation coefficient.
 """
@@ -16,6 +18,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy import stats
 
+from tools.grid import Grid
 from tools.tiles import label_counts, region_histograms, row_tiles
 
 METRICS = ("hist_diff", "chi2", "ks", "w1")
@@ -194,11 +197,15 @@ def compare_bands(
     regions: list[RegionMetrics] = []
     for k, name in enumerate(band_names):
         circ = name in circular
+        grid = (Grid.over(0, 0, nlevs[k]) if nlevs[k] <= 256 else
+                Grid.over(min(ref[..., k].min(), test[..., k].min()), max(ref[..., k].max(), test[..., k].max()),
+                          nlevs[k]))
         for i, label in enumerate(ids):
             hr, ht = (normalized(side[k][i]) for side in counts)
+            br, bt = (hr, ht) if grid.bins == nlevs[k] else (grid.rebin(hr), grid.rebin(ht))
             n = int(counts[0][k][i].sum())
             regions.append(RegionMetrics(
-                int(label), name, n, n, hist_diff(hr, ht), chi2(hr, ht), ks(hr, ht, circ), w1(hr, ht, circ),
+                int(label), name, n, n, hist_diff(br, bt), chi2(br, bt), ks(hr, ht, circ), w1(hr, ht, circ),
             ))
     total = {m: float(sum(getattr(r, m) for r in regions)) for m in METRICS}
     corr = {name: c.value() for name, c in zip(band_names, corrs)}

@@ -6,6 +6,8 @@ the model's probability p_k of each integer level k, i.e. its mass over
 [k - 1/2, k + 1/2] with both tails folded into the end levels (exactly what
 rounding and clipping a continuous draw to the sensor's levels gives). Using the
 binned probabilities rather than samples keeps the table free of sampling noise.
+A deep (16-bit) band is scored over at most 256 equal bins of the levels it occupies
+(tools.grid), the models' probabilities taken over the same bins.
 
 Johnson is our robot's percentile fit from the region's histogram. The peers are
 scipy.stats maximum-likelihood fits to the dequantized values (each integer spread
@@ -22,6 +24,7 @@ from scipy import stats
 
 from btf.johnson import Johnson
 from onboard.fit import fit_histogram
+from tools.grid import Grid
 from tools.metrics import normalized
 from tools.tiles import Region, label_counts, region, region_histograms
 
@@ -53,28 +56,31 @@ class PdfTable:
         }
 
 
-def binned(dist, levels: int) -> np.ndarray:
-    c = dist.cdf(np.arange(levels - 1, dtype=np.float64) + 0.5)
+def binned(dist, levels: int, edges: np.ndarray | None = None) -> np.ndarray:
+    """Probability of each integer level, or of each bin between `edges` (tails folded in)."""
+    inner = np.arange(levels - 1, dtype=np.float64) + 0.5 if edges is None else edges
+    c = dist.cdf(inner)
     return np.diff(np.concatenate(([0.0], c, [1.0])))
 
 
 Values = Callable[[np.ndarray], np.ndarray]  # positions among a region's pixels -> their values
 
 
-def _peer_probabilities(values: Values, n: int, levels: int, rng: np.random.Generator) -> dict[str, np.ndarray]:
+def _peer_probabilities(values: Values, n: int, levels: int, rng: np.random.Generator,
+                        edges: np.ndarray | None = None) -> dict[str, np.ndarray]:
     v = values(np.arange(n) if n <= FIT_SAMPLE else rng.choice(n, FIT_SAMPLE, replace=False))
     x = v.astype(np.float64) + rng.uniform(-0.5, 0.5, len(v))
     floor = float(v.min()) - 0.5 - 1e-3
     out: dict[str, np.ndarray] = {}
     with np.errstate(all="ignore"):
         mu, sd = stats.norm.fit(x)
-        out["gaussian"] = binned(stats.norm(mu, sd), levels)
+        out["gaussian"] = binned(stats.norm(mu, sd), levels, edges)
         lo, width = stats.uniform.fit(x)
-        out["uniform"] = binned(stats.uniform(lo, width), levels)
+        out["uniform"] = binned(stats.uniform(lo, width), levels, edges)
         c, _, scale = stats.weibull_min.fit(x, floc=floor)
-        out["weibull"] = binned(stats.weibull_min(c, floor, scale), levels)
+        out["weibull"] = binned(stats.weibull_min(c, floor, scale), levels, edges)
         s, _, scale = stats.lognorm.fit(x, floc=floor)
-        out["lognormal"] = binned(stats.lognorm(s, floor, scale), levels)
+        out["lognormal"] = binned(stats.lognorm(s, floor, scale), levels, edges)
     return out
 
 
@@ -109,12 +115,14 @@ def table(bands: np.ndarray, mask: np.ndarray, band_names: tuple[str, ...],
     rng = np.random.default_rng(seed)
     ids = np.array(list(label_counts(mask)), np.int64)
     counts = region_histograms(bands, mask, ids, [levels] * len(band_names))
+    grids = [_grid(c, levels) for c in counts]
     rows = []
     for i, label in enumerate(ids):
         where = region(mask, int(label))
         for k, name in enumerate(band_names):
-            c = counts[k][i]
-            h = normalized(c)
+            c, grid = counts[k][i], grids[k]
+            deep = grid.bins != levels
+            h = normalized(grid.rebin(c) if deep else c)
             if np.count_nonzero(c) == 1:
                 # A constant region: every model degenerates to the one level, exactly.
                 probs = {p: h for p in PEERS}
@@ -122,8 +130,9 @@ def table(bands: np.ndarray, mask: np.ndarray, band_names: tuple[str, ...],
                 values = lambda positions, k=k: gather(bands, k, mask, where, positions)  # noqa: E731
                 model = (fit_histogram(c).model if fit is None
                          else fit(values(np.arange(where.count)).astype(np.int64), levels))
-                probs = {"johnson": model.level_probabilities(levels)}
-                probs.update(_peer_probabilities(values, where.count, levels, rng))
+                edges = grid.edges() if deep else None
+                probs = {"johnson": model.interval_probabilities(edges) if deep else model.level_probabilities(levels)}
+                probs.update(_peer_probabilities(values, where.count, levels, rng, edges))
             errors, failed = {}, []
             for p in PEERS:
                 e = float(np.abs(h - probs[p]).sum())
@@ -133,3 +142,11 @@ def table(bands: np.ndarray, mask: np.ndarray, band_names: tuple[str, ...],
             rows.append(PdfRow(int(label), name, where.count, errors, tuple(failed)))
     total = {p: float(sum(r.errors[p] for r in rows)) for p in PEERS}
     return PdfTable(tuple(rows), total)
+
+
+def _grid(counts: np.ndarray, levels: int) -> Grid:
+    """The band's bins: its levels (8-bit), or equal bins over the levels its pixels occupy."""
+    if levels <= 256:
+        return Grid.over(0, 0, levels)
+    used = np.flatnonzero(counts.sum(axis=0))
+    return Grid.over(int(used[0]), int(used[-1]), levels) if used.size else Grid.over(0, 0, 256)

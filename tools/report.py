@@ -12,7 +12,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from tools.images import write_image
+from tools.grid import Grid
+from tools.images import stretched_8bit, write_image
 from tools.receiver import mask_key
 from tools.store import Store, StoredCapture
 from tools.synth import MissingModels, synthesize
@@ -50,23 +51,35 @@ def capture_mask(store: Store, cap: StoredCapture) -> np.ndarray | None:
     return None
 
 
+def _model_curve(model, levels: int) -> tuple[np.ndarray, np.ndarray]:
+    """(x, probability per level) for 8-bit models; deep ones per bin of 256 over their bulk."""
+    if levels <= 256:
+        return np.arange(levels), model.level_probabilities(levels)
+    lo, hi = (int(np.clip(model.ppf(q), 0, levels - 1)) for q in (1e-3, 1 - 1e-3))
+    grid = Grid.over(lo, hi, levels)
+    bounds = np.concatenate(([lo - 0.5], grid.edges(), [hi + 0.5]))
+    per_level = model.interval_probabilities(grid.edges()) / np.diff(bounds)  # bins hold 1 or 2 counts of levels
+    # the end bins also hold the folded tails: left out of the curve
+    return ((bounds[:-1] + bounds[1:]) / 2)[1:-1], per_level[1:-1]
+
+
 def _hist_plot(path: Path, image: np.ndarray | None, mask: np.ndarray, models: dict, bands: tuple[str, ...],
-               title: str) -> None:
+               title: str, levels: int = 256) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, len(bands), figsize=(3.2 * len(bands), 2.4), squeeze=False)
-    x, edges = np.arange(256), np.arange(257) - 0.5
+    edges = np.arange(257) - 0.5
     for b, name in enumerate(bands):
         ax = axes[0][b]
         for lab in sorted({lab for lab, _ in models}):
-            if image is not None and image.shape[:2] == mask.shape and (mask == lab).any():
+            if image is not None and levels <= 256 and image.shape[:2] == mask.shape and (mask == lab).any():
                 h = np.bincount(image[..., b][mask == lab], minlength=256) / (mask == lab).sum()
                 # one filled step artist: 256 bar patches per label made the report slow
                 ax.stairs(h, edges, fill=True, alpha=0.4, label=f"measured {lab}")
-            ax.plot(x, models[(lab, b)].level_probabilities(256), lw=1, label=f"Johnson {lab}")
+            ax.plot(*_model_curve(models[(lab, b)], levels), lw=1, label=f"Johnson {lab}")
         ax.set_title(f"{title} {name}", fontsize=8)
         ax.tick_params(labelsize=6)
     axes[0][0].legend(fontsize=5)
@@ -145,9 +158,9 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
         name = f"{c.scene or 'robot' + c.robot}_{c.elevation:05.1f}_{c.sequence}"
         deps = store.dependence(c.id)
         try:
-            syn = synthesize(mask, models, rng)
+            syn = synthesize(mask, models, rng, c.levels)
             # With stored grain and band correlation, the correlated synthesis goes beside it.
-            corr = synthesize(mask, models, rng, dependence=deps) if deps else None
+            corr = synthesize(mask, models, rng, c.levels, dependence=deps) if deps else None
         except MissingModels as exc:
             parts.append(f"<p>{html.escape(name)}: {html.escape(str(exc))}</p>")
             continue
@@ -156,14 +169,17 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
         if real is not None and c.space == "rgb":
             write_image(out / f"{name}_measured.png", real)
             imgs.append(_figure(f"{name}_measured.png", "measured"))
-        if c.space == "rgb" and syn.shape[2] == 3:
-            write_image(out / f"{name}_synthetic.png", syn)
+        if (c.space == "rgb" and syn.shape[2] == 3) or (c.space == "gray" and syn.shape[2] == 1):
+            # 16-bit pixels are shown stretched over the levels they occupy (one span for both)
+            span = (int(syn.min()), int(syn.max())) if corr is None else (
+                int(min(syn.min(), corr.min())), int(max(syn.max(), corr.max())))
+            write_image(out / f"{name}_synthetic.png", stretched_8bit(syn, span))
             imgs.append(_figure(f"{name}_synthetic.png", "independent pixels" if corr is not None else "synthetic"))
             if corr is not None:
-                write_image(out / f"{name}_correlated.png", corr)
+                write_image(out / f"{name}_correlated.png", stretched_8bit(corr, span))
                 imgs.append(_figure(f"{name}_correlated.png", "grain and band correlation"))
         _hist_plot(out / f"{name}_hist.png", real if c.space == "rgb" else None, mask, models,
-                   c.band_names, f"{c.scene} {c.elevation:.0f}°")
+                   c.band_names, f"{c.scene} {c.elevation:.0f}°", c.levels)
         imgs.append(f"<img src='{name}_hist.png' style='width:480px' title='histograms'>")
         parts.append(f"<h3>{html.escape(c.scene)} at {c.elevation:.1f}° (seq {c.sequence})</h3>"
                      "<div>" + "".join(imgs) + "</div>")

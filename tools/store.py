@@ -123,10 +123,14 @@ class Store:
         source: str | None = None,
         dependence: Mapping[int, Dependence] | None = None,
         pca: PcaBasis | None = None,
+        levels: int = 256,
     ) -> bool:
         """Stores one capture with its models; False if (robot, sequence) was already there.
         `illumination` is the light's (elevation, azimuth) when known; `source` the image file;
-        `pca` the basis the capture arrived with (later captures of the robot inherit it)."""
+        `pca` the basis the capture arrived with (later captures of the robot inherit it);
+        `levels` the sensor's levels (256 for 8-bit pixels, 65536 for 16-bit)."""
+        if type(levels) is not int or not 2 <= levels <= 65536:
+            raise ValueError(f"levels {levels!r}: expected an integer in 2..65536")
         cmd = _angles(commanded)
         meas = _angles(measured)
         light = _angles(illumination)
@@ -147,11 +151,11 @@ class Store:
         with self._write():
             cur = self._conn.execute(
                 "INSERT OR IGNORE INTO captures (robot, sequence, time, cmd_elevation, cmd_azimuth,"
-                " elevation, azimuth, space, bands, scene, light_elevation, light_azimuth, source)"
-                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                " elevation, azimuth, space, bands, scene, light_elevation, light_azimuth, source, levels)"
+                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (str(robot_id), int(sequence), float(time), cmd[0], cmd[1], meas[0], meas[1],
                  str(space), json.dumps(list(band_names)), str(scene), light[0], light[1],
-                 None if source is None else str(source)),
+                 None if source is None else str(source), levels),
             )
             if cur.rowcount == 0:
                 raise _Undo
@@ -217,7 +221,7 @@ class Store:
     def _select_captures(self, where: str, args: list) -> list[StoredCapture]:
         rows = self._conn.execute(
             "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
-            " space, bands, scene, light_elevation, light_azimuth, source FROM captures"
+            " space, bands, scene, light_elevation, light_azimuth, source, levels FROM captures"
             + where + " ORDER BY elevation, id", args
         ).fetchall()
         return [self._checked(capture_from_row, r, f"capture row {r[0]!r}") for r in rows]
@@ -293,6 +297,11 @@ class Store:
         """For every measured elevation, the models of its latest capture."""
         return {a: {k: m.model for k, m in self.models(c.id).items()}
                 for a, c in self._latest(robot, space, scene).items()}
+
+    def levels(self, robot: str | None = None, space: str | None = None, scene: str | None = None) -> int:
+        """The sensor levels of the captures models_by_angle uses (the deepest, when they differ;
+        256 when there are none)."""
+        return max((c.levels for c in self._latest(robot, space, scene).values()), default=256)
 
     def dependence(self, capture: int) -> dict[int, Dependence]:
         """The per-region dependence stored with a capture ({} when it carried none)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -44,6 +44,7 @@ CREATE TABLE captures (
     scene TEXT NOT NULL DEFAULT '',
     light_elevation REAL, light_azimuth REAL,
     source TEXT,
+    levels INTEGER NOT NULL DEFAULT 256,
     UNIQUE (robot, sequence)
 );
 CREATE INDEX captures_by_source ON captures (robot, source);
@@ -87,6 +88,8 @@ _MIGRATIONS: dict[int, str] = {
     4: "ALTER TABLE models ADD COLUMN shift REAL NOT NULL DEFAULT 0;"
        "ALTER TABLE models ADD COLUMN fallback INTEGER NOT NULL DEFAULT 0;"
        "ALTER TABLE models ADD COLUMN exact_family INTEGER NOT NULL DEFAULT 0;",
+    # the sensor's levels (256 for 8-bit, 65536 for 16-bit images), so synthesis keeps the depth
+    5: "ALTER TABLE captures ADD COLUMN levels INTEGER NOT NULL DEFAULT 256;",
 }
 
 

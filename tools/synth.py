@@ -13,7 +13,7 @@ from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
-from btf.dependence import Dependence
+from btf.dependence import LAGS, Dependence
 from btf.johnson import Johnson
 from tools.field import blend, latent, region_fields
 from tools.tiles import Draws, Region, label_counts, region
@@ -203,7 +203,8 @@ def synthesize_at(source: _ModelSource | Mapping[float, Models], mask: np.ndarra
 # --- the MODELS.json document that `btf-host fit --json` prints ----------------------------
 def models_document(space: str, band_names: tuple[str, ...], levels: int, angle: float | None,
                     results: Mapping[tuple[int, int], object], pca: dict | None = None,
-                    image: str | None = None) -> dict:
+                    image: str | None = None, dependence: Dependences | None = None) -> dict:
+    """The MODELS.json document; `dependence` None (not measured) is written as null."""
     rows = []
     for (label, band), r in sorted(results.items()):
         m = r.model
@@ -214,7 +215,37 @@ def models_document(space: str, band_names: tuple[str, ...], levels: int, angle:
             "beta1": float(r.beta1), "beta2": float(r.beta2),
         })
     return {"image": image, "space": space, "bands": list(band_names), "levels": int(levels),
-            "angle": angle, "pca": pca, "models": rows}
+            "angle": angle, "pca": pca, "models": rows,
+            "dependence": None if dependence is None else dependence_record(dependence)}
+
+
+def dependence_record(dependence: Dependences) -> dict:
+    """{"lags", "regions": [{"label", "corr", "dx", "dy"}]}: the document's dependence section."""
+    return {"lags": list(LAGS), "regions": [
+        {"label": int(lab), "corr": list(d.corr), "dx": list(d.dx), "dy": list(d.dy)}
+        for lab, d in sorted(dependence.items())]}
+
+
+def dependence_from_document(doc: dict, n_bands: int) -> dict[int, Dependence]:
+    """The per-label dependence of a models document ({} when it has none); ValueError says what is wrong."""
+    rec = doc.get("dependence")
+    if rec is None:
+        return {}
+    if not isinstance(rec, dict) or not isinstance(rec.get("regions"), list):
+        raise ValueError("dependence: expected an object with a 'regions' list")
+    if rec.get("lags") != list(LAGS):
+        raise ValueError(f"dependence: lags {rec.get('lags')!r}; synthesis reads lags {list(LAGS)}")
+    out: dict[int, Dependence] = {}
+    for k, row in enumerate(rec["regions"]):
+        try:
+            dep = Dependence(*(tuple(float(v) for v in row[name]) for name in ("corr", "dx", "dy")))
+            label = int(row["label"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"dependence region {k}: {exc}") from None
+        if dep.n_bands != n_bands:
+            raise ValueError(f"dependence of label {label}: {dep.n_bands} band(s), the models have {n_bands}")
+        out[label] = dep
+    return out
 
 
 def models_from_document(doc: object) -> tuple[float | None, dict[tuple[int, int], Johnson], dict]:
