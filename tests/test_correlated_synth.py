@@ -56,10 +56,11 @@ def test_correlated_synthesis_matches_grain_colour_and_marginals(name):
     measured = measure(img, labels, models)
     regions = sorted(measured)
     deps = decode_dependence(encode_dependence(measured, regions, bands), regions, bands)
-    # Marginals over four draws: a grainy draw has fewer independent pixels, so one draw's
-    # histogram is noisier even though its expected histogram is the model's exactly.
-    cors = [synthesize(labels, models, np.random.default_rng(s), dependence=deps) for s in range(4)]
-    inds = [synthesize(labels, models, np.random.default_rng(s)) for s in range(4)]
+    # Marginals over eight draws: a grainy draw has fewer independent pixels, so one draw's
+    # histogram is noisier even though its expected histogram is the model's exactly (over
+    # four, the field's region 5 still scatters 0.041..0.055 around its independent 0.044).
+    cors = [synthesize(labels, models, np.random.default_rng(s), dependence=deps) for s in range(8)]
+    inds = [synthesize(labels, models, np.random.default_rng(s)) for s in range(8)]
     cor, ind = cors[0], inds[0]
     checked = 0
     for lab in regions:

@@ -62,16 +62,19 @@ def test_fit_then_synth_model_reproduces_grain_and_colour_of_a_photograph(host, 
     models.write_text(out)
     outs = {}
     for flag in ([], ["--independent"]):
-        dest = tmp_path / f"synth{len(flag)}.png"
-        code, _, err = host("synth", "--model", models, "--mask", mask, "--angle", 90, "--out", dest, *flag)
-        assert code == 0, err
-        outs[bool(flag)] = read_image(dest)
+        outs[bool(flag)] = []
+        for seed in range(3):  # one 512x512 draw's lag-8 autocorrelation scatters by about 0.03
+            dest = tmp_path / f"synth{len(flag)}_{seed}.png"
+            code, _, err = host("synth", "--model", models, "--mask", mask, "--angle", 90, "--out", dest,
+                                "--seed", seed, *flag)
+            assert code == 0, err
+            outs[bool(flag)].append(read_image(dest))
     real = read_image(image)
     want = _autocorr(real)
-    assert np.abs(_autocorr(outs[False]) - want).max() <= 0.1
-    assert np.abs(_band_corr(outs[False]) - _band_corr(real)).max() <= 0.05
+    assert np.abs(np.mean([_autocorr(o) for o in outs[False]], axis=0) - want).max() <= 0.1
+    assert np.abs(np.mean([_band_corr(o) for o in outs[False]], axis=0) - _band_corr(real)).max() <= 0.05
     # Without the dependence the same models give independent pixels: far from the photograph.
-    assert np.abs(_autocorr(outs[True]) - want).max() > 0.5
+    assert np.abs(_autocorr(outs[True][0]) - want).max() > 0.5
 
 
 def test_independent_only_measures_nothing_and_says_so_in_the_document(host, tmp_path):

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from btf.dependence import LAGS, Dependence
-from btf.johnson import Family, Johnson
+from btf.johnson import Family, Johnson, normal_ppf
 from tools.tiles import Region, row_tiles
 
 _PROJECTIONS = 12
@@ -159,7 +159,7 @@ def _fast(n: int) -> int:
 
 def gaussian_fields(shape: tuple[int, int], dep: Dependence, rng: np.random.Generator) -> np.ndarray:
     """B x H x W float32 standard normal fields with the region's grain and band copula.
-    Beyond the B fields themselves it holds one band's spectrum and transform at a time."""
+    Beyond the B fields themselves it holds the spectrum's amplitude and one band's transform."""
     h, w = shape
     ny, nx = _fast(h), _fast(w)
     k = np.arange(ny)
@@ -167,10 +167,12 @@ def gaussian_fields(shape: tuple[int, int], dep: Dependence, rng: np.random.Gene
     sx = np.sqrt(spectrum(dep.dx, nx))
     n_bands = dep.n_bands
     out = np.empty((n_bands, h, w), dtype=np.float32)
+    # the spectrum's square root once for all bands (float32, half a band's transform)
+    amplitude = [(r, _amplitude(full_y[r], sx, nx, ny)) for r in row_tiles(ny, nx // 2 + 1)]
     for b in range(n_bands):
-        white = rng.standard_normal((ny, nx // 2 + 1, 2), dtype=np.float32).view(np.complex64)[..., 0]
-        for r in row_tiles(ny, nx // 2 + 1):
-            white[r] *= _amplitude(full_y[r], sx, nx, ny)
+        white = _white(rng, (ny, nx // 2 + 1))
+        for r, amp in amplitude:
+            white[r] *= amp
         out[b] = sfft.irfft2(white, s=(ny, nx), workers=-1, overwrite_x=True)[:h, :w]
         del white
     if n_bands > 1:
@@ -182,6 +184,25 @@ def gaussian_fields(shape: tuple[int, int], dep: Dependence, rng: np.random.Gene
                 for j in range(b):
                     out[b, r] += low[b, j] * out[j, r]
     return out
+
+
+@lru_cache(maxsize=1)
+def _normal_table() -> np.ndarray:
+    """2**16 equiprobable standard normal quantiles (float32, scaled to unit variance)."""
+    z = normal_ppf((np.arange(1 << 16) + 0.5) / (1 << 16)).astype(np.float64)
+    z /= np.sqrt(np.mean(z * z))
+    table = z.astype(np.float32)
+    table.flags.writeable = False
+    return table
+
+
+def _white(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
+    """Complex64 white noise, unit variance per part: 16-bit uniform draws through the normal
+    table (four times faster here than numpy's float32 normals). Every pixel of the inverse
+    transform sums all the coefficients, so the field is Gaussian whatever the parts' shape;
+    the table keeps even a white field's pixels normal to 2**-16 in probability."""
+    draws = rng.integers(0, 1 << 16, shape + (2,), dtype=np.uint16)
+    return np.take(_normal_table(), draws).view(np.complex64)[..., 0]
 
 
 def _amplitude(fy: np.ndarray, sx: np.ndarray, nx: int, ny: int) -> np.ndarray:
