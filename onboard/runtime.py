@@ -38,11 +38,11 @@ from onboard.capture import Capture, Pipeline, PoseSkipped
 from onboard.config import Config, ConfigError
 from onboard.outbox import Outbox, OutboxFull, Reply
 from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore
-from onboard.transport import Acked, LinkState, Received, Transport
+from onboard.transport import Transport
 from onboard.watchdog import Notifier
 from radio import FrameError
 from radio import packet as pk
-from radio.link import QueueFull
+from radio.link import Acked, Delivered, LinkDown, LinkUp, QueueFull
 
 # -- the runtime -----------------------------------------------------------------------
 
@@ -143,16 +143,17 @@ class Runtime:
     def service(self) -> None:
         """Read link events, answer commands, feed the link from the outbox."""
         now = self.clock()
-        for event in self.transport.poll(now):
+        for event in self.transport.read(now):
             if isinstance(event, Acked):
                 self._in_flight.discard(event.msg_id)
                 if self.outbox.ack(event.msg_id):
                     self._full_until_ack = False
-            elif isinstance(event, LinkState):
-                self._link_changed(event.up)
-            elif isinstance(event, Received):
-                self._on_body(event.body)
+            elif isinstance(event, (LinkUp, LinkDown)):
+                self._link_changed(isinstance(event, LinkUp))
+            elif isinstance(event, Delivered):
+                self._on_body(event.payload)
         self._flush(now)
+        self.transport.write(now)  # after the replies were queued: they leave with the acks
         self.notifier.kick()
 
     def _flush(self, now: float) -> None:
@@ -161,7 +162,7 @@ class Runtime:
             return
         for msg_id, body in self.outbox.pending(limit=room, after=self._last_sent):
             try:
-                self.transport.send(body, msg_id, now)
+                self.transport.send(body, msg_id=msg_id, now=now)
             except QueueFull:  # the link holds enough already: offer the rest later
                 return
             self._in_flight.add(msg_id)
@@ -173,9 +174,8 @@ class Runtime:
         self.link_up = up
         if up:
             self.ever_up = True
-            # Re-offer everything unacknowledged; the receiver drops duplicates by id.
-            self._in_flight.clear()
-            self._last_sent = 0
+            # Nothing to re-offer: the link holds every message until it is acknowledged,
+            # across link loss (a new session re-sends it). Offering one twice was an error.
             if self.mode is Mode.FAILSAFE:
                 event = self.failsafe_events[-1]
                 event["until"] = self.wall()

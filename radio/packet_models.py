@@ -62,14 +62,13 @@ from radio.packet_base import (
     Kind,
     angles_from_wire,
     angles_to_wire,
-    get_varint,
-    put_varint,
     want_bin,
     want_float,
     want_int,
     want_str,
 )
 from radio.packet_dependence import decode_dependence, encode_dependence, quantized, section_size
+from radio.varint import get_varint, put_varint
 
 _HEAD = struct.Struct(">hHhHH")  # angles, levels - 1
 _U8, _I8, _U16 = struct.Struct(">B"), struct.Struct(">b"), struct.Struct(">H")

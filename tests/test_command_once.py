@@ -9,7 +9,7 @@ from onboard import config
 from onboard.outbox import REMEMBERED_REPLIES, Outbox, Reply
 from onboard.runtime import Runtime
 from onboard.segmentation import Segmentation
-from onboard.transport import MemoryTransport, Received
+from onboard.transport import MemoryTransport
 from radio import packet as pk
 
 CONFIG = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n[segment]\nmethod = "scene"\n'
@@ -34,7 +34,7 @@ def robot(state_dir):
 
 
 def send(rt, tr, cid, name, **args):
-    tr.deliver(Received(pk.encode(pk.CommandPacket(cid, name, args))))
+    tr.receive(pk.encode(pk.CommandPacket(cid, name, args)))
     for _ in range(3):
         rt.step()
 

@@ -36,7 +36,8 @@ from radio.packet import (
     encode_models,
     models_packet,
 )
-from radio.packet_base import MAX_FRAME_PIXELS, get_varint
+from radio.packet_base import MAX_FRAME_PIXELS
+from radio.varint import get_varint
 from radio.packet_dependence import record_size
 
 HEADER = dict(robot_id=3, seq=41, time=1_700_000_000.25, commanded=(45.0, 30.0),

@@ -15,8 +15,9 @@ from onboard.capture import Pipeline
 from onboard.outbox import Outbox
 from onboard.runtime import Mode, Runtime
 from onboard.segmentation import Segmentation
-from onboard.transport import Acked, LinkState, MemoryTransport, Received
+from onboard.transport import MemoryTransport
 from radio import packet as pk
+from radio.link import Acked, Delivered, LinkDown, LinkUp
 
 BASE = '[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\nfault_rate = {rate}\nfault_seed = 3\n' \
        '[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\n{extra}'
@@ -94,7 +95,7 @@ def test_unacknowledged_packets_stay_in_the_outbox_within_the_window(tmp_path):
 
 
 def command(tr, cid, name, **args):
-    tr.deliver(Received(pk.encode(pk.CommandPacket(cid, name, args))))
+    tr.receive(pk.encode(pk.CommandPacket(cid, name, args)))
 
 
 def replies(tr):
@@ -138,9 +139,9 @@ def test_commands_are_answered_with_a_result_or_a_reason(tmp_path):
 def test_failsafe_holds_the_arm_and_is_reported_when_the_link_returns(tmp_path):
     rt, tr = make(tmp_path, "black")
     rt.boot()
-    tr.deliver(LinkState(True))
+    tr.deliver(LinkUp())
     rt.step()
-    tr.deliver(LinkState(False))  # heartbeats stopped for longer than failsafe_s
+    tr.deliver(LinkDown())  # heartbeats stopped for longer than failsafe_s
     rt.step()
     assert rt.mode is Mode.FAILSAFE
     bus = rt.hal.servo_bus
@@ -149,7 +150,7 @@ def test_failsafe_holds_the_arm_and_is_reported_when_the_link_returns(tmp_path):
     rt.step()
     assert bus.positions([1, 2]) == pytest.approx(held, abs=0.5)  # held, no sweep move
     command(tr, 20, pk.CommandName.GOTO, elevation=40.0, azimuth=0.0)  # read before the link is up
-    tr.deliver(LinkState(True))
+    tr.deliver(LinkUp())
     before = len(tr.sent)
     rt.step()
     assert rt.mode is Mode.SWEEPING  # resumed
@@ -162,9 +163,9 @@ def test_failsafe_holds_the_arm_and_is_reported_when_the_link_returns(tmp_path):
 def test_goto_during_failsafe_is_refused_with_a_reason(tmp_path):
     rt, tr = make(tmp_path, "black", extra="[sweep]\nautostart = false\n")
     rt.boot()
-    tr.deliver(LinkState(True))
+    tr.deliver(LinkUp())
     rt.step()
-    tr.deliver(LinkState(False))
+    tr.deliver(LinkDown())
     rt.step()
     rt._on_body(pk.encode(pk.CommandPacket(5, pk.CommandName.GOTO, {"elevation": 40.0, "azimuth": 0.0})))
     rt.service()
@@ -188,7 +189,7 @@ def test_garbage_from_the_base_never_ends_the_runtime(tmp_path):
     rt, tr = make(tmp_path, "black", extra="[sweep]\nautostart = false\n")
     rt.boot()
     for junk in (b"", b"\x00", b"\x93\x01\x04\x00", bytes(range(256))):
-        tr.deliver(Received(junk))
+        tr.receive(junk)
     rt.step()
     assert len(rt.errors) == 4
 
@@ -367,7 +368,7 @@ def mid_pose(tmp_path, *events):
     """A runtime past its first pose, with `events` waiting for the next pose's move."""
     rt, tr = make(tmp_path, "black", extra=PLAN3)
     rt.boot()
-    tr.deliver(LinkState(True))
+    tr.deliver(LinkUp())
     rt.step()
     assert rt.progress.next_index == 1
     for ev in events:
@@ -376,7 +377,7 @@ def mid_pose(tmp_path, *events):
 
 
 def test_abort_mid_pose_stops_the_sweep_without_skipping_or_reviving_the_pose(tmp_path):
-    rt, tr = mid_pose(tmp_path, Received(pk.encode(pk.CommandPacket(7, pk.CommandName.ABORT, {}))))
+    rt, tr = mid_pose(tmp_path, Delivered(2, 1, pk.encode(pk.CommandPacket(7, pk.CommandName.ABORT, {}))))
     assert rt.sweep_step() == "interrupted"
     assert isinstance(replies(tr)[7], pk.AckPacket)
     assert rt.mode is Mode.IDLE and not rt.progress.active
@@ -386,7 +387,7 @@ def test_abort_mid_pose_stops_the_sweep_without_skipping_or_reviving_the_pose(tm
 
 
 def test_failsafe_mid_pose_holds_the_arm_and_measures_the_pose_after_the_link_returns(tmp_path):
-    rt, tr = mid_pose(tmp_path, LinkState(False))
+    rt, tr = mid_pose(tmp_path, LinkDown())
     assert rt.sweep_step() == "interrupted"
     assert rt.mode is Mode.FAILSAFE and rt.progress.next_index == 1 and not rt.progress.skipped
     bus = rt.hal.servo_bus
@@ -395,7 +396,7 @@ def test_failsafe_mid_pose_holds_the_arm_and_measures_the_pose_after_the_link_re
     rt.sleep(0.05)
     rt.step()
     assert bus.positions([1, 2]) == pytest.approx(held, abs=0.5)  # no move while failsafe
-    tr.deliver(LinkState(True))
+    tr.deliver(LinkUp())
     sweep(rt)
     assert not rt.progress.skipped
     assert [e for e, _ in poses_by_seq(host_view(tr))] == [70, 80, 90]
@@ -403,7 +404,7 @@ def test_failsafe_mid_pose_holds_the_arm_and_measures_the_pose_after_the_link_re
 
 def test_arm_commands_mid_pose_are_refused_as_busy_and_the_pose_completes(tmp_path):
     goto = pk.CommandPacket(8, pk.CommandName.GOTO, {"elevation": 40.0, "azimuth": 0.0})
-    rt, tr = mid_pose(tmp_path, Received(pk.encode(goto)))
+    rt, tr = mid_pose(tmp_path, Delivered(2, 1, pk.encode(goto)))
     assert rt.sweep_step() == "measured"
     nack = replies(tr)[8]
     assert isinstance(nack, pk.NackPacket) and nack.reason is pk.Reason.BUSY
@@ -412,7 +413,7 @@ def test_arm_commands_mid_pose_are_refused_as_busy_and_the_pose_completes(tmp_pa
 
 def test_a_sweep_command_mid_pose_replaces_the_sweep_for_good(tmp_path):
     new = pk.CommandPacket(9, pk.CommandName.SWEEP, {"elevations": [60.0], "azimuths": [0.0]})
-    rt, tr = mid_pose(tmp_path, Received(pk.encode(new)))
+    rt, tr = mid_pose(tmp_path, Delivered(2, 1, pk.encode(new)))
     old_id = rt.progress.sweep_id
     assert rt.sweep_step() == "interrupted"
     assert rt.progress.sweep_id == old_id + 1 and rt.progress.next_index == 0

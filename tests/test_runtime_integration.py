@@ -17,7 +17,7 @@ from onboard.config import ConfigError
 from onboard.features import PcaBasis
 from onboard.runtime import Runtime
 from onboard.segmentation import Segmentation
-from onboard.transport import MemoryTransport, Received
+from onboard.transport import MemoryTransport
 from radio import FrameError
 from radio import packet as pk
 
@@ -45,7 +45,7 @@ def decoded(tr):
 
 
 def command(rt, tr, cid, name, **args):
-    tr.deliver(Received(pk.encode(pk.CommandPacket(cid, name, args))))
+    tr.receive(pk.encode(pk.CommandPacket(cid, name, args)))
     rt.step()
     return {p.command_id: p for p in decoded(tr) if isinstance(p, (pk.AckPacket, pk.NackPacket))}[cid]
 

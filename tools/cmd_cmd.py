@@ -98,7 +98,7 @@ def run(args: argparse.Namespace) -> int:
         # One more turn so our acknowledgement of the answer goes out.
         session.step()
     finally:
-        session.port.close()
+        session.close()
     item = session.answers[cid]
     ok = isinstance(item.packet, pk.AckPacket)
     if args.json:

@@ -5,25 +5,24 @@ Storing happens before the link's next `poll`, so a packet is acknowledged only 
 is in the database; a crash in between makes the robot send it again, and the database
 keeps it once because captures are unique by (robot, sequence).
 
-`HostSession` binds a `radio.link.Link` to a port (pyserial URL, pty fd, or the channel
-simulator) and pumps it: received payloads go to the Receiver, commands go out, and the
-robot's ACK/NACK answers are collected by command id.
+`HostSession` turns the link (`radio.pump.LinkPump` over any pyserial URL, a pty fd or the
+simulated radio): received payloads go to the Receiver, commands go out, and the robot's
+ACK/NACK answers are collected by command id.
 """
 from __future__ import annotations
 
 import enum
 import secrets
-import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from onboard.features import PcaBasis
 from radio import FrameError
 from radio import packet as pk
-from radio.link import Delivered, Link, LinkDown, LinkStats, LinkUp
-from radio.serial_port import Port
+from radio.link import Delivered, LinkDown, LinkStats, LinkUp
+from radio.pump import LinkPump
 from tools.store import Store
 
 HOST_NODE, ROBOT_NODE, LINK_ID = 2, 1, 1
@@ -183,40 +182,39 @@ class Receiver:
 
 
 class HostSession:
-    """A Link bound to a port, feeding a Receiver; `step` does one read and one write."""
+    """The host's end of the link: a `LinkPump` feeding a Receiver; commands go out and the
+    robot's ACK/NACK answers are collected by command id."""
 
-    def __init__(self, link: Link, port: Port, receiver: Receiver,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self.link, self.port, self.receiver, self.clock = link, port, receiver, clock
+    def __init__(self, pump: LinkPump, receiver: Receiver) -> None:
+        self.pump, self.receiver = pump, receiver
         self.answers: dict[int, Item] = {}
-        self.last_delivery = clock()
+        self.last_delivery = pump.clock()
         self.up = False
 
     def step(self) -> list[Item]:
-        data = self.port.read(4096)
-        now = self.clock()
-        events = self.link.receive(data, now) if data else []
+        """One turn: what arrived is stored, then the link writes (so the ACK of a packet
+        leaves only once it is in the database)."""
         items = []
-        for ev in [*events, *self.link.pop_events()]:
+        for ev in self.pump.read():
             if isinstance(ev, Delivered):
                 item = self.receiver.handle(ev.payload)
-                self.last_delivery = now
+                self.last_delivery = self.pump.clock()
                 if item.kind is ItemKind.ANSWER and item.seq is not None:
                     self.answers[item.seq] = item
                 items.append(item)
             elif isinstance(ev, (LinkUp, LinkDown)):
                 self.up = isinstance(ev, LinkUp)
-        out = self.link.poll(self.clock())
-        if out:
-            self.port.write(out)
+        self.pump.write()
         return items
 
     def command(self, name: pk.CommandName, args: dict | None = None) -> int:
         """Queue one command; returns its id (the robot's ACK/NACK lands in `answers`)."""
         cid = secrets.randbits(31)
-        body = pk.encode(pk.CommandPacket(cid, name, dict(args or {})))
-        self.link.send(body, self.clock())
+        self.pump.send(pk.encode(pk.CommandPacket(cid, name, dict(args or {}))))
         return cid
 
     def stats(self) -> LinkStats:
-        return self.link.stats()
+        return self.pump.stats()
+
+    def close(self) -> None:
+        self.pump.close()
