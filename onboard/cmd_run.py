@@ -80,9 +80,8 @@ def run(args: argparse.Namespace) -> int:
         link = Link(cfg.link.node_id, cfg.link.peer_id, cfg.link.link_id, key,
                     FileCounterStore(cfg.state_dir / "counters.json"), mtu=cfg.link.mtu,
                     heartbeat=cfg.link.heartbeat_s, link_timeout=cfg.link.failsafe_s)
-        if hasattr(hal.camera, "open"):
-            h, w = cfg.hal.size
-            hal.camera.open(w, h)
+        h, w = cfg.hal.size
+        hal.camera.open(w, h)
         rt = Runtime(cfg, hal, LinkPump(link, port), segment, notifier=Notifier(),
                      new_sweep=args.new_sweep)
     except (ConfigError, ValueError, HalError, OutboxError) as exc:
