@@ -40,7 +40,7 @@ from radio.packet_base import (
     want_str,
 )
 from radio.packet_mask import MAX_SIDE, MaskPacket, downsample_labels, mask_packet
-from radio.packet_models import LabelModels, ModelsPacket, UnchangedPacket, models_packet
+from radio.packet_models import LabelModels, ModelsPacket, models_packet
 
 __all__ = [
     "SCHEMA_VERSION", "MAX_BODY", "MAX_SIDE", "Kind", "CommandName", "Reason", "LogLevel",
@@ -77,6 +77,39 @@ class RobotState(enum.IntEnum):
     SWEEPING = 3
     PAUSED = 4
     FAULT = 5
+
+
+@dataclass(frozen=True, slots=True)
+class UnchangedPacket:
+    """A capture whose models all lie within tolerance of capture `ref_seq` at the same pose."""
+
+    KIND: ClassVar[Kind] = Kind.UNCHANGED
+    robot_id: int
+    seq: int
+    time: float
+    commanded: tuple[float, float]
+    measured: tuple[float, float]
+    ref_seq: int
+    extras: Mapping[str, Any] = field(default_factory=dict)
+
+    def _wire(self) -> list:
+        return [
+            self.robot_id, self.seq, float(self.time),
+            *angles_to_wire(self.commanded, "commanded"), *angles_to_wire(self.measured, "measured"),
+            self.ref_seq,
+        ]
+
+    @classmethod
+    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> UnchangedPacket:
+        seq = want_int(f[1], "capture seq", 0, UINT32)
+        ref = want_int(f[7], "reference seq", 0, UINT32)
+        if ref >= seq:
+            raise FrameError(f"reference capture {ref} is not before capture {seq}")
+        return cls(
+            want_int(f[0], "robot id", 0, 0xFFFF), seq, want_float(f[2], "time", 0.0),
+            angles_from_wire(f[3], f[4], "commanded"), angles_from_wire(f[5], f[6], "measured"),
+            ref, extras,
+        )
 
 
 @dataclass(frozen=True, slots=True)
