@@ -1,9 +1,10 @@
-"""Link goodput against loss through the seeded channel simulator (radio.channel.run_linktest,
+"""Link goodput against loss through the seeded channel simulator (radio.linktest.run_linktest,
 as `btf-host linktest` drives it): independent and bursty loss, 0 to 40%."""
 from __future__ import annotations
 
 from benchmarks.common import Context, Section, figure, save
-from radio.channel import ChannelConfig, run_linktest
+from radio.channel import ChannelConfig
+from radio.linktest import run_linktest
 
 LOSSES = (0.0, 0.05, 0.1, 0.2, 0.3, 0.4)
 

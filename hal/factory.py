@@ -3,7 +3,7 @@
 The body comes from the config mapping's `body` (the keys of `onboard.config.HalConfig`)
 or else from `BTF_HAL`; with neither, `build_hal` refuses: a robot must never run on
 fakes by accident. Device modules are imported only when their body is chosen, so a
-machine without a camera stack can still build the fakes.
+machine without a camera stack can still build the fakes. What it builds is a `hal.Hal`.
 """
 from __future__ import annotations
 
@@ -11,49 +11,21 @@ import dataclasses
 import os
 import shutil
 import tempfile
-from dataclasses import dataclass, field
-from enum import Enum
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from hal.arm import Arm, ArmCalibration, JointCalibration, load_arm_fit
 from hal.bno055 import AxisRemap
 from hal.fakes import Faults
-from hal.interfaces import Camera, HalError, Orientation, OrientationTracker, ServoBus, ViewAngles
+from hal.interfaces import Body, Camera, Hal, HalError, Orientation, ViewAngles
 
 ENV_VAR = "BTF_HAL"
 # Views the emulated camera's image sequence is rendered at (it replays them in order).
 SEQUENCE_VIEWS = (ViewAngles(90.0), ViewAngles(60.0), ViewAngles(30.0))
 
 
-class Body(str, Enum):
-    REAL = "real"
-    EMULATED = "emulated"
-    FAKE = "fake"
-
-
 class HalConfigError(HalError):
     """The HAL cannot be built from this configuration; the message says which key."""
-
-
-@dataclass(frozen=True)
-class Hal:
-    """Every device of the robot, built for one body; `close()` releases them all."""
-
-    body: Body
-    servo_bus: ServoBus
-    arm: Arm
-    tracker: OrientationTracker
-    camera: Camera
-    size: tuple[int, int]
-    _cleanup: tuple[Callable[[], None], ...] = field(default=(), repr=False)
-
-    def close(self) -> None:
-        for closer in (self.camera.close, self.tracker.close, self.servo_bus.close, *self._cleanup):
-            try:
-                closer()
-            except Exception:  # noqa: BLE001 - closing must release everything it can
-                pass
 
 
 def _options(config: Mapping[str, Any] | Any | None) -> dict[str, Any]:
@@ -218,7 +190,7 @@ def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
     camera = FakeCamera(str(options.get("scene", "black")), true_view, seed=seed, size=size,
                         faults=_faults(options), reference=bool(options.get("reference", False)),
                         honours_lock=bool(options.get("camera_honours_lock", True)))
-    return Hal(Body.FAKE, bus, arm, tracker, camera, size)
+    return Hal(Body.FAKE, bus, arm, tracker, camera, size, ground_truth=camera)
 
 
 def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int],

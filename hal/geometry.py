@@ -15,7 +15,7 @@ import numpy as np
 
 from hal.arm import Arm, ArmFit, JointCalibration, JointFit
 from hal.bno055 import AxisRemap
-from hal.interfaces import HalError, Orientation, ViewAngles, view_from_orientation
+from hal.interfaces import Hal, HalError, Orientation, ViewAngles, view_from_orientation
 from hal.orientation import fit_rotation, nearest_axis_rotation, up_in_camera, up_in_device
 
 READINGS_PER_POSE = 5
@@ -82,7 +82,7 @@ class ArmReport:
         return max(self.fit.yaw.residual_deg, self.fit.tilt.residual_deg, self.check_error_deg) <= GOOD_FIT_DEG
 
 
-def calibrate_arm(hal: Any) -> ArmReport:
+def calibrate_arm(hal: Hal) -> ArmReport:
     """Fit yaw from a turn at a fixed tilt, then tilt from a swing at a fixed yaw; check the result."""
     arm: Arm = hal.arm
     joints = arm.joints
@@ -122,7 +122,7 @@ class TrackerReport:
         return self.nadir_ok and self.needed == self.current and self.off_square_deg <= SQUARE_TOLERANCE_DEG
 
 
-def calibrate_tracker(hal: Any, readings: int = READINGS_PER_POSE) -> TrackerReport:
+def calibrate_tracker(hal: Hal, readings: int = READINGS_PER_POSE) -> TrackerReport:
     """Read which way is up in the tracker's axes looking straight down and tilted; the
     rotation that carries the camera's up into them is the mounting the remap must undo.
     Up comes from roll and pitch only, so the compass plays no part."""

@@ -7,9 +7,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from enum import Enum
+from typing import TYPE_CHECKING, Callable, Protocol, runtime_checkable
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from hal.arm import Arm
 
 
 class HalError(RuntimeError):
@@ -63,6 +67,8 @@ class ServoRecovery:
 
 @runtime_checkable
 class ServoBus(Protocol):
+    recoveries: list[ServoRecovery]  # alerts the bus cleared by rebooting a servo
+
     def ping(self, servo_id: int) -> bool: ...
     def set_torque(self, servo_ids: list[int], enabled: bool) -> None: ...
     def move(self, goals_deg: dict[int, float]) -> None: ...
@@ -150,6 +156,42 @@ class Camera(Protocol):
     def set_controls(self, controls: CameraControls) -> CameraSettings: ...
     def settings(self) -> CameraSettings: ...
     def close(self) -> None: ...
+
+
+@runtime_checkable
+class GroundTruth(Protocol):
+    """An optional capability, of the fake camera only: the true label map of the frame it
+    last returned. Only `segment.method = "scene"` (tests and the demo) reads it."""
+
+    def true_labels(self) -> np.ndarray | None: ...
+
+
+class Body(str, Enum):
+    REAL = "real"
+    EMULATED = "emulated"
+    FAKE = "fake"
+
+
+@dataclass(frozen=True)
+class Hal:
+    """Every device of the robot, built for one body by `hal.factory.build_hal`; `close()`
+    releases them all. `ground_truth` is None except on the fake body."""
+
+    body: Body
+    servo_bus: ServoBus
+    arm: Arm
+    tracker: OrientationTracker
+    camera: Camera
+    size: tuple[int, int]
+    _cleanup: tuple[Callable[[], None], ...] = field(default=(), repr=False)
+    ground_truth: GroundTruth | None = None
+
+    def close(self) -> None:
+        for closer in (self.camera.close, self.tracker.close, self.servo_bus.close, *self._cleanup):
+            try:
+                closer()
+            except Exception:  # noqa: BLE001 - closing must release everything it can
+                pass
 
 
 def view_from_orientation(o: Orientation) -> ViewAngles:

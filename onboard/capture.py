@@ -17,7 +17,7 @@ import numpy as np
 
 from btf.dependence import Dependence
 from btf.record import FittedModel
-from hal.interfaces import HalError, ViewAngles, view_from_orientation
+from hal.interfaces import Hal, HalError, ViewAngles, view_from_orientation
 from onboard import dependence, skip
 from onboard.config import Config
 from onboard.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
@@ -64,7 +64,7 @@ class Pipeline:
     def __init__(
         self,
         cfg: Config,
-        hal: Any,
+        hal: Hal,
         segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple[np.ndarray, bool]],
         pump: Callable[[], None] = lambda: None,
         sleep: Callable[[float], None] = time.sleep,
@@ -83,7 +83,8 @@ class Pipeline:
 
     # -- device steps ------------------------------------------------------------------
 
-    def _retry(self, step: str, fn: Callable[[], T]) -> T:
+    def retry(self, step: str, fn: Callable[[], T]) -> T:
+        """`fn()`, tried `sweep.retries` more times on a device fault; PoseSkipped with the last one."""
         attempts = self.cfg.sweep.retries + 1
         last = ""
         for attempt in range(attempts):
@@ -104,22 +105,22 @@ class Pipeline:
         except HalError as exc:  # outside the limits: retrying cannot help
             raise PoseSkipped(f"move: {exc}") from None
         ids = list(goals)
-        self._retry("move", lambda: bus.move(goals))
+        self.retry("move", lambda: bus.move(goals))
         deadline = time.monotonic() + self.cfg.sweep.settle_timeout_s
-        while self._retry("settle", lambda: bus.is_moving(ids)):
+        while self.retry("settle", lambda: bus.is_moving(ids)):
             if time.monotonic() > deadline:
                 raise PoseSkipped(f"settle failed: servos {ids} still moving after "
                                   f"{self.cfg.sweep.settle_timeout_s:.1f} s")
             self.pump()
             self.sleep(0.005)
-        reached = self._retry("positions", lambda: bus.positions(ids))
-        tol = getattr(arm.joints, "tolerance_deg", 1.0)
+        reached = self.retry("positions", lambda: bus.positions(ids))
+        tol = arm.joints.tolerance_deg
         for sid, goal in goals.items():
             if abs(reached[sid] - goal) > tol:
                 raise PoseSkipped(f"move: servo {sid} stopped at {reached[sid]:.1f}°, short of {goal:.1f}°")
 
     def measure_view(self) -> ViewAngles:
-        v = self._retry("tracker", lambda: view_from_orientation(self.hal.tracker.orientation()))
+        v = self.retry("tracker", lambda: view_from_orientation(self.hal.tracker.orientation()))
         # Tracker noise can read a hair past straight down; a view elevation is at most 90°.
         return ViewAngles(min(90.0, max(-90.0, v.elevation)), v.azimuth % 360.0)
 
@@ -130,7 +131,7 @@ class Pipeline:
                 raise ValueError(f"camera returned an unusable frame {getattr(frame, 'shape', None)}")
             return frame
 
-        return self._retry("camera", grab)
+        return self.retry("camera", grab)
 
     # -- the capture -------------------------------------------------------------------
 

@@ -12,10 +12,13 @@ import dataclasses
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from onboard.cli_runner import CliError
 from onboard.cmd_selftest import _hal_options
+
+if TYPE_CHECKING:
+    from hal.interfaces import Hal
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
@@ -91,7 +94,7 @@ def _say(args: argparse.Namespace, text: str) -> None:
     print(text, file=sys.stderr if args.json else sys.stdout)
 
 
-def _arm(args: argparse.Namespace, hal: Any, state_dir: Path) -> int:
+def _arm(args: argparse.Namespace, hal: Hal, state_dir: Path) -> int:
     from hal.arm import save_arm_fit
     from hal.geometry import GOOD_FIT_DEG, calibrate_arm
 
@@ -123,7 +126,7 @@ def _arm(args: argparse.Namespace, hal: Any, state_dir: Path) -> int:
     return 0
 
 
-def _tracker(args: argparse.Namespace, hal: Any) -> int:
+def _tracker(args: argparse.Namespace, hal: Hal) -> int:
     from hal.geometry import NADIR_TOLERANCE_DEG, SQUARE_TOLERANCE_DEG, calibrate_tracker
 
     r = calibrate_tracker(hal)

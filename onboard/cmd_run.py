@@ -17,7 +17,7 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = sub.add_parser("run", help="run the robot: sweeps, commands, outbox, failsafe")
     p.add_argument("--config", required=True, help="robot TOML config (see examples/robot.toml)")
     p.add_argument("--hal", choices=("fake", "emulated", "real"), help="override hal.body")
-    p.add_argument("--port", help="override link.url (a device, pty path, loop://, socket://)")
+    p.add_argument("--port", help="override link.url (a device, pty path, loop://, socket://, btfsim://?port=...)")
     p.add_argument("--exit-when-idle", action="store_true",
                    help="exit 0 once no sweep is running and every packet is acknowledged")
     p.add_argument("--max-seconds", type=float, default=0.0, help="stop after this long (0: never)")
@@ -48,7 +48,7 @@ def _setup(args: argparse.Namespace):
 
 
 def _open_port(url: str, baud: int):
-    from radio.serial_port import open_url
+    from radio.ports import open_url
 
     return open_url(url, baud, timeout=0.005)
 
@@ -60,10 +60,10 @@ def run(args: argparse.Namespace) -> int:
     from onboard.outbox import OutboxError
     from onboard.runtime import Runtime
     from onboard.segmentation import Segmentation
-    from onboard.transport import LinkTransport
     from onboard.watchdog import Notifier
     from radio.auth import FileCounterStore
     from radio.link import Link
+    from radio.pump import LinkPump
 
     cfg.state_dir.mkdir(parents=True, exist_ok=True)
     try:
@@ -80,10 +80,9 @@ def run(args: argparse.Namespace) -> int:
         link = Link(cfg.link.node_id, cfg.link.peer_id, cfg.link.link_id, key,
                     FileCounterStore(cfg.state_dir / "counters.json"), mtu=cfg.link.mtu,
                     heartbeat=cfg.link.heartbeat_s, link_timeout=cfg.link.failsafe_s)
-        if hasattr(hal.camera, "open"):
-            h, w = cfg.hal.size
-            hal.camera.open(w, h)
-        rt = Runtime(cfg, hal, LinkTransport(link, port), segment, notifier=Notifier(),
+        h, w = cfg.hal.size
+        hal.camera.open(w, h)
+        rt = Runtime(cfg, hal, LinkPump(link, port), segment, notifier=Notifier(),
                      new_sweep=args.new_sweep)
     except (ConfigError, ValueError, HalError, OutboxError) as exc:
         hal.close()

@@ -14,7 +14,7 @@ from typing import Any, Callable
 import numpy as np
 
 from hal.controls import describe
-from hal.interfaces import CameraControls, ViewAngles, view_from_orientation
+from hal.interfaces import CameraControls, Hal, ViewAngles, view_from_orientation
 from onboard.cli_runner import CliError
 
 POSES = (ViewAngles(60.0, 0.0), ViewAngles(90.0, 0.0))
@@ -88,14 +88,14 @@ def run(args: argparse.Namespace) -> int:
     return 0 if all(r.ok for r in results) else 1
 
 
-def _check(name: str, fn: Callable[[Any], str], hal: Any) -> DeviceResult:
+def _check(name: str, fn: Callable[[Any], str], hal: Hal) -> DeviceResult:
     try:
         return DeviceResult(name, True, fn(hal))
     except Exception as exc:  # noqa: BLE001 - every failure is reported, none escapes
         return DeviceResult(name, False, f"{type(exc).__name__}: {exc}")
 
 
-def _servo_bus(hal: Any) -> str:
+def _servo_bus(hal: Hal) -> str:
     bus, ids = hal.servo_bus, hal.arm.joints.servo_ids
     missing = [i for i in ids if not bus.ping(i)]
     if missing:
@@ -115,7 +115,7 @@ def _servo_bus(hal: Any) -> str:
     errors = {i: bus.hardware_error(i) for i in ids}
     if any(errors.values()):
         raise RuntimeError(f"hardware error status {errors}")
-    recovered = len(getattr(bus, "recoveries", ()))
+    recovered = len(bus.recoveries)
     return f"servos {ids} ping, torque, move {SERVO_NUDGE_DEG} deg, settle, no hardware error; {recovered} recoveries"
 
 
@@ -126,7 +126,7 @@ def _nudge(joint: Any, servo_deg: float) -> float:
     return joint.servo_deg(here + toward * SERVO_NUDGE_DEG)
 
 
-def _arm(hal: Any) -> str:
+def _arm(hal: Hal) -> str:
     arm = hal.arm
     arm.enable()
     seen = []
@@ -138,7 +138,7 @@ def _arm(hal: Any) -> str:
     return "reached elevations " + ", ".join(seen)
 
 
-def _tracker(hal: Any) -> str:
+def _tracker(hal: Hal) -> str:
     o = hal.tracker.orientation()
     values = (o.heading, o.roll, o.pitch)
     if not all(math.isfinite(v) for v in values):
@@ -151,7 +151,7 @@ def _tracker(hal: Any) -> str:
     return f"heading {o.heading:.1f} deg roll {o.roll:.1f} deg pitch {o.pitch:.1f} deg; calibration {cal}"
 
 
-def _camera(hal: Any) -> str:
+def _camera(hal: Hal) -> str:
     """A frame of the right shape, and a manual lock of exposure, gain and white balance at
     the values the camera stands at that holds for a few frames: a camera that keeps its
     automatics running would flatten the change with the view that a sweep measures."""

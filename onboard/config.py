@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 import os
 import tomllib
+import types
+import typing
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Mapping
@@ -66,7 +68,10 @@ class FeatureConfig:
     space: str = "rgb"  # rgb | hsv | gray | pca | raw
     bands: tuple[str, ...] = ()  # empty: every band of the space
     bins_16bit: int = 4096  # histogram bins over 0..65535 for 16-bit sensors (memory: labels x bands x bins)
-    dependence: bool = False  # also send grain and band correlation per region (onboard.dependence)
+    # also send grain and band correlation per region (onboard.dependence): on, its cost is 35 ms
+    # and 44 bytes a capture at most (RESULTS.md "dependence"), without it the host cannot
+    # reproduce grain or colour
+    dependence: bool = True
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,23 +119,27 @@ _SECTIONS: dict[str, type] = {
     "segment": SegmentConfig,
     "skip": SkipConfig,
 }
-_TOP = {"robot_id": int, "state_dir": Path, "outbox_quota_bytes": int}
-_TYPES: dict[type, dict[str, Any]] = {
-    HalConfig: {"body": str, "scene": str, "size": (int, 2), "fault_rate": float, "fault_seed": int,
-                "servo_port": str, "servo_baud": int, "tracker_bus": int, "camera": str, "seed": int,
-                "tracker_remap": str},
-    LinkConfig: {"url": str, "key_file": Path, "baud": int, "node_id": int, "peer_id": int,
-                 "link_id": int, "mtu": int, "heartbeat_s": float, "failsafe_s": float, "window": int},
-    SweepConfig: {"start": float, "stop": float, "step": float, "azimuths": (float, None),
-                  "autostart": bool, "settle_timeout_s": float, "retries": int,
-                  "pose_tolerance_deg": float},
-    FeatureConfig: {"space": str, "bands": (str, None), "bins_16bit": int, "dependence": bool},
-    SegmentConfig: {"method": str, "mask": Path, "n_labels": int, "k": int, "min_samples": int,
-                    "split_std": float, "merge_distance": float, "max_merges": int,
-                    "iterations": int, "subsample": int, "refit_drift": float},
-    SkipConfig: {"min_pixels": int, "percentile_precision": float, "unchanged_tolerance": float,
-                 "skip_measured_pose": bool},
-}
+
+
+def _kind(annotation: Any) -> Any:
+    """How `_convert` reads a field of this type: the type, or (item type, length or None) for a tuple."""
+    if typing.get_origin(annotation) is tuple:
+        args = typing.get_args(annotation)
+        return (args[0], None) if args[-1] is Ellipsis else (args[0], len(args))
+    if typing.get_origin(annotation) in (types.UnionType, typing.Union):  # `Path | None`: a Path
+        (inner,) = [a for a in typing.get_args(annotation) if a is not type(None)]
+        return _kind(inner)
+    return annotation
+
+
+def field_types(cls: type) -> dict[str, Any]:
+    """Each field's kind, read from the dataclass's own annotations (stated nowhere else)."""
+    hints = typing.get_type_hints(cls)
+    return {f.name: _kind(hints[f.name]) for f in fields(cls)}
+
+
+_TYPES: dict[type, dict[str, Any]] = {cls: field_types(cls) for cls in _SECTIONS.values()}
+_TOP = {k: v for k, v in field_types(Config).items() if k not in _SECTIONS and k != "source"}
 CHOICES = {
     "hal.body": ("", "fake", "emulated", "real"),
     "hal.scene": ("black", "white", "mixed", "field"),
@@ -257,6 +266,20 @@ def check(cfg: Config) -> None:
         raise ConfigError("segment.method = 'scene' needs hal.body = 'fake' (ground truth)")
     if cfg.outbox_quota_bytes < 4096:
         raise ConfigError("outbox_quota_bytes must be at least 4096")
+
+
+def with_value(cfg: Config, dotted: str, value: Any) -> Config:
+    """`cfg` with `section.key` set to `value`, read as the config file's value would be
+    (paths against the state directory); ConfigError naming the key otherwise."""
+    section, _, key = dotted.partition(".")
+    cls = _SECTIONS.get(section)
+    if cls is None or key not in _TYPES[cls]:
+        raise ConfigError(f"unknown key {dotted}")
+    new = _convert(dotted, value, _TYPES[cls][key], cfg.state_dir)
+    if dotted in CHOICES and new not in CHOICES[dotted]:
+        raise ConfigError(f"{dotted} must be one of {', '.join(CHOICES[dotted])}, got {new!r}")
+    part = getattr(cfg, section)
+    return replace(cfg, **{section: replace(part, **{key: new})})
 
 
 def check_key_file(cfg: Config) -> None:

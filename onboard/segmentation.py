@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from hal.interfaces import ViewAngles
+from hal.interfaces import Hal, ViewAngles
 from onboard.capture import PoseSkipped
 from onboard.config import Config, ConfigError, SegmentConfig
 from onboard.features import FeatureFrame
@@ -166,12 +166,16 @@ class Segmentation:
     types persisted in `state_dir/palette.json`, so labels mean the same across views and
     restarts; a palette saved for other feature bands is not reused (its entries would be
     colours of another space). mask: the label file, read at start. scene: the fake camera's own mask of
-    the frame it rendered (ground truth). `changed` comes from the Segmenter in every case.
+    the frame it rendered (the HAL's `ground_truth` capability; a HAL without it is a config
+    error). `changed` comes from the Segmenter in every case.
     """
 
-    def __init__(self, cfg: Config, hal: Any = None) -> None:
+    def __init__(self, cfg: Config, hal: Hal | None = None) -> None:
         self.cfg = cfg
-        self.hal = hal
+        self.truth = None if hal is None else hal.ground_truth
+        if cfg.segment.method == "scene" and self.truth is None:
+            raise ConfigError("segment.method = 'scene' needs ground truth, which only the fake camera has "
+                              "(hal.body = 'fake')")
         self.palette_path = cfg.state_dir / "palette.json"
         self.features = f"{cfg.features.space}:{','.join(cfg.features.bands)}"
         try:
@@ -212,7 +216,7 @@ class Segmentation:
     def __call__(self, feats: Any, frame: Any, measured: ViewAngles) -> tuple[Any, bool]:
         method = self.cfg.segment.method
         if method == "scene":
-            labels = getattr(getattr(self.hal, "camera", None), "last_mask", None)
+            labels = self.truth.true_labels()
             if labels is None or labels.shape != feats.data.shape[:2]:
                 raise PoseSkipped("segment: the camera has no ground-truth mask for this frame")
             self.segmenter.note(labels)

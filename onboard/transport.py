@@ -1,84 +1,58 @@
-"""The runtime's link seam: reliable send under a persistent id, and the events it needs.
+"""The runtime's link seam: what the robot needs of its link, and an in-memory body for tests.
 
-`LinkTransport` binds the sans-I/O `radio.link.Link` to a byte port; `MemoryTransport` is
-the in-memory body for tests.
+On the robot the body is `radio.pump.LinkPump` (the sans-I/O link bound to the serial port);
+its events are the link's own (`radio.link`: Delivered, Acked, LinkUp, LinkDown).
 """
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Protocol
 
-from radio.link import Acked  # the link's own event: the peer holds message msg_id
-
-
-@dataclass(frozen=True, slots=True)
-class Received:
-    body: bytes
-
-
-@dataclass(frozen=True, slots=True)
-class LinkState:
-    up: bool
+from radio.link import Acked, Delivered, Event
 
 
 class Transport(Protocol):
-    """What the runtime needs from a link: reliable send under a persistent id, and events."""
+    """Reliable send under a persistent id; `read` returns the link's events, `write` sends
+    what is due (after the events were acted on)."""
 
-    def send(self, body: bytes, msg_id: int, now: float) -> None: ...
-    def poll(self, now: float) -> list[Received | Acked | LinkState]: ...
+    def send(self, payload: bytes, reliable: bool = True, msg_id: int | None = None,
+             now: float | None = None) -> int: ...
+    def read(self, now: float | None = None) -> list[Event]: ...
+    def write(self, now: float | None = None) -> None: ...
 
 
 class MemoryTransport:
-    """An in-memory link for tests: `sent` holds (msg_id, body); push events with `deliver`."""
+    """An in-memory link for tests: `sent` holds (msg_id, body); the base's messages arrive
+    with `receive`, any other link event with `deliver`."""
+
+    BASE = 2  # the peer's node id on the events it raises
 
     def __init__(self, auto_ack: bool = True) -> None:
         self.sent: list[tuple[int, bytes]] = []
         self.auto_ack = auto_ack
-        self._events: deque = deque()
+        self._events: deque[Event] = deque()
+        self._received = 0
 
-    def send(self, body: bytes, msg_id: int, now: float) -> None:
-        self.sent.append((msg_id, body))
+    def send(self, payload: bytes, reliable: bool = True, msg_id: int | None = None,
+             now: float | None = None) -> int:
+        msg_id = len(self.sent) + 1 if msg_id is None else msg_id
+        self.sent.append((msg_id, bytes(payload)))
         if self.auto_ack:
             self._events.append(Acked(msg_id))
+        return msg_id
 
-    def deliver(self, event: Received | Acked | LinkState) -> None:
+    def receive(self, body: bytes) -> None:
+        """The base's message `body` arrives."""
+        self._received += 1
+        self._events.append(Delivered(self.BASE, self._received, bytes(body)))
+
+    def deliver(self, event: Event) -> None:
         self._events.append(event)
 
-    def poll(self, now: float) -> list[Received | Acked | LinkState]:
+    def read(self, now: float | None = None) -> list[Event]:
         out = list(self._events)
         self._events.clear()
         return out
 
-
-
-class LinkTransport:
-    """The sans-I/O `radio.link.Link` bound to a pyserial-like port (read/write/in_waiting)."""
-
-    def __init__(self, link: Any, port: Any) -> None:
-        self.link = link
-        self.port = port
-
-    def send(self, body: bytes, msg_id: int, now: float) -> None:
-        self.link.send(body, now, reliable=True, msg_id=msg_id)
-
-    def poll(self, now: float) -> list[Received | Acked | LinkState]:
-        from radio import link as lk
-
-        data = self.port.read(max(1, getattr(self.port, "in_waiting", 0) or 0))
-        events = self.link.receive(data, now) if data else []
-        out = self.link.poll(now)
-        if out:
-            self.port.write(out)
-        events = [*events, *self.link.pop_events()]
-        mine: list[Received | Acked | LinkState] = []
-        for ev in events:
-            if isinstance(ev, lk.Delivered):
-                mine.append(Received(ev.payload))
-            elif isinstance(ev, Acked):
-                mine.append(ev)
-            elif isinstance(ev, lk.LinkUp):
-                mine.append(LinkState(True))
-            elif isinstance(ev, lk.LinkDown):
-                mine.append(LinkState(False))
-        return mine
+    def write(self, now: float | None = None) -> None:
+        pass  # `sent` already holds what the robot sent

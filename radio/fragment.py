@@ -10,7 +10,8 @@ from __future__ import annotations
 from collections import OrderedDict, deque
 from dataclasses import dataclass, field
 
-from radio.frame import Reason, read_varint, reject, varint
+from radio.frame import Reason, reject
+from radio.varint import get_varint, varint
 
 FIRST = 0x01
 LAST = 0x02
@@ -95,10 +96,10 @@ def parse_segments(data: bytes) -> list[tuple[int, int | None, bytes]]:
             raise reject(Reason.PAYLOAD, f"unknown segment flags {flags:#x}")
         msg_id = None
         if flags & FIRST:
-            number, pos = read_varint(data, pos)
+            number, pos = get_varint(data, pos, "message id", 9)
             msg_id = public_id(flags, number)
         if flags & MORE:
-            n, pos = read_varint(data, pos, 3)
+            n, pos = get_varint(data, pos, "segment length", 3)
             if pos + n >= len(data):
                 raise reject(Reason.PAYLOAD, "segment length runs past the frame")
             chunk, pos = data[pos:pos + n], pos + n
@@ -205,9 +206,9 @@ class Reassembler:
         flags = data[0]
         if flags & ~AUTO:
             raise reject(Reason.PAYLOAD, f"unknown datagram flags {flags:#x}")
-        number, pos = read_varint(data, 1)
-        index, pos = read_varint(data, pos, 3)
-        count, pos = read_varint(data, pos, 3)
+        number, pos = get_varint(data, 1, "datagram id", 9)
+        index, pos = get_varint(data, pos, "fragment index", 3)
+        count, pos = get_varint(data, pos, "fragment count", 3)
         if not 0 < count <= MAX_FRAGMENTS or index >= count:
             raise reject(Reason.PAYLOAD, f"fragment {index} of {count}")
         msg_id, chunk = public_id(flags, number), data[pos:]

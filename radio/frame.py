@@ -30,7 +30,10 @@ MAX_COUNTER = (1 << 48) - 1
 DEFAULT_MTU = 100
 
 
-class Kind(enum.IntEnum):
+class FrameKind(enum.IntEnum):
+    """What a frame does on the link. Not a packet kind (`radio.packet.Kind`): a frame ACK
+    acknowledges frames by sequence number, a packet ACK answers a command."""
+
     DATA = 1  # reliable, sequenced
     DATAGRAM = 2  # unreliable, fragmented with explicit indices
     ACK = 3
@@ -72,7 +75,7 @@ def reason_of(err: FrameError) -> Reason:
 
 @dataclass(frozen=True, slots=True)
 class Frame:
-    kind: Kind
+    kind: FrameKind
     sender: int
     link: int
     seq: int
@@ -159,7 +162,7 @@ def decode_repaired(stuffed: bytes, key: bytes) -> tuple[Frame, int]:
     if first >> 4 != VERSION:
         raise reject(Reason.VERSION, f"version {first >> 4}, expected {VERSION}")
     try:
-        kind = Kind(first & 0x0F)
+        kind = FrameKind(first & 0x0F)
     except ValueError:
         raise reject(Reason.KIND, f"unknown frame kind {first & 0x0F}") from None
     signed, tag = body[:-CRC_LEN - TAG_LEN], body[-CRC_LEN - TAG_LEN:-CRC_LEN]
@@ -205,32 +208,3 @@ class Deframer:
     @property
     def buffered(self) -> int:
         return len(self._buf)
-
-
-def varint(n: int) -> bytes:
-    """Unsigned LEB128."""
-    if n < 0:
-        raise ValueError("varint of a negative number")
-    out = bytearray()
-    while True:
-        b = n & 0x7F
-        n >>= 7
-        if n:
-            out.append(b | 0x80)
-        else:
-            out.append(b)
-            return bytes(out)
-
-
-def read_varint(data: bytes, pos: int, max_bytes: int = 9) -> tuple[int, int]:
-    """(value, next position); FrameError for a truncated or overlong varint."""
-    n = shift = 0
-    for i in range(max_bytes):
-        if pos + i >= len(data):
-            raise reject(Reason.PAYLOAD, "truncated varint")
-        b = data[pos + i]
-        n |= (b & 0x7F) << shift
-        shift += 7
-        if not b & 0x80:
-            return n, pos + i + 1
-    raise reject(Reason.PAYLOAD, "varint longer than 9 bytes")

@@ -1,5 +1,6 @@
-"""The link protocol, sans-I/O: fed received bytes and the time, it returns events, and
-`poll` returns the bytes to write. No sockets, clocks or threads: deterministic.
+"""The link protocol, sans-I/O: fed received bytes and the time (`receive`), it queues events
+(`pop_events`), and `poll` returns the bytes to write. No sockets, clocks or threads:
+deterministic. `radio.pump.LinkPump` binds it to a port.
 
 Each direction is a session opened by SYN (its counter names the session) and
 answered by SYNACK. Reliable messages are cut into sequenced DATA frames, sent with
@@ -13,16 +14,17 @@ repeats into re-acks rather than re-deliveries.
 from __future__ import annotations
 
 from collections import Counter, OrderedDict, deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from radio import FrameError
 from radio.auth import CounterStore, ReplayWindow
+from radio.events import Acked, Delivered, Event, LinkDown, LinkStats, LinkUp, QueueFull
 from radio.fragment import AUTO_BASE, Reassembler, StreamAssembler, StreamPacker, split_datagram
 from radio.frame import (
     DEFAULT_MTU,
     Deframer,
     Frame,
-    Kind,
+    FrameKind,
     Reason,
     decode_repaired,
     encode,
@@ -31,48 +33,7 @@ from radio.frame import (
     reject,
 )
 
-
-@dataclass(frozen=True, slots=True)
-class Delivered:
-    sender: int
-    msg_id: int
-    payload: bytes
-
-
-@dataclass(frozen=True, slots=True)
-class Acked:
-    msg_id: int
-
-
-@dataclass(frozen=True, slots=True)
-class LinkUp:
-    pass
-
-
-@dataclass(frozen=True, slots=True)
-class LinkDown:
-    pass
-
-
-Event = Delivered | Acked | LinkUp | LinkDown
-
-
-class QueueFull(RuntimeError):
-    """The link holds `max_queue_bytes` of unacknowledged data already; try again later."""
-
-
-@dataclass(frozen=True, slots=True)
-class LinkStats:
-    frames_sent: int
-    bytes_sent: int
-    frames_accepted: int
-    retransmissions: int
-    delivered: int
-    duplicates: int
-    acked: int
-    sessions_opened: int
-    rejected: dict[str, int] = field(default_factory=dict)
-    repaired: int = 0  # accepted frames whose single bit error the CRC corrected
+__all__ = ["Link", "Acked", "Delivered", "Event", "LinkDown", "LinkStats", "LinkUp", "QueueFull"]
 
 
 @dataclass
@@ -201,7 +162,8 @@ class Link:
         return not self._msgs and not self._dgrams
 
     def pop_events(self) -> list[Event]:
-        """Events raised by `poll` (LinkDown) that no `receive` has returned yet."""
+        """Everything that happened since the last call, in order: what `receive` delivered
+        and acknowledged, and what `poll` found (LinkDown). The link's one event queue."""
         ev, self._events = self._events, []
         return ev
 
@@ -216,8 +178,9 @@ class Link:
         return (self._reasm.bytes_held + self._asm.buffered + self._deframer.buffered
                 + sum(len(b) for b in self._rx_buf.values()))
 
-    def receive(self, data: bytes, now: float) -> list[Event]:
-        """Feed bytes read from the port; returns what happened. Never raises on bad bytes."""
+    def receive(self, data: bytes, now: float) -> None:
+        """Feed bytes read from the port; what happened waits in `pop_events`. Never raises on
+        bad bytes."""
         before = self._deframer.oversize
         for body in self._deframer.feed(data):
             try:
@@ -228,7 +191,6 @@ class Link:
                 self._rejected[reason_of(exc).value] += 1
         if self._deframer.oversize > before:
             self._rejected[Reason.OVERSIZE.value] += self._deframer.oversize - before
-        return self.pop_events()
 
     def poll(self, now: float, max_bytes: int | None = None) -> bytes:
         """Bytes to write now: control frames, retransmissions, new data, heartbeats.
@@ -242,7 +204,7 @@ class Link:
         out = bytearray()
         budget = [max_bytes if max_bytes is not None else 1 << 62]
 
-        def emit(kind: Kind, payload: bytes = b"", seq: int = 0) -> bool:
+        def emit(kind: FrameKind, payload: bytes = b"", seq: int = 0) -> bool:
             if budget[0] < self.mtu:
                 return False
             c = self._store.next_tx(self.node_id, self.link_id)
@@ -252,34 +214,34 @@ class Link:
             self._n["frames_sent"] += 1
             self._n["bytes_sent"] += len(wire)
             self._last_tx = now
-            if kind is Kind.SYN and self._syn_first is None:
+            if kind is FrameKind.SYN and self._syn_first is None:
                 self._syn_first = c
             return True
 
-        while self._synacks and emit(Kind.SYNACK, _c6(self._synacks[0])):
+        while self._synacks and emit(FrameKind.SYNACK, _c6(self._synacks[0])):
             self._synack_again = (self._synacks.pop(0), ACK_REPEATS, now + self._min_rto / 2)
         if self._synack_again and self._synack_again[1] and now >= self._synack_again[2]:
             c, left, _ = self._synack_again  # a lost SYNACK would cost the peer a whole RTO
-            if emit(Kind.SYNACK, _c6(c)):
+            if emit(FrameKind.SYNACK, _c6(c)):
                 self._synack_again = (c, left - 1, now + self._min_rto / 2)
-        if self._need_syn is not None and emit(Kind.NEED_SYN, _c6(self._need_syn)):
+        if self._need_syn is not None and emit(FrameKind.NEED_SYN, _c6(self._need_syn)):
             self._need_syn = None
-        if self._ack_pending and emit(Kind.ACK, self._ack_payload()):
+        if self._ack_pending and emit(FrameKind.ACK, self._ack_payload()):
             self._ack_pending = False
             self._ack_repeats, self._ack_again = ACK_REPEATS, now + self._min_rto / 2
-        elif self._ack_repeats and now >= self._ack_again and emit(Kind.ACK, self._ack_payload()):
+        elif self._ack_repeats and now >= self._ack_again and emit(FrameKind.ACK, self._ack_payload()):
             # The last ACK of a burst has no successor to cover its loss: say it again.
             self._ack_repeats -= 1
             self._ack_again = now + self._min_rto / 2
         if not self._tx_open:
-            if (self._syn_sent_at is None or now - self._syn_sent_at >= self._rto) and emit(Kind.SYN):
+            if (self._syn_sent_at is None or now - self._syn_sent_at >= self._rto) and emit(FrameKind.SYN):
                 self._syn_sent_at = now
-        while self._dgrams and emit(Kind.DATAGRAM, self._dgrams[0]):
+        while self._dgrams and emit(FrameKind.DATAGRAM, self._dgrams[0]):
             self._dgram_bytes -= len(self._dgrams.popleft())
         if self._tx_open:
             self._send_data(now, emit, lambda: budget[0])
         if (self._last_tx is None or now - self._last_tx >= self.heartbeat) and not out:
-            emit(Kind.HEARTBEAT)
+            emit(FrameKind.HEARTBEAT)
         return bytes(out)
 
     # ------------------------------------------------------------- sending side
@@ -299,7 +261,7 @@ class Link:
             o = self._inflight[s]
             if o.lost and not o.sacked:
                 for _ in range(o.copies):
-                    if not emit(Kind.DATA, o.data, s & 0xFF):
+                    if not emit(FrameKind.DATA, o.data, s & 0xFF):
                         return
                 o.copies = 1
                 o.sent_at, o.tries, o.lost, o.xmit = now, o.tries + 1, False, self._xmit
@@ -309,7 +271,7 @@ class Link:
             nxt = self._packer.next_payload(self._unsent, self._room)
             if nxt is None:
                 return
-            emit(Kind.DATA, nxt[0], self._tx_next & 0xFF)
+            emit(FrameKind.DATA, nxt[0], self._tx_next & 0xFF)
             if not self._inflight:
                 self._news = now  # the timer runs from the first frame of a flight
             self._inflight[self._tx_next] = _Out(nxt[0], nxt[1], now, 1, self._xmit)
@@ -398,25 +360,25 @@ class Link:
             raise reject(why, f"counter {f.counter}")
         self._replay.accept(f.counter)
         self._n["accepted"] += 1
-        if f.kind is Kind.SYN:
+        if f.kind is FrameKind.SYN:
             self._on_syn(f)
-        elif f.kind is Kind.SYNACK:
+        elif f.kind is FrameKind.SYNACK:
             if len(f.payload) != 6:
                 raise reject(Reason.PAYLOAD, "SYNACK without a 6-byte counter")
             c = int.from_bytes(f.payload, "big")
             if not self._tx_open and self._syn_first is not None and c >= self._syn_first:
                 self._tx_open = True
                 self._last_ack_counter = f.counter
-        elif f.kind is Kind.NEED_SYN:
+        elif f.kind is FrameKind.NEED_SYN:
             if len(f.payload) != 6:
                 raise reject(Reason.PAYLOAD, "NEED_SYN without a 6-byte counter")
             c = int.from_bytes(f.payload, "big")
             if self._tx_open and self._syn_first is not None and c > self._syn_first:
                 self._restart_session()
-        elif f.kind is Kind.ACK:
+        elif f.kind is FrameKind.ACK:
             self._on_ack(f, now)
         if self._rx_session is None or f.counter <= self._rx_session:
-            if f.kind in (Kind.DATA, Kind.DATAGRAM, Kind.HEARTBEAT):
+            if f.kind in (FrameKind.DATA, FrameKind.DATAGRAM, FrameKind.HEARTBEAT):
                 if self._rx_session is None:
                     self._need_syn = f.counter
                 raise reject(Reason.STALE_SESSION, f"{f.kind.name} outside a session")
@@ -425,9 +387,9 @@ class Link:
         if not self.up:
             self.up = True
             self._events.append(LinkUp())
-        if f.kind is Kind.DATA:
+        if f.kind is FrameKind.DATA:
             self._on_data(f)
-        elif f.kind is Kind.DATAGRAM:
+        elif f.kind is FrameKind.DATAGRAM:
             done = self._reasm.add(f.payload, now)
             if done is not None:
                 self._deliver(*done)

@@ -23,15 +23,14 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from radio import FrameError
+from radio.commands import CommandName, check_args
 from radio.packet_base import (
-    MAX_ANGLES,
     MAX_BODY,
     SCHEMA_VERSION,
     UINT32,
     Kind,
     angles_from_wire,
     angles_to_wire,
-    check_extras,
     pack_body,
     split_fields,
     unpack_body,
@@ -41,7 +40,7 @@ from radio.packet_base import (
     want_str,
 )
 from radio.packet_mask import MAX_SIDE, MaskPacket, downsample_labels, mask_packet
-from radio.packet_models import LabelModels, ModelsPacket, UnchangedPacket, models_packet
+from radio.packet_models import LabelModels, ModelsPacket, models_packet
 
 __all__ = [
     "SCHEMA_VERSION", "MAX_BODY", "MAX_SIDE", "Kind", "CommandName", "Reason", "LogLevel",
@@ -49,19 +48,6 @@ __all__ = [
     "CommandPacket", "AckPacket", "NackPacket", "LogPacket", "Packet", "encode", "decode",
     "encode_models", "encode_mask", "models_packet", "mask_packet", "downsample_labels",
 ]
-
-
-class CommandName(enum.IntEnum):
-    PING = 1
-    STATUS = 2
-    GOTO = 3
-    CAPTURE = 4
-    SWEEP = 5
-    ABORT = 6
-    SET = 7
-    TORQUE_OFF = 8
-    REBOOT_SERVO = 9
-    SEND_MASK = 10
 
 
 class Reason(enum.IntEnum):
@@ -91,6 +77,39 @@ class RobotState(enum.IntEnum):
     SWEEPING = 3
     PAUSED = 4
     FAULT = 5
+
+
+@dataclass(frozen=True, slots=True)
+class UnchangedPacket:
+    """A capture whose models all lie within tolerance of capture `ref_seq` at the same pose."""
+
+    KIND: ClassVar[Kind] = Kind.UNCHANGED
+    robot_id: int
+    seq: int
+    time: float
+    commanded: tuple[float, float]
+    measured: tuple[float, float]
+    ref_seq: int
+    extras: Mapping[str, Any] = field(default_factory=dict)
+
+    def _wire(self) -> list:
+        return [
+            self.robot_id, self.seq, float(self.time),
+            *angles_to_wire(self.commanded, "commanded"), *angles_to_wire(self.measured, "measured"),
+            self.ref_seq,
+        ]
+
+    @classmethod
+    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> UnchangedPacket:
+        seq = want_int(f[1], "capture seq", 0, UINT32)
+        ref = want_int(f[7], "reference seq", 0, UINT32)
+        if ref >= seq:
+            raise FrameError(f"reference capture {ref} is not before capture {seq}")
+        return cls(
+            want_int(f[0], "robot id", 0, 0xFFFF), seq, want_float(f[2], "time", 0.0),
+            angles_from_wire(f[3], f[4], "commanded"), angles_from_wire(f[5], f[6], "measured"),
+            ref, extras,
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -125,57 +144,10 @@ class StatusPacket:
         )
 
 
-# Each command's arguments: name -> check. Exactly these keys, nothing else.
-def _angle_list(v: Any, name: str, lo: float, hi: float) -> tuple[float, ...]:
-    if type(v) is not list or not 1 <= len(v) <= MAX_ANGLES:
-        raise FrameError(f"{name} must be a list of 1..{MAX_ANGLES} angles")
-    return tuple(want_float(x, name, lo, hi, allow_int=True) for x in v)
-
-
-_ARGS: dict[CommandName, dict[str, Any]] = {
-    CommandName.PING: {}, CommandName.STATUS: {}, CommandName.CAPTURE: {},
-    CommandName.ABORT: {}, CommandName.TORQUE_OFF: {},
-    CommandName.GOTO: {
-        "elevation": lambda v: want_float(v, "elevation", -90.0, 90.0, allow_int=True),
-        "azimuth": lambda v: want_float(v, "azimuth", -360.0, 360.0, allow_int=True),
-    },
-    CommandName.SWEEP: {
-        "start": lambda v: want_float(v, "sweep start", -90.0, 90.0, allow_int=True),
-        "stop": lambda v: want_float(v, "sweep stop", -90.0, 90.0, allow_int=True),
-        "step": lambda v: want_float(v, "sweep step", 0.1, 180.0, allow_int=True),
-        "elevations": lambda v: _angle_list(v, "elevations", -90.0, 90.0),
-        "azimuths": lambda v: _angle_list(v, "azimuths", -360.0, 360.0),
-    },
-    CommandName.SET: {
-        "key": lambda v: want_str(v, "setting key", 64, allow_empty=False),
-        "value": lambda v: check_extras({"value": v}, "setting")["value"],
-    },
-    CommandName.REBOOT_SERVO: {"servo_id": lambda v: want_int(v, "servo id", 0, 252)},
-    CommandName.SEND_MASK: {"seq": lambda v: want_int(v, "capture seq", 0, UINT32)},
-}
-# Key sets a command accepts (default: exactly the keys of _ARGS), plus optional keys.
-# SWEEP is (start, stop, step) as in the issue, or an explicit list of elevations.
-_FORMS: dict[CommandName, tuple[frozenset[str], ...]] = {
-    CommandName.SWEEP: (frozenset({"start", "stop", "step"}), frozenset({"elevations"})),
-}
-_OPTIONAL: dict[CommandName, frozenset[str]] = {CommandName.SWEEP: frozenset({"azimuths"})}
-
-
-def _check_args(name: CommandName, args: dict) -> dict[str, Any]:
-    spec = _ARGS[name]
-    optional = _OPTIONAL.get(name, frozenset())
-    forms = _FORMS.get(name, (frozenset(spec),))
-    given = set(args)
-    if not any(given - optional == form for form in forms):
-        want = " or ".join(str(sorted(f)) + (f" (+ optional {sorted(optional)})" if optional else "")
-                           for f in forms)
-        raise FrameError(f"{name.name} takes arguments {want}, got {sorted(map(str, args))}")
-    return {k: spec[k](args[k]) for k in spec if k in given}
-
-
 @dataclass(frozen=True, slots=True)
 class CommandPacket:
-    """A remote-control command; `command_id` makes retries idempotent."""
+    """A remote-control command; `command_id` makes retries idempotent. Its arguments are
+    checked against the command table (`radio.commands`)."""
 
     KIND: ClassVar[Kind] = Kind.COMMAND
     command_id: int
@@ -193,7 +165,7 @@ class CommandPacket:
         name = want_enum(f[1], CommandName, "command")
         if not isinstance(f[2], dict):
             raise FrameError(f"{name.name} arguments must be a map")
-        return cls(cid, name, _check_args(name, f[2]), extras)
+        return cls(cid, name, check_args(name, f[2]), extras)
 
 
 @dataclass(frozen=True, slots=True)

@@ -171,34 +171,6 @@ def check_extras(v: Any, name: str) -> dict[str, Any]:
     return out
 
 
-# -- unsigned LEB128 varints inside binary blobs -------------------------------------------
-
-
-def put_varint(out: bytearray, value: int) -> None:
-    """Append `value` (>= 0) in 7-bit groups, low first, high bit set on all but the last."""
-    if value < 0:
-        raise ValueError(f"varint must be non-negative, got {value}")
-    while value >= 0x80:
-        out.append(value & 0x7F | 0x80)
-        value >>= 7
-    out.append(value)
-
-
-def get_varint(blob: bytes, pos: int, name: str, max_bytes: int = 5) -> tuple[int, int]:
-    """(value, next position) of the varint at `pos`; at most `max_bytes` long, canonical."""
-    value = 0
-    for i in range(max_bytes):
-        if pos + i >= len(blob):
-            raise FrameError(f"{name} ends inside a varint")
-        b = blob[pos + i]
-        value |= (b & 0x7F) << (7 * i)
-        if not b & 0x80:
-            if b == 0 and i:
-                raise FrameError(f"{name} varint has a redundant zero byte")
-            return value, pos + i + 1
-    raise FrameError(f"{name} varint is longer than {max_bytes} bytes")
-
-
 # -- view angles, carried as integer centidegrees (0.01 degree resolution) ----------------
 
 

@@ -1,4 +1,5 @@
-"""MODELS and UNCHANGED packets: one capture's Johnson models, or the note that nothing moved.
+"""MODELS packets: one capture's Johnson models. (UNCHANGED, the note that nothing moved since
+capture `ref_seq` at the same pose, is a plain record in `radio.packet`.)
 
 A model travels as its four Slifker-Shapiro percentiles x(-3z), x(-z), x(z), x(3z) in the
 fitter's fixed point (`PercentileCodec.for_levels(levels)`: 16-bit codes for 8-bit sensors,
@@ -60,8 +61,6 @@ from radio.packet_base import (
     Kind,
     angles_from_wire,
     angles_to_wire,
-    get_varint,
-    put_varint,
     want_bin,
     want_float,
     want_int,
@@ -69,6 +68,7 @@ from radio.packet_base import (
 )
 from radio.packet_dependence import decode_dependence, encode_dependence, quantized, section_size
 from radio.packet_records import Tail, censor_code, read_tails, tail_bytes, tail_of
+from radio.varint import get_varint, put_varint
 
 _HEAD = struct.Struct(">hHhHH")  # angles, levels - 1
 _Z_BITS = 4  # z index in the low bits of a label's count varint
@@ -224,39 +224,6 @@ class ModelsPacket:
         if compute:
             object.__setattr__(packet, "fits", _recompute(packet, codec))
         return packet
-
-
-@dataclass(frozen=True, slots=True)
-class UnchangedPacket:
-    """A capture whose models all lie within tolerance of capture `ref_seq` at the same pose."""
-
-    KIND: ClassVar[Kind] = Kind.UNCHANGED
-    robot_id: int
-    seq: int
-    time: float
-    commanded: tuple[float, float]
-    measured: tuple[float, float]
-    ref_seq: int
-    extras: Mapping[str, Any] = field(default_factory=dict)
-
-    def _wire(self) -> list:
-        return [
-            self.robot_id, self.seq, float(self.time),
-            *angles_to_wire(self.commanded, "commanded"), *angles_to_wire(self.measured, "measured"),
-            self.ref_seq,
-        ]
-
-    @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> UnchangedPacket:
-        seq = want_int(f[1], "capture seq", 0, UINT32)
-        ref = want_int(f[7], "reference seq", 0, UINT32)
-        if ref >= seq:
-            raise FrameError(f"reference capture {ref} is not before capture {seq}")
-        return cls(
-            want_int(f[0], "robot id", 0, 0xFFFF), seq, want_float(f[2], "time", 0.0),
-            angles_from_wire(f[3], f[4], "commanded"), angles_from_wire(f[5], f[6], "measured"),
-            ref, extras,
-        )
 
 
 def models_packet(

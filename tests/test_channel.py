@@ -1,7 +1,8 @@
 """The channel simulator and the end-to-end bar through it."""
 import pytest
 
-from radio.channel import Channel, ChannelConfig, run_linktest
+from radio.channel import Channel, ChannelConfig
+from radio.linktest import run_linktest
 
 BAR = ChannelConfig(loss=0.2, bursty=True, ber=1e-4, dup=0.05, reorder=0.05)
 

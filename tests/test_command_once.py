@@ -4,12 +4,7 @@ The base retries a command with the same id until it hears the answer; after a r
 restart the link's dedup window is gone, so the runtime itself must recognise the id."""
 import pytest
 
-from hal.factory import build_hal
-from onboard import config
 from onboard.outbox import REMEMBERED_REPLIES, Outbox, Reply
-from onboard.runtime import Runtime
-from onboard.segmentation import Segmentation
-from onboard.transport import MemoryTransport, Received
 from radio import packet as pk
 
 CONFIG = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n[segment]\nmethod = "scene"\n'
@@ -21,20 +16,14 @@ class Crash(BaseException):
     """The process dies here (not an Exception: the runtime's guards do not catch it)."""
 
 
-def robot(state_dir):
-    path = state_dir / "robot.toml"
-    path.write_text(CONFIG)
-    cfg = config.load(path)
-    hal = build_hal(cfg.hal)
-    hal.camera.open(cfg.hal.size[1], cfg.hal.size[0])
-    tr = MemoryTransport()
-    rt = Runtime(cfg, hal, tr, Segmentation(cfg, hal))
+def robot(fake_robot, state_dir):
+    rt, tr = fake_robot(CONFIG, where=state_dir)
     rt.boot()
     return rt, tr
 
 
 def send(rt, tr, cid, name, **args):
-    tr.deliver(Received(pk.encode(pk.CommandPacket(cid, name, args))))
+    tr.receive(pk.encode(pk.CommandPacket(cid, name, args)))
     for _ in range(3):
         rt.step()
 
@@ -71,21 +60,21 @@ def die_at_commit(rt, k, after):
 
 
 @pytest.mark.parametrize("after", [False, True], ids=["kill-before-commit", "kill-after-commit"])
-def test_a_capture_killed_at_any_commit_and_resent_after_restart_is_captured_once(tmp_path, after):
+def test_a_capture_killed_at_any_commit_and_resent_after_restart_is_captured_once(fake_robot, tmp_path, after):
     (tmp_path / "count").mkdir()
-    rt, _ = robot(tmp_path / "count")
+    rt, _ = robot(fake_robot, tmp_path / "count")
     commits = die_at_commit(rt, 0, after)
     send(rt, rt.transport, 42, C.CAPTURE)
     assert len(commits) >= 1
     for k in range(1, len(commits) + 1):
         state = tmp_path / f"kill{k}"
         state.mkdir()
-        rt, tr = robot(state)
+        rt, tr = robot(fake_robot, state)
         die_at_commit(rt, k, after)
         with pytest.raises(Crash):
             send(rt, tr, 42, C.CAPTURE)
         rt.outbox.close()
-        rt2, tr2 = robot(state)  # restarted; the base re-sends the command, twice
+        rt2, tr2 = robot(fake_robot, state)  # restarted; the base re-sends the command, twice
         send(rt2, tr2, 42, C.CAPTURE)
         send(rt2, tr2, 42, C.CAPTURE)
         assert len(captures(tr, tr2)) == 1, k
@@ -97,11 +86,11 @@ def test_a_capture_killed_at_any_commit_and_resent_after_restart_is_captured_onc
         rt2.outbox.close()
 
 
-def test_a_capture_answered_after_a_restart_is_not_captured_again(tmp_path):
-    rt, tr = robot(tmp_path)
+def test_a_capture_answered_after_a_restart_is_not_captured_again(fake_robot, tmp_path):
+    rt, tr = robot(fake_robot, tmp_path)
     send(rt, tr, 7, C.CAPTURE)
     rt.outbox.close()
-    rt2, tr2 = robot(tmp_path)
+    rt2, tr2 = robot(fake_robot, tmp_path)
     send(rt2, tr2, 7, C.CAPTURE)  # the base never heard the answer: it asks again
     assert len(captures(tr, tr2)) == 1
     assert len(set(answers(7, tr, tr2))) == 1 and len(answers(7, tr2)) == 1
@@ -109,8 +98,8 @@ def test_a_capture_answered_after_a_restart_is_not_captured_again(tmp_path):
     assert len(captures(tr, tr2)) == 2
 
 
-def test_a_retried_goto_or_set_is_answered_from_memory_without_running_again(tmp_path):
-    rt, tr = robot(tmp_path)
+def test_a_retried_goto_or_set_is_answered_from_memory_without_running_again(fake_robot, tmp_path):
+    rt, tr = robot(fake_robot, tmp_path)
     moves = []
     real_move = rt.pipeline.move
     rt.pipeline.move = lambda view: (moves.append(view.elevation), real_move(view))[1]
@@ -132,8 +121,8 @@ def test_a_retried_goto_or_set_is_answered_from_memory_without_running_again(tmp
     assert pk.decode(nacks[0]).reason is pk.Reason.BAD_ARGUMENT
 
 
-def test_a_retried_command_whose_answer_is_still_queued_is_not_answered_twice(tmp_path):
-    rt, tr = robot(tmp_path)
+def test_a_retried_command_whose_answer_is_still_queued_is_not_answered_twice(fake_robot, tmp_path):
+    rt, tr = robot(fake_robot, tmp_path)
     tr.auto_ack = False
     send(rt, tr, 11, C.PING)
     send(rt, tr, 11, C.PING)
@@ -154,9 +143,9 @@ def test_the_robot_remembers_only_the_last_replies(tmp_path):
         assert box.remembered(total - 1) == last and box.remembered(3) is None
 
 
-def test_a_forgotten_command_id_runs_again(tmp_path, monkeypatch):
+def test_a_forgotten_command_id_runs_again(fake_robot, tmp_path, monkeypatch):
     monkeypatch.setattr("onboard.outbox.REMEMBERED_REPLIES", 2)
-    rt, tr = robot(tmp_path)
+    rt, tr = robot(fake_robot, tmp_path)
     send(rt, tr, 1, C.SET, key="skip.min_pixels", value=5)
     send(rt, tr, 2, C.SET, key="skip.min_pixels", value=9)
     send(rt, tr, 1, C.SET, key="skip.min_pixels", value=5)

@@ -140,3 +140,20 @@ def test_default_paths_resolve_against_the_config_file_even_without_their_sectio
     cfg = config.load(write(tmp_path, '[hal]\nbody = "fake"\n'))
     assert cfg.link.key_file == tmp_path.resolve() / "robot.key"
     assert cfg.state_dir == tmp_path.resolve() / "state"
+
+
+def test_config_types_are_read_from_the_dataclasses():
+    assert config.field_types(config.HalConfig)["size"] == (int, 2)
+    assert config.field_types(config.SweepConfig)["azimuths"] == (float, None)
+    assert config.field_types(config.SegmentConfig)["mask"] is Path
+    assert config.field_types(config.Config)["outbox_quota_bytes"] is int
+
+
+def test_a_value_set_at_run_time_is_read_as_the_file_would_read_it(tmp_path):
+    cfg = config.load(write(tmp_path, '[hal]\nbody = "fake"\n'))
+    assert config.with_value(cfg, "sweep.azimuths", [0, 90]).sweep.azimuths == (0.0, 90.0)
+    assert config.with_value(cfg, "skip.min_pixels", 5).skip.min_pixels == 5
+    with pytest.raises(config.ConfigError, match="skip.min_pixels must be an integer"):
+        config.with_value(cfg, "skip.min_pixels", 2.5)
+    with pytest.raises(config.ConfigError, match="unknown key skip.nope"):
+        config.with_value(cfg, "skip.nope", 1)

@@ -7,14 +7,25 @@ from cobs import cobs
 
 from radio import FrameError
 from radio.auth import FileCounterStore, ReplayWindow
-from radio.frame import OVERHEAD, Deframer, Frame, Kind, Reason, decode, decode_repaired, encode, max_payload, reason_of
+from radio.frame import (
+    OVERHEAD,
+    Deframer,
+    Frame,
+    FrameKind,
+    Reason,
+    decode,
+    decode_repaired,
+    encode,
+    max_payload,
+    reason_of,
+)
 from radio.keys import KeyFileError, load_key, write_key
 
 KEY = bytes(range(32))
 
 
 def frame(payload=b"hello\x00world", counter=77):
-    return Frame(Kind.DATA, 3, 9, 200, counter, payload)
+    return Frame(FrameKind.DATA, 3, 9, 200, counter, payload)
 
 
 def test_frame_round_trips_and_overhead_is_at_most_20_bytes():

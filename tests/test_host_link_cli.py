@@ -213,3 +213,17 @@ def test_cmd_against_a_running_robot_reports_a_refusal_with_its_reason(robot_por
     code, ans = _cmd(port, key, capsys, "set", "link.no_such_key", "3")
     assert code == 1 and ans["type"] == "NACK" and not ans["ok"]
     assert ans["reason"] == "BAD_ARGUMENT" and "cannot be set at run time" in ans["text"]
+
+
+def test_cmd_reaches_the_robot_through_a_lossy_radio_url(robot_port, capsys):
+    port, key = robot_port
+    code, ans = _cmd(f"btfsim://?port={port}&loss=0.2&seed=5", key, capsys, "status")
+    assert code == 0 and ans["type"] == "ACK" and ans["text"] == "STATUS"
+
+
+def test_ping_and_reboot_servo_have_command_line_forms_the_robot_answers(robot_port, capsys):
+    port, key = robot_port
+    code, ans = _cmd(port, key, capsys, "ping")
+    assert code == 0 and ans["type"] == "ACK" and ans["text"] == "PING" and ans["extras"]["time"] > 0
+    code, ans = _cmd(port, key, capsys, "reboot-servo", "--servo-id", "1")
+    assert code == 0 and ans["type"] == "ACK" and ans["extras"]["rebooted"] == 1

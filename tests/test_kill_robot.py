@@ -20,7 +20,8 @@ from pathlib import Path
 from radio.auth import MemoryCounterStore
 from radio.keys import load_key, write_key
 from radio.link import Link
-from radio.serial_port import FdPort
+from radio.ports import FdPort
+from radio.pump import LinkPump
 from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
 from tools.store import Store
 
@@ -93,15 +94,14 @@ def _kill(robot: subprocess.Popen) -> bool:
 
 def test_killed_robot_restarts_and_the_host_holds_every_capture_exactly_once(tmp_path):
     write_key(tmp_path / "robot.key")
-    config = tmp_path / "robot.toml"
-    config.write_text(CONFIG)
+    (config := tmp_path / "robot.toml").write_text(CONFIG)
     master, slave = os.openpty()
     tty.setraw(master)
     tty.setraw(slave)
     store = Store.open(tmp_path / "host.sqlite")
-    host = HostSession(Link(HOST_NODE, ROBOT_NODE, LINK_ID, load_key(tmp_path / "robot.key"),
-                            MemoryCounterStore(), heartbeat=0.2, link_timeout=30),
-                       FdPort(master, timeout=0.005), Receiver(store))
+    link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, load_key(tmp_path / "robot.key"), MemoryCounterStore(),
+                heartbeat=0.2, link_timeout=30)
+    host = HostSession(LinkPump(link, FdPort(master, timeout=0.005)), Receiver(store))
     rng = random.Random(int(os.environ.get("BTF_KILL_SEED", "20240")))
     items: list = []
     kills = 0

@@ -6,7 +6,8 @@ import pytest
 
 from radio.auth import FileCounterStore, MemoryCounterStore
 from radio.link import Acked, Delivered, Link, LinkDown, LinkUp, QueueFull
-from radio.serial_port import FdPort, SerialLink, open_url
+from radio.ports import FdPort, open_url
+from radio.pump import LinkPump
 
 KEY = bytes(range(32))
 
@@ -17,6 +18,12 @@ def pair(**kw):
     return robot, host
 
 
+def fed(link, data, t):
+    """Feed `data` to `link` at time t; the events it raised."""
+    link.receive(data, t)
+    return link.pop_events()
+
+
 def pump(a, b, t, seconds, dt=0.01, tap=None):
     """Exchange bytes losslessly; returns (events at a, events at b, end time)."""
     ea, eb = [], []
@@ -25,8 +32,8 @@ def pump(a, b, t, seconds, dt=0.01, tap=None):
         ab, ba = a.poll(t), b.poll(t)
         if tap:
             tap(ab)
-        eb += b.receive(ab, t) + b.pop_events()
-        ea += a.receive(ba, t) + a.pop_events()
+        eb += fed(b, ab, t)
+        ea += fed(a, ba, t)
         t += dt
     return ea, eb, t
 
@@ -64,7 +71,7 @@ def test_sender_restart_resends_unacked_and_receiver_reacks_without_redelivery(t
     t = 0.0
     got = []
     while not got and t < 2.0:
-        got += delivered(host.receive(robot.poll(t), t))
+        got += delivered(fed(host, robot.poll(t), t))
         if not got:
             robot.receive(host.poll(t), t)
         t += 0.01
@@ -98,7 +105,7 @@ def test_replayed_frames_are_rejected_and_counted():
     _, eh, t = pump(robot, host, 0.0, 1.0, tap=captured.append)
     assert delivered(eh) == [(9, b"x" * 300)]
     for wire in captured:
-        assert not delivered(host.receive(wire, t))
+        assert not delivered(fed(host, wire, t))
     rej = host.stats().rejected
     assert rej.get("replay", 0) + rej.get("stale", 0) >= len([w for w in captured if w])
 
@@ -114,7 +121,7 @@ def test_replay_after_receiver_restart_is_not_accepted(tmp_path):
     host2 = Link(0, 1, 5, KEY, FileCounterStore(tmp_path / "host.json"))
     events = []
     for wire in captured:
-        events += host2.receive(wire, t)
+        events += fed(host2, wire, t)
     assert not delivered(events)
 
 
@@ -123,7 +130,7 @@ def test_forged_frames_are_rejected_and_counted():
     forger = Link(1, 0, 5, bytes(32), MemoryCounterStore(start=10**9))
     forger.send(b"FORGED", 0.0, reliable=False)
     _, eh, _ = pump(robot, host, 0.0, 0.5)
-    assert not delivered(host.receive(forger.poll(0.5), 0.5))
+    assert not delivered(fed(host, forger.poll(0.5), 0.5))
     assert host.stats().rejected["tag"] >= 2  # its SYN and its datagram
 
 
@@ -176,8 +183,8 @@ def test_two_links_over_a_real_pty_pair():
     tty.setraw(master)
     tty.setraw(slave)
     robot, host = pair()
-    a = SerialLink(robot, open_url(os.ttyname(slave), timeout=0.005))
-    b = SerialLink(host, FdPort(master, timeout=0.005))
+    a = LinkPump(robot, open_url(os.ttyname(slave), timeout=0.005))
+    b = LinkPump(host, FdPort(master, timeout=0.005))
     msgs = [os.urandom(200 + i) for i in range(10)]
     for i, m in enumerate(msgs):
         robot.send(m, 0.0, msg_id=i + 1)
@@ -225,7 +232,7 @@ def test_single_bit_errors_are_repaired_and_counted():
             bad = bytearray(w)
             bad[w.index(b"qqqq") + 2] ^= 0x04
             w, flipped = bytes(bad), True
-        got += delivered(host.receive(w, t))
+        got += delivered(fed(host, w, t))
         robot.receive(host.poll(t), t)
         t += 0.01
     assert flipped and got == [(1, b"q" * 60)]

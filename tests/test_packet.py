@@ -39,8 +39,9 @@ from radio.packet import (
     encode_models,
     models_packet,
 )
-from radio.packet_base import MAX_FRAME_PIXELS, get_varint
+from radio.packet_base import MAX_FRAME_PIXELS
 from radio.packet_dependence import record_size
+from radio.varint import get_varint
 
 HEADER = dict(robot_id=3, seq=41, time=1_700_000_000.25, commanded=(45.0, 30.0),
               measured=(44.93, 29.87), feature_space="rgb")

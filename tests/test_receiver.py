@@ -8,6 +8,7 @@ from onboard.fit import FrameFitter
 from radio import packet as pk
 from radio.auth import MemoryCounterStore
 from radio.link import Link
+from radio.pump import LinkPump
 from tools.receiver import HostSession, ItemKind, Receiver, mask_key
 from tools.store import Store
 
@@ -101,9 +102,15 @@ def test_garbage_and_status_are_reported_not_stored(store):
 class Pipe:
     """One end of an in-memory byte pipe pair."""
 
+    timeout = 0.0
+
     def __init__(self):
         self.inbox = bytearray()
         self.peer = None
+
+    @property
+    def in_waiting(self):
+        return len(self.inbox)
 
     def read(self, size=4096):
         data, self.inbox[:] = bytes(self.inbox[:size]), self.inbox[size:]
@@ -123,13 +130,14 @@ def test_over_the_link_captures_are_stored_before_acknowledgement_and_commands_a
     t = [0.0]
     clock = lambda: t[0]
     robot = Link(1, 2, 1, KEY, MemoryCounterStore())
-    host = HostSession(Link(2, 1, 1, KEY, MemoryCounterStore()), b, Receiver(store), clock)
+    host = HostSession(LinkPump(Link(2, 1, 1, KEY, MemoryCounterStore()), b, clock), Receiver(store))
     acked, got_cmd = set(), []
     ids = [robot.send(models_body(s, 30.0 + 10 * s)[0], 0.0) for s in range(3)]
     cid = host.command(pk.CommandName.STATUS)
     for _ in range(300):
         t[0] += 0.01
-        for ev in robot.receive(a.read(), t[0]):
+        robot.receive(a.read(), t[0])
+        for ev in robot.pop_events():
             if hasattr(ev, "payload"):
                 got_cmd.append(pk.decode(ev.payload))
                 robot.send(pk.encode(pk.AckPacket(got_cmd[-1].command_id, "STATUS")), t[0])
@@ -224,3 +232,17 @@ def test_synth_from_the_database_turns_received_pca_captures_back_into_rgb(tmp_p
     for lab in np.unique(view.mask):  # each region's mean colour comes back, not its components
         sel = view.mask == lab
         assert np.abs(syn[sel].mean(axis=0) - view.image[sel].mean(axis=0)).max() < 8, lab
+
+
+def test_a_16_bit_capture_is_stored_at_its_depth(store):
+    rng = np.random.default_rng(8)
+    frame = np.clip(np.rint(rng.normal(30000, 900, (120, 160, 1))), 0, 65535).astype(np.uint16)
+    f = FrameFitter(1, 1, bins=65536)
+    f.add(frame, np.zeros((120, 160), np.uint8))
+    fits = f.fit()
+    body = pk.encode_models(fits, robot_id=3, seq=1, time=1.0, commanded=(90.0, 0.0), measured=(90.0, 0.0),
+                            feature_space="raw", bands=("T",), levels=65536)
+    Receiver(store).handle(body)
+    (cap,) = store.captures()
+    assert cap.levels == 65536
+    assert store.models(cap.id)[(0, 0)].model == fits[(0, 0)].model

@@ -8,28 +8,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hal.factory import build_hal
 from hal.interfaces import ViewAngles
 from onboard import config
 from onboard.capture import Pipeline
-from onboard.outbox import Outbox
-from onboard.runtime import Mode, Runtime
-from onboard.segmentation import Segmentation
-from onboard.transport import Acked, LinkState, MemoryTransport, Received
+from onboard.runtime import Mode
+from onboard.transport import MemoryTransport
 from radio import packet as pk
+from radio.link import Acked, LinkDown, LinkUp
 
 BASE = '[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\nfault_rate = {rate}\nfault_seed = 3\n' \
        '[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\n{extra}'
 
 
-def make(tmp_path, scene="mixed", rate=0.0, extra="", transport=None):
-    path = tmp_path / "robot.toml"
-    path.write_text(BASE.format(scene=scene, rate=rate, extra=extra))
-    cfg = config.load(path)
-    hal = build_hal(cfg.hal)
-    hal.camera.open(cfg.hal.size[1], cfg.hal.size[0])
-    tr = transport or MemoryTransport()
-    return Runtime(cfg, hal, tr, Segmentation(cfg, hal)), tr
+def make(fake_robot, scene="mixed", rate=0.0, extra="", **kw):
+    """A fake robot on `scene` (fault rate `rate`, more config in `extra`)."""
+    return fake_robot(BASE.format(scene=scene, rate=rate, extra=extra), **kw)
 
 
 def sweep(rt):
@@ -41,8 +34,8 @@ def decoded(tr):
 
 
 @pytest.mark.parametrize("scene", ["black", "white", "mixed"])
-def test_sweep_of_each_plate_sends_every_pose_label_band_model(tmp_path, scene):
-    rt, tr = make(tmp_path, scene)
+def test_sweep_of_each_plate_sends_every_pose_label_band_model(fake_robot, scene):
+    rt, tr = make(fake_robot, scene)
     sweep(rt)
     models = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
     assert [round(p.commanded[0]) for p in models] == [90, 80, 70, 60, 50, 40, 30]
@@ -54,9 +47,9 @@ def test_sweep_of_each_plate_sends_every_pose_label_band_model(tmp_path, scene):
     assert len(rt.outbox) == 0 and rt.mode is Mode.IDLE
 
 
-def test_faults_at_ten_percent_still_finish_and_report_every_skipped_pose(tmp_path):
+def test_faults_at_ten_percent_still_finish_and_report_every_skipped_pose(fake_robot):
     # A stalled servo moves on only at the settle timeout (real seconds): 2 s, not the default 10.
-    rt, tr = make(tmp_path, "black", rate=0.1, extra="[sweep]\nsettle_timeout_s = 2\n")
+    rt, tr = make(fake_robot, "black", rate=0.1, extra="[sweep]\nsettle_timeout_s = 2\n")
     sweep(rt)
     packets = decoded(tr)
     measured = [p for p in packets if isinstance(p, pk.ModelsPacket)]
@@ -68,14 +61,14 @@ def test_faults_at_ten_percent_still_finish_and_report_every_skipped_pose(tmp_pa
     assert rt.pipeline.faults  # faults did happen and were retried
 
 
-def test_interrupted_sweep_resumes_after_restart_without_repeating_poses(tmp_path):
-    rt, tr = make(tmp_path, "black")
+def test_interrupted_sweep_resumes_after_restart_without_repeating_poses(fake_robot):
+    rt, tr = make(fake_robot, "black")
     rt.boot()
     for _ in range(3):
         rt.step()
     first = {p.seq: p.commanded[0] for p in decoded(tr) if isinstance(p, pk.ModelsPacket)}
     rt.outbox.close()
-    rt2, tr2 = make(tmp_path, "black")  # same state directory: a restart
+    rt2, tr2 = make(fake_robot, "black")  # same state directory: a restart
     sweep(rt2)
     # An unacknowledged packet is offered again after the restart; the seq identifies it.
     second = {p.seq: p.commanded[0] for p in decoded(tr2) if isinstance(p, pk.ModelsPacket)}
@@ -84,8 +77,8 @@ def test_interrupted_sweep_resumes_after_restart_without_repeating_poses(tmp_pat
     assert first and all(first[s] == second[s] for s in set(first) & set(second))
 
 
-def test_unacknowledged_packets_stay_in_the_outbox_within_the_window(tmp_path):
-    rt, tr = make(tmp_path, "black", transport=MemoryTransport(auto_ack=False))
+def test_unacknowledged_packets_stay_in_the_outbox_within_the_window(fake_robot):
+    rt, tr = make(fake_robot, "black", transport=MemoryTransport(auto_ack=False))
     rt.boot()
     for _ in range(10):
         rt.step()
@@ -94,15 +87,15 @@ def test_unacknowledged_packets_stay_in_the_outbox_within_the_window(tmp_path):
 
 
 def command(tr, cid, name, **args):
-    tr.deliver(Received(pk.encode(pk.CommandPacket(cid, name, args))))
+    tr.receive(pk.encode(pk.CommandPacket(cid, name, args)))
 
 
 def replies(tr):
     return {p.command_id: p for p in decoded(tr) if isinstance(p, (pk.AckPacket, pk.NackPacket))}
 
 
-def test_commands_are_answered_with_a_result_or_a_reason(tmp_path):
-    rt, tr = make(tmp_path, "black", extra="[sweep]\nautostart = false\n")
+def test_commands_are_answered_with_a_result_or_a_reason(fake_robot):
+    rt, tr = make(fake_robot, "black", extra="[sweep]\nautostart = false\n")
     rt.boot()
     C = pk.CommandName
     command(tr, 1, C.PING)
@@ -135,12 +128,12 @@ def test_commands_are_answered_with_a_result_or_a_reason(tmp_path):
     assert isinstance(r[10], pk.AckPacket) and isinstance(r[11], pk.AckPacket)
 
 
-def test_failsafe_holds_the_arm_and_is_reported_when_the_link_returns(tmp_path):
-    rt, tr = make(tmp_path, "black")
+def test_failsafe_holds_the_arm_and_is_reported_when_the_link_returns(fake_robot):
+    rt, tr = make(fake_robot, "black")
     rt.boot()
-    tr.deliver(LinkState(True))
+    tr.deliver(LinkUp())
     rt.step()
-    tr.deliver(LinkState(False))  # heartbeats stopped for longer than failsafe_s
+    tr.deliver(LinkDown())  # heartbeats stopped for longer than failsafe_s
     rt.step()
     assert rt.mode is Mode.FAILSAFE
     bus = rt.hal.servo_bus
@@ -149,7 +142,7 @@ def test_failsafe_holds_the_arm_and_is_reported_when_the_link_returns(tmp_path):
     rt.step()
     assert bus.positions([1, 2]) == pytest.approx(held, abs=0.5)  # held, no sweep move
     command(tr, 20, pk.CommandName.GOTO, elevation=40.0, azimuth=0.0)  # read before the link is up
-    tr.deliver(LinkState(True))
+    tr.deliver(LinkUp())
     before = len(tr.sent)
     rt.step()
     assert rt.mode is Mode.SWEEPING  # resumed
@@ -159,23 +152,23 @@ def test_failsafe_holds_the_arm_and_is_reported_when_the_link_returns(tmp_path):
     assert any(isinstance(p, pk.StatusPacket) and "failsafe" in p.text for p in statuses)
 
 
-def test_goto_during_failsafe_is_refused_with_a_reason(tmp_path):
-    rt, tr = make(tmp_path, "black", extra="[sweep]\nautostart = false\n")
+def test_goto_during_failsafe_is_refused_with_a_reason(fake_robot):
+    rt, tr = make(fake_robot, "black", extra="[sweep]\nautostart = false\n")
     rt.boot()
-    tr.deliver(LinkState(True))
+    tr.deliver(LinkUp())
     rt.step()
-    tr.deliver(LinkState(False))
+    tr.deliver(LinkDown())
     rt.step()
-    rt._on_body(pk.encode(pk.CommandPacket(5, pk.CommandName.GOTO, {"elevation": 40.0, "azimuth": 0.0})))
+    rt.dispatch.on_body(pk.encode(pk.CommandPacket(5, pk.CommandName.GOTO, {"elevation": 40.0, "azimuth": 0.0})))
     rt.service()
     r = replies(tr)
     assert isinstance(r[5], pk.NackPacket) and r[5].reason is pk.Reason.BUSY
 
 
-def test_skip_rules_unchanged_marker_and_small_labels(tmp_path):
+def test_skip_rules_unchanged_marker_and_small_labels(fake_robot):
     extra = '[sweep]\nautostart = false\n'
-    rt, tr = make(tmp_path, "black", extra=extra)
-    rt.set_keys({"skip.unchanged_tolerance": 50.0})
+    rt, tr = make(fake_robot, "black", extra=extra)
+    rt.dispatch.set_keys({"skip.unchanged_tolerance": 50.0})
     rt.boot()
     for cid in (1, 2):
         command(tr, cid, pk.CommandName.CAPTURE)
@@ -184,11 +177,11 @@ def test_skip_rules_unchanged_marker_and_small_labels(tmp_path):
     assert kinds.count("ModelsPacket") == 1 and kinds.count("UnchangedPacket") == 1
 
 
-def test_garbage_from_the_base_never_ends_the_runtime(tmp_path):
-    rt, tr = make(tmp_path, "black", extra="[sweep]\nautostart = false\n")
+def test_garbage_from_the_base_never_ends_the_runtime(fake_robot):
+    rt, tr = make(fake_robot, "black", extra="[sweep]\nautostart = false\n")
     rt.boot()
     for junk in (b"", b"\x00", b"\x93\x01\x04\x00", bytes(range(256))):
-        tr.deliver(Received(junk))
+        tr.receive(junk)
     rt.step()
     assert len(rt.errors) == 4
 
@@ -286,21 +279,21 @@ def counting_commits(rt, kill_at=None, after=False):
 
 
 @pytest.mark.parametrize("after", [False, True], ids=["kill-before-commit", "kill-after-commit"])
-def test_a_kill_at_any_commit_delivers_every_pose_exactly_once(tmp_path, after):
+def test_a_kill_at_any_commit_delivers_every_pose_exactly_once(fake_robot, tmp_path, after):
     (tmp_path / "count").mkdir()
-    rt, _ = make(tmp_path / "count", "mixed", extra=PLAN3)
+    rt, _ = make(fake_robot, "mixed", extra=PLAN3, where=tmp_path / "count")
     commits = counting_commits(rt)
     sweep(rt)
     assert len(commits) >= 4  # the sweep's start and its three poses at least
     for k in range(1, len(commits) + 1):
         state = tmp_path / f"kill{k}"
         state.mkdir()
-        rt, tr = make(state, "mixed", extra=PLAN3)
+        rt, tr = make(fake_robot, "mixed", extra=PLAN3, where=state)
         counting_commits(rt, kill_at=k, after=after)
         with pytest.raises(Crash):
             sweep(rt)
         rt.outbox.close()
-        rt2, tr2 = make(state, "mixed", extra=PLAN3)  # restarted on the same state
+        rt2, tr2 = make(fake_robot, "mixed", extra=PLAN3, where=state)  # restarted on the same state
         sweep(rt2)
         kept = host_view(tr, tr2)
         got = poses_by_seq(kept)
@@ -310,16 +303,10 @@ def test_a_kill_at_any_commit_delivers_every_pose_exactly_once(tmp_path, after):
         assert masks and masks <= {s for _, s in got}  # no mask of a pose measured twice
 
 
-def test_a_full_outbox_pauses_the_pose_and_measures_it_once_after_the_ack(tmp_path):
-    path = tmp_path / "robot.toml"
-    path.write_text(BASE.format(scene="black", rate=0.0, extra=PLAN3))
-    cfg = config.load(path)
-    hal = build_hal(cfg.hal)
-    hal.camera.open(80, 60)
+def test_a_full_outbox_pauses_the_pose_and_measures_it_once_after_the_ack(fake_robot):
     tr = MemoryTransport(auto_ack=False)
-    cfg.state_dir.mkdir()
-    box = Outbox(cfg.state_dir / "outbox.sqlite", quota_bytes=400)
-    rt = Runtime(cfg, hal, tr, Segmentation(cfg, hal), outbox=box)
+    rt, _ = make(fake_robot, "black", extra=PLAN3, transport=tr, quota=400)
+    box = rt.outbox
     rt.boot()
     for _ in range(6):
         rt.step()
@@ -338,20 +325,20 @@ def test_a_full_outbox_pauses_the_pose_and_measures_it_once_after_the_ack(tmp_pa
     assert box.bytes_used <= 400
 
 
-def test_a_restart_after_a_finished_sweep_does_not_sweep_again(tmp_path):
-    rt, tr = make(tmp_path, "black", extra=PLAN3)
+def test_a_restart_after_a_finished_sweep_does_not_sweep_again(fake_robot):
+    rt, tr = make(fake_robot, "black", extra=PLAN3)
     sweep(rt)
     assert rt.progress.done and len(poses_by_seq(host_view(tr))) == 3
     rt.outbox.close()
-    rt2, tr2 = make(tmp_path, "black", extra=PLAN3)
+    rt2, tr2 = make(fake_robot, "black", extra=PLAN3)
     rt2.run(lambda r: r.idle())
     assert rt2.mode is Mode.IDLE and not poses_by_seq(host_view(tr2))
     boot = [p for p in decoded(tr2) if isinstance(p, pk.StatusPacket) and p.text == "boot"]
     assert boot[0].extras["sweep_state"] == "finished"
     rt2.outbox.close()
     # Asked for explicitly (btf-robot run --new-sweep) a new sweep runs, with new sequences.
-    rt3, tr3 = make(tmp_path, "black", extra=PLAN3)
-    rt3.new_sweep = True
+    rt3, tr3 = make(fake_robot, "black", extra=PLAN3)
+    rt3.sweep.new_sweep = True
     sweep(rt3)
     again = poses_by_seq(host_view(tr3))
     assert [e for e, _ in again] == [70, 80, 90]
@@ -359,94 +346,9 @@ def test_a_restart_after_a_finished_sweep_does_not_sweep_again(tmp_path):
     assert rt3.progress.sweep_id == rt.progress.sweep_id + 1
 
 
-# -- commands and the failsafe while a pose is being measured --------------------------
-# The pipeline services the link while the arm moves, so these arrive mid-pose.
-
-
-def mid_pose(tmp_path, *events):
-    """A runtime past its first pose, with `events` waiting for the next pose's move."""
-    rt, tr = make(tmp_path, "black", extra=PLAN3)
-    rt.boot()
-    tr.deliver(LinkState(True))
-    rt.step()
-    assert rt.progress.next_index == 1
-    for ev in events:
-        tr.deliver(ev)
-    return rt, tr
-
-
-def test_abort_mid_pose_stops_the_sweep_without_skipping_or_reviving_the_pose(tmp_path):
-    rt, tr = mid_pose(tmp_path, Received(pk.encode(pk.CommandPacket(7, pk.CommandName.ABORT, {}))))
-    assert rt.sweep_step() == "interrupted"
-    assert isinstance(replies(tr)[7], pk.AckPacket)
-    assert rt.mode is Mode.IDLE and not rt.progress.active
-    assert rt.progress.next_index == 1 and not rt.progress.skipped
-    saved = rt.sweeps.load()  # what a restart would resume from
-    assert not saved.active and saved.next_index == 1 and not saved.skipped
-
-
-def test_failsafe_mid_pose_holds_the_arm_and_measures_the_pose_after_the_link_returns(tmp_path):
-    rt, tr = mid_pose(tmp_path, LinkState(False))
-    assert rt.sweep_step() == "interrupted"
-    assert rt.mode is Mode.FAILSAFE and rt.progress.next_index == 1 and not rt.progress.skipped
-    bus = rt.hal.servo_bus
-    held = bus.positions([1, 2])
-    rt.step()
-    rt.sleep(0.05)
-    rt.step()
-    assert bus.positions([1, 2]) == pytest.approx(held, abs=0.5)  # no move while failsafe
-    tr.deliver(LinkState(True))
-    sweep(rt)
-    assert not rt.progress.skipped
-    assert [e for e, _ in poses_by_seq(host_view(tr))] == [70, 80, 90]
-
-
-def test_arm_commands_mid_pose_are_refused_as_busy_and_the_pose_completes(tmp_path):
-    goto = pk.CommandPacket(8, pk.CommandName.GOTO, {"elevation": 40.0, "azimuth": 0.0})
-    rt, tr = mid_pose(tmp_path, Received(pk.encode(goto)))
-    assert rt.sweep_step() == "measured"
-    nack = replies(tr)[8]
-    assert isinstance(nack, pk.NackPacket) and nack.reason is pk.Reason.BUSY
-    assert rt.progress.next_index == 2 and not rt.progress.skipped
-
-
-def test_a_sweep_command_mid_pose_replaces_the_sweep_for_good(tmp_path):
-    new = pk.CommandPacket(9, pk.CommandName.SWEEP, {"elevations": [60.0], "azimuths": [0.0]})
-    rt, tr = mid_pose(tmp_path, Received(pk.encode(new)))
-    old_id = rt.progress.sweep_id
-    assert rt.sweep_step() == "interrupted"
-    assert rt.progress.sweep_id == old_id + 1 and rt.progress.next_index == 0
-    assert rt.sweeps.load().sweep_id == old_id + 1  # the old sweep's pose did not overwrite it
-    sweep(rt)
-    assert [e for e, _ in poses_by_seq(host_view(tr))] == [60, 90]
-
-
-def test_an_unforeseen_fault_skips_the_pose_with_its_reason_and_the_sweep_goes_on(tmp_path):
-    rt, tr = make(tmp_path, "black", extra=PLAN3)
-    real = rt.pipeline.process
-
-    def broken_once(frame, commanded, measured):
-        if commanded.elevation == 80.0:
-            raise RuntimeError("fitter state corrupt")
-        return real(frame, commanded, measured)
-
-    rt.pipeline.process = broken_once
-    sweep(rt)
-    assert [(s.index, s.reason) for s in rt.progress.skipped] == \
-        [(1, "internal: RuntimeError: fitter state corrupt")]
-    assert [e for e, _ in poses_by_seq(host_view(tr))] == [70, 90]
-
-
-def test_a_sweep_paused_by_a_full_outbox_rests_between_turns_instead_of_spinning(tmp_path):
-    path = tmp_path / "robot.toml"
-    path.write_text(BASE.format(scene="black", rate=0.0, extra=PLAN3))
-    cfg = config.load(path)
-    hal = build_hal(cfg.hal)
-    hal.camera.open(80, 60)
-    cfg.state_dir.mkdir()
+def test_a_sweep_paused_by_a_full_outbox_rests_between_turns_instead_of_spinning(fake_robot):
     rests = []
-    rt = Runtime(cfg, hal, MemoryTransport(auto_ack=False), Segmentation(cfg, hal),
-                 outbox=Outbox(cfg.state_dir / "outbox.sqlite", quota_bytes=400),
+    rt, _ = make(fake_robot, "black", extra=PLAN3, transport=MemoryTransport(auto_ack=False), quota=400,
                  sleep=lambda s: rests.append(s))
     turns = []
     rt.run(lambda r: turns.append(1) or len(turns) > 20, tick_s=0.01)
@@ -454,20 +356,14 @@ def test_a_sweep_paused_by_a_full_outbox_rests_between_turns_instead_of_spinning
     assert rests.count(0.01) >= 15  # every paused turn rests a tick
 
 
-def test_commands_are_still_answered_when_captures_have_filled_the_outbox(tmp_path):
-    path = tmp_path / "robot.toml"
-    path.write_text(BASE.format(scene="mixed", rate=0.0, extra="[sweep]\nstart = 90\nstop = 0\nstep = 2\n"))
-    cfg = config.load(path)
-    hal = build_hal(cfg.hal)
-    hal.camera.open(80, 60)
-    cfg.state_dir.mkdir()
-    tr = MemoryTransport(auto_ack=False)
-    box = Outbox(cfg.state_dir / "outbox.sqlite", quota_bytes=8192)
-    rt = Runtime(cfg, hal, tr, Segmentation(cfg, hal), outbox=box)
+def test_commands_are_still_answered_when_captures_have_filled_the_outbox(fake_robot):
+    rt, tr = make(fake_robot, "mixed", extra="[sweep]\nstart = 90\nstop = 0\nstep = 2\n",
+                  transport=MemoryTransport(auto_ack=False), quota=8192)
+    box = rt.outbox
     rt.boot()
     while not rt.paused_reason:
         rt.step()
-    assert rt.sweep_step() == "paused"
+    assert rt.sweep.step() == "paused"
     for cid in (1, 2, 3):
         command(tr, cid, pk.CommandName.PING if cid < 3 else pk.CommandName.STATUS)
     rt.service()
@@ -476,7 +372,7 @@ def test_commands_are_still_answered_when_captures_have_filled_the_outbox(tmp_pa
     assert answered == {1, 2, 3} and box.bytes_used <= 8192
 
 
-def test_per_pose_memory_is_bounded_over_a_long_mission(tmp_path):
+def test_per_pose_memory_is_bounded_over_a_long_mission(fake_robot):
     from onboard.capture import MAX_POSES_REMEMBERED, remember
 
     table = {}
@@ -485,10 +381,10 @@ def test_per_pose_memory_is_bounded_over_a_long_mission(tmp_path):
     remember(table, (2 * MAX_POSES_REMEMBERED, 0), "again")  # re-set: now the newest
     assert len(table) == MAX_POSES_REMEMBERED
     assert list(table)[-1] == (2 * MAX_POSES_REMEMBERED, 0) and (0, 0) not in table
-    rt, tr = make(tmp_path, "black", extra="[sweep]\nautostart = false\n")
+    rt, tr = make(fake_robot, "black", extra="[sweep]\nautostart = false\n")
     rt.boot()
     for cid, el in enumerate((90.0, 80.0, 70.0)):
         command(tr, 2 * cid, pk.CommandName.GOTO, elevation=el, azimuth=0.0)
         command(tr, 2 * cid + 1, pk.CommandName.CAPTURE)
         rt.step()
-    assert len(rt.pipeline._previous) == len(rt._last_models) == 3
+    assert len(rt.pipeline._previous) == len(rt.captures.last_models) == 3

@@ -15,9 +15,7 @@ from hal.interfaces import HalError
 from onboard import config
 from onboard.config import ConfigError
 from onboard.features import PcaBasis
-from onboard.runtime import Runtime
 from onboard.segmentation import Segmentation
-from onboard.transport import MemoryTransport, Received
 from radio import FrameError
 from radio import packet as pk
 
@@ -31,21 +29,12 @@ def load(tmp_path, text):
     return config.load(path)
 
 
-def make(tmp_path, text, hal=None):
-    cfg = load(tmp_path, text)
-    if hal is None:
-        hal = build_hal(cfg.hal)
-        hal.camera.open(cfg.hal.size[1], cfg.hal.size[0])
-    tr = MemoryTransport()
-    return Runtime(cfg, hal, tr, Segmentation(cfg, hal)), tr
-
-
 def decoded(tr):
     return [pk.decode(body) for _, body in tr.sent]
 
 
 def command(rt, tr, cid, name, **args):
-    tr.deliver(Received(pk.encode(pk.CommandPacket(cid, name, args))))
+    tr.receive(pk.encode(pk.CommandPacket(cid, name, args)))
     rt.step()
     return {p.command_id: p for p in decoded(tr) if isinstance(p, (pk.AckPacket, pk.NackPacket))}[cid]
 
@@ -63,8 +52,8 @@ def test_hal_body_is_never_a_silent_fake(tmp_path, monkeypatch):
     assert example.hal.body == "fake"  # the example names its fake body
 
 
-def test_scene_labels_come_from_the_frame_the_camera_rendered(tmp_path, monkeypatch):
-    rt, tr = make(tmp_path, HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+def test_scene_labels_come_from_the_frame_the_camera_rendered(fake_robot, monkeypatch):
+    rt, tr = fake_robot(HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
     calls = []
     real = fake_camera.scene_radiance  # the fake camera renders through it (then exposes)
     monkeypatch.setattr(fake_camera, "scene_radiance", lambda *a, **k: calls.append(1) or real(*a, **k))
@@ -73,12 +62,12 @@ def test_scene_labels_come_from_the_frame_the_camera_rendered(tmp_path, monkeypa
     rt.boot()
     command(rt, tr, 1, pk.CommandName.CAPTURE)
     assert len(calls) == 1
-    assert rt._last_labels is rt.hal.camera.last_mask
-    assert set(np.unique(rt._last_labels)) == {1, 2}
+    assert rt.captures.last_labels is rt.hal.camera.last_mask
+    assert set(np.unique(rt.captures.last_labels)) == {1, 2}
 
 
-def test_mask_is_sent_when_the_label_map_changes_and_on_request(tmp_path):
-    rt, tr = make(tmp_path, HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+def test_mask_is_sent_when_the_label_map_changes_and_on_request(fake_robot):
+    rt, tr = fake_robot(HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
     rt.boot()
     C = pk.CommandName
     masks = lambda: [p for p in decoded(tr) if isinstance(p, pk.MaskPacket)]
@@ -95,11 +84,11 @@ def test_mask_is_sent_when_the_label_map_changes_and_on_request(tmp_path):
     assert len(masks()) == 3
 
 
-def test_mask_png_labels_the_frames(tmp_path):
+def test_mask_png_labels_the_frames(fake_robot, tmp_path):
     lab = np.zeros((60, 80), np.uint8)
     lab[:, 40:] = 3
     cv2.imwrite(str(tmp_path / "mask.png"), lab)
-    rt, tr = make(tmp_path, HAL.format(scene="black") + "[segment]\nmethod = 'mask'\nmask = 'mask.png'\nn_labels = 4\n"
+    rt, tr = fake_robot(HAL.format(scene="black") + "[segment]\nmethod = 'mask'\nmask = 'mask.png'\nn_labels = 4\n"
                   + NO_AUTO)
     rt.boot()
     command(rt, tr, 1, pk.CommandName.CAPTURE)
@@ -111,34 +100,34 @@ def test_mask_png_labels_the_frames(tmp_path):
         Segmentation(rt.cfg, rt.hal)
 
 
-def test_isodata_palette_survives_a_restart(tmp_path):
+def test_isodata_palette_survives_a_restart(fake_robot):
     text = HAL.format(scene="mixed") + "[segment]\nmethod = 'isodata'\nsplit_std = 12\nsubsample = 2000\n" + NO_AUTO
-    rt, tr = make(tmp_path, text)
+    rt, tr = fake_robot(text)
     rt.boot()
     command(rt, tr, 1, pk.CommandName.CAPTURE)
     saved = json.loads((rt.cfg.state_dir / "palette.json").read_text())
     assert saved["entries"] == [list(e) for e in rt.pipeline.segmenter.segmenter.palette.entries]
-    first = rt._last_labels.copy()
+    first = rt.captures.last_labels.copy()
     rt.outbox.close()
-    rt2, tr2 = make(tmp_path, text)  # same state directory
+    rt2, tr2 = fake_robot(text)  # same state directory
     assert {**rt2.pipeline.segmenter.segmenter.palette.to_record(), "features": "rgb:"} == saved
     rt2.boot()
     command(rt2, tr2, 2, pk.CommandName.CAPTURE)
-    assert (rt2._last_labels == first).mean() > 0.99  # the same view keeps its labels
+    assert (rt2.captures.last_labels == first).mean() > 0.99  # the same view keeps its labels
     (rt.cfg.state_dir / "palette.json").write_text("{not json")
     with pytest.raises(ConfigError, match="palette file"):
         Segmentation(rt.cfg, rt.hal)
 
 
-def test_a_palette_saved_for_other_bands_is_replaced_not_matched(tmp_path):
+def test_a_palette_saved_for_other_bands_is_replaced_not_matched(fake_robot):
     isodata = "[segment]\nmethod = 'isodata'\nsplit_std = 12\nsubsample = 2000\n"
-    rt, tr = make(tmp_path, HAL.format(scene="mixed") + isodata + NO_AUTO)
+    rt, tr = fake_robot(HAL.format(scene="mixed") + isodata + NO_AUTO)
     rt.boot()
     assert isinstance(command(rt, tr, 1, pk.CommandName.CAPTURE), pk.AckPacket)
     rt.outbox.close()
     # The same state directory, now fitting gray: 3-band colour entries cannot label it.
     gray = HAL.format(scene="mixed") + "[features]\nspace = 'gray'\n" + isodata + NO_AUTO
-    rt2, tr2 = make(tmp_path, gray)
+    rt2, tr2 = fake_robot(gray)
     assert rt2.pipeline.segmenter.segmenter.palette.entries == []
     rt2.boot()
     ack = command(rt2, tr2, 2, pk.CommandName.CAPTURE)
@@ -147,8 +136,8 @@ def test_a_palette_saved_for_other_bands_is_replaced_not_matched(tmp_path):
     assert saved["features"] == "gray:" and all(len(e) == 1 for e in saved["entries"])
 
 
-def test_sweep_command_takes_start_stop_step_and_optional_azimuths(tmp_path):
-    rt, tr = make(tmp_path, HAL.format(scene="black") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+def test_sweep_command_takes_start_stop_step_and_optional_azimuths(fake_robot):
+    rt, tr = fake_robot(HAL.format(scene="black") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
     rt.boot()
     ack = command(rt, tr, 1, pk.CommandName.SWEEP, start=80.0, stop=60.0, step=10.0)
     assert ack.extras["poses"] == 3
@@ -172,9 +161,9 @@ def test_sweep_command_schema_refuses_mixed_or_missing_forms():
     assert ok.args == {"start": 90.0, "stop": 30.0, "step": 10.0}
 
 
-def test_pca_basis_goes_once_with_the_scene_and_survives_a_restart(tmp_path):
+def test_pca_basis_goes_once_with_the_scene_and_survives_a_restart(fake_robot):
     text = HAL.format(scene="mixed") + "[features]\nspace = 'pca'\n[segment]\nmethod = 'scene'\n" + NO_AUTO
-    rt, tr = make(tmp_path, text)
+    rt, tr = fake_robot(text)
     rt.boot()
     for cid in (1, 2):
         command(rt, tr, cid, pk.CommandName.CAPTURE)
@@ -182,7 +171,7 @@ def test_pca_basis_goes_once_with_the_scene_and_survives_a_restart(tmp_path):
     basis = PcaBasis.from_extras(models[0].extras)
     assert basis == rt.pipeline.pca and PcaBasis.from_extras(models[1].extras) is None
     rt.outbox.close()
-    rt2, tr2 = make(tmp_path, text)
+    rt2, tr2 = fake_robot(text)
     assert rt2.pipeline.pca == basis
     rt2.boot()
     command(rt2, tr2, 2, pk.CommandName.CAPTURE)
@@ -199,15 +188,15 @@ def test_malformed_pca_extras_are_refused():
             PcaBasis.from_extras(bad)
 
 
-def test_sixteen_bit_multispectral_bands_through_the_runtime(tmp_path):
+def test_sixteen_bit_multispectral_bands_through_the_runtime(fake_robot, tmp_path):
     text = (HAL.format(scene="mixed") + "[features]\nspace = 'raw'\nbands = ['B0', 'B3']\nbins_16bit = 65536\n"
             "[segment]\nmethod = 'scene'\n" + NO_AUTO)
     cfg = load(tmp_path, text)
     hal_ = build_hal(cfg.hal)
     cam = FakeCamera("mixed", hal_.camera.true_view, size=(60, 80), bands="multispectral")
     cam.open(80, 60, "MSP6")
-    hal_ = dataclasses.replace(hal_, camera=cam)
-    rt, tr = make(tmp_path, text, hal_)
+    hal_ = dataclasses.replace(hal_, camera=cam, ground_truth=cam)
+    rt, tr = fake_robot(text, hal=hal_)
     rt.boot()
     assert isinstance(command(rt, tr, 1, pk.CommandName.CAPTURE), pk.AckPacket)
     models = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
@@ -218,6 +207,19 @@ def test_sixteen_bit_multispectral_bands_through_the_runtime(tmp_path):
         lo, hi = np.percentile(values, [1, 99])
         med = float(model.ppf(0.5))
         assert np.isfinite(med) and lo - 32 <= med <= hi + 32  # within a bin of the data
-    rt_bad, tr_bad = make(tmp_path, text.replace("['B0', 'B3']", "['B9']"), hal_)
+    rt_bad, tr_bad = fake_robot(text.replace("['B0', 'B3']", "['B9']"), hal=hal_)
     nack = command(rt_bad, tr_bad, 2, pk.CommandName.CAPTURE)
     assert isinstance(nack, pk.NackPacket) and "unknown band" in nack.text
+
+
+def test_scene_labels_are_a_capability_a_hal_without_ground_truth_lacks(tmp_path):
+    cfg = load(tmp_path, HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n")
+    hal_ = build_hal(cfg.hal)
+    assert hal_.ground_truth is hal_.camera  # the fake camera knows what it rendered
+    with pytest.raises(ConfigError, match="segment.method = 'scene' needs ground truth"):
+        Segmentation(cfg, dataclasses.replace(hal_, ground_truth=None))
+    emulated = build_hal(dataclasses.replace(cfg.hal, body="emulated"))
+    try:
+        assert emulated.ground_truth is None
+    finally:
+        emulated.close()

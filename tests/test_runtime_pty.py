@@ -12,12 +12,15 @@ from radio import packet as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import load_key, write_key
 from radio.link import Delivered, Link
-from radio.serial_port import FdPort
+from radio.ports import FdPort
+from radio.pump import LinkPump
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def receive_sweep(tmp_path, scene, rate=0.0, limit_s=120.0):
+def receive_sweep(tmp_path, scene, rate=0.0, limit_s=120.0, radio=""):
+    """The packets a host receives of one sweep; `radio`: the robot's port goes through the
+    simulated lossy radio with these btfsim:// options."""
     key_path = tmp_path / "robot.key"
     write_key(key_path)
     master, slave = os.openpty()
@@ -32,23 +35,20 @@ def receive_sweep(tmp_path, scene, rate=0.0, limit_s=120.0):
         f'[sweep]\nsettle_timeout_s = 3\n[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\n')
     robot = subprocess.Popen(
         [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())", "run",
-         "--config", str(tmp_path / "robot.toml"), "--hal", "fake", "--port", os.ttyname(slave),
+         "--config", str(tmp_path / "robot.toml"), "--hal", "fake",
+         "--port", f"btfsim://?port={os.ttyname(slave)}&{radio}" if radio else os.ttyname(slave),
          "--exit-when-idle", "--max-seconds", str(limit_s)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    host = Link(2, 1, 1, load_key(key_path), MemoryCounterStore(), heartbeat=0.2, link_timeout=30)
-    port = FdPort(master, timeout=0.01)
+    host = LinkPump(Link(2, 1, 1, load_key(key_path), MemoryCounterStore(), heartbeat=0.2, link_timeout=30),
+                    FdPort(master, timeout=0.01))
     got: dict[int, object] = {}
     t0 = time.monotonic()
     try:
         while robot.poll() is None and time.monotonic() - t0 < limit_s + 10:
-            now = time.monotonic()
-            data = port.read(4096)
-            for ev in host.receive(data, now) if data else []:
+            for ev in host.read():
                 if isinstance(ev, Delivered):
                     got[ev.msg_id] = pk.decode(ev.payload)
-            out = host.poll(now)
-            if out:
-                port.write(out)
+            host.write()
         # Let the last acks out before the robot sees its outbox empty.
         err = robot.communicate(timeout=30)[1].decode()
     finally:
@@ -77,3 +77,9 @@ def test_with_faults_every_skipped_pose_reaches_the_receiver_with_its_reason(tmp
     assert done and done[-1].extras["skipped"] == len(skipped)
     assert len(models) + len(skipped) == 7
     assert all(p.text.startswith("skipped pose:") and "failed" in p.text for p in skipped)
+
+
+def test_the_robot_runs_through_a_lossy_radio_named_by_its_url(tmp_path):
+    packets = receive_sweep(tmp_path, "mixed", radio="loss=0.1&ber=1e-4&seed=4")
+    models = [p for p in packets if isinstance(p, pk.ModelsPacket)]
+    assert sorted(round(p.commanded[0]) for p in models) == [30, 40, 50, 60, 70, 80, 90]

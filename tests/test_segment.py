@@ -9,9 +9,9 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from PIL import Image
 
+from onboard.config import SegmentConfig
 from onboard.features import FeatureSpace, FeatureSpec, compute
 from onboard.isodata import IsodataParams
-from onboard.config import SegmentConfig
 from onboard.mask_file import load_mask
 from onboard.palette import Palette
 from onboard.segmentation import Segmenter, SegmentMethod

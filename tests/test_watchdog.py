@@ -7,11 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from hal.factory import build_hal
-from onboard import cli, config
-from onboard.runtime import Mode, Runtime
-from onboard.segmentation import Segmentation
-from onboard.transport import MemoryTransport
+from onboard import cli
+from onboard.runtime import Mode
 from onboard.watchdog import Notifier
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -54,18 +51,14 @@ def watchdog_usec() -> int:
 
 
 def test_runtime_says_ready_kicks_the_watchdog_at_half_its_period_and_reports_status(
-        tmp_path, systemd, monkeypatch):
+        fake_robot, systemd, monkeypatch):
     monkeypatch.setenv("WATCHDOG_USEC", str(watchdog_usec()))  # as systemd sets it from the unit
     monkeypatch.setenv("WATCHDOG_PID", str(os.getpid()))
     period = watchdog_usec() / 1e6
     now = [0.0]
     notifier = Notifier(clock=lambda: now[0])
     assert notifier.enabled
-    (tmp_path / "robot.toml").write_text(ROBOT)
-    cfg = config.load(tmp_path / "robot.toml")
-    hal = build_hal(cfg.hal)
-    hal.camera.open(60, 40)
-    rt = Runtime(cfg, hal, MemoryTransport(), Segmentation(cfg, hal), notifier=notifier)
+    rt, _ = fake_robot(ROBOT, notifier=notifier)
     rt.boot()
     got = [(now[0], m) for m in drain(systemd)]
     assert got[0][1].startswith("READY=1\nSTATUS=btf-robot running")

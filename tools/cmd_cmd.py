@@ -1,81 +1,76 @@
-"""`btf-host cmd`: one remote-control command to the robot, printing its answer."""
+"""`btf-host cmd`: one remote-control command to the robot, printing its answer.
+
+The subcommands, their options and help come from the command table (`radio.commands`).
+"""
 from __future__ import annotations
 
 import argparse
 import json
 import time
 
+from radio.commands import COMMANDS, Command, CommandName
 from tools.cli import CliError
 
 
-def _floats(text: str) -> list[float]:
-    try:
-        return [float(v) for v in text.split(",") if v.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected comma-separated numbers") from None
+def _cli_type(parse):
+    """An argparse type from a table parser: a ValueError becomes argparse's own usage error."""
+    def convert(text: str):
+        try:
+            return parse(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    convert.__name__ = getattr(parse, "__name__", "value")
+    return convert
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("cmd", help="send the robot a command and print its answer")
-    p.add_argument("--port", required=True, help="pyserial URL of the link")
+    p.add_argument("--port", required=True, help="pyserial URL of the link (btfsim://?port=URL&loss=0.2: lossy)")
     p.add_argument("--key", required=True, help="link key file")
     p.add_argument("--baud", type=int, default=115200)
     p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the answer")
     p.add_argument("--json", action="store_true", help="print the answer as one JSON object")
     c = p.add_subparsers(dest="what", required=True, metavar="COMMAND")
-    g = c.add_parser("goto", help="move the arm")
-    g.add_argument("--elevation", type=float, required=True)
-    g.add_argument("--azimuth", type=float, default=0.0)
-    c.add_parser("capture", help="capture at the current pose")
-    s = c.add_parser("sweep", help="start a sweep: --start/--stop/--step or --elevations")
-    s.add_argument("--start", type=float, help="first elevation, e.g. 90")
-    s.add_argument("--stop", type=float, help="last elevation, e.g. 30")
-    s.add_argument("--step", type=float, help="elevation step, e.g. 10")
-    s.add_argument("--elevations", type=_floats, help="explicit elevations, e.g. 90,80,70")
-    s.add_argument("--azimuths", type=_floats, default=[0.0], help="e.g. 0,90")
-    c.add_parser("abort", help="stop the sweep and hold the arm")
-    st = c.add_parser("set", help="change a run-time setting")
-    st.add_argument("setting", help="section.key, e.g. skip.min_pixels")
-    st.add_argument("value", help="the value (JSON if it parses, else a string)")
-    c.add_parser("status", help="the robot's state")
-    c.add_parser("torque-off", help="stop and release the servos")
-    m = c.add_parser("send-mask", help="re-send the label map of a capture")
-    m.add_argument("--seq", type=int, required=True, help="capture sequence number")
+    for cmd in COMMANDS.values():
+        s = c.add_parser(cmd.cli, help=cmd.help, description=cmd.help)
+        required = set.intersection(*(set(f) for f in cmd.key_sets()))
+        for arg in cmd.args:  # dest apart from cmd's own options (--key is the key file)
+            kind = _cli_type(arg.parse)
+            if arg.cli.startswith("-"):
+                s.add_argument(arg.cli, dest=_dest(arg.key), type=kind, default=arg.default, help=arg.help,
+                               required=arg.key in required and arg.default is None,
+                               metavar=arg.metavar or arg.key.upper())
+            else:
+                s.add_argument(_dest(arg.key), type=kind, help=arg.help, metavar=arg.metavar or arg.cli)
     return p
 
 
-def command_of(args: argparse.Namespace):
-    """(CommandName, args) for the parsed subcommand."""
-    from radio.packet import CommandName as C
+def _dest(key: str) -> str:
+    return f"arg_{key}"
 
-    w = args.what
-    if w == "goto":
-        return C.GOTO, {"elevation": args.elevation, "azimuth": args.azimuth}
-    if w == "sweep":
-        ranged = (args.start, args.stop, args.step)
-        if args.elevations is not None and any(v is not None for v in ranged):
-            raise CliError("sweep takes either --start/--stop/--step or --elevations, not both")
-        if not args.azimuths:
-            raise CliError("sweep needs at least one azimuth")
-        if args.elevations is not None:
-            if not args.elevations:
-                raise CliError("sweep needs at least one elevation")
-            return C.SWEEP, {"elevations": args.elevations, "azimuths": args.azimuths}
-        if any(v is None for v in ranged):
-            raise CliError("sweep needs --start, --stop and --step (or --elevations)")
-        return C.SWEEP, {"start": args.start, "stop": args.stop, "step": args.step,
-                         "azimuths": args.azimuths}
-    if w == "set":
-        try:
-            value = json.loads(args.value)
-        except ValueError:
-            value = args.value
-        return C.SET, {"key": args.setting, "value": value}
-    if w == "send-mask":
-        if args.seq < 0:
-            raise CliError(f"--seq {args.seq}: must not be negative")
-        return C.SEND_MASK, {"seq": args.seq}
-    return {"capture": C.CAPTURE, "abort": C.ABORT, "status": C.STATUS, "torque-off": C.TORQUE_OFF}[w], {}
+
+def _by_cli(what: str) -> Command:
+    return next(c for c in COMMANDS.values() if c.cli == what)
+
+
+def command_of(args: argparse.Namespace) -> tuple[CommandName, dict]:
+    """(CommandName, args) for the parsed subcommand, in one of the command's forms."""
+    cmd = _by_cli(args.what)
+    given = {a.key: getattr(args, _dest(a.key)) for a in cmd.args if getattr(args, _dest(a.key)) is not None}
+    if not any(set(given) - cmd.optional == form for form in cmd.key_sets()):
+        forms = " or ".join("/".join(cmd.arg(k).cli for k in sorted(form, key=_order(cmd)))
+                            for form in cmd.key_sets())
+        named = ", ".join(cmd.arg(k).cli for k in sorted(set(given) - cmd.optional, key=_order(cmd)))
+        raise CliError(f"{cmd.cli} takes {forms}, not {named or 'none of them'}")
+    for key, value in given.items():
+        if isinstance(value, list) and not value:
+            raise CliError(f"{cmd.cli} {cmd.arg(key).cli}: needs at least one value")
+    return cmd.name, given
+
+
+def _order(cmd: Command):
+    keys = [a.key for a in cmd.args]
+    return keys.index
 
 
 def run(args: argparse.Namespace) -> int:
@@ -98,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         # One more turn so our acknowledgement of the answer goes out.
         session.step()
     finally:
-        session.port.close()
+        session.close()
     item = session.answers[cid]
     ok = isinstance(item.packet, pk.AckPacket)
     if args.json:

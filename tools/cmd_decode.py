@@ -22,7 +22,7 @@ def headers(bodies: list[bytes]) -> list[dict]:
     """Frame headers without the key: CRC checked, the tag not (marked so)."""
     from cobs import cobs
 
-    from radio.frame import CRC_LEN, HEADER, OVERHEAD, Kind
+    from radio.frame import CRC_LEN, HEADER, OVERHEAD, FrameKind
 
     out = []
     for i, raw in enumerate(bodies):
@@ -40,7 +40,7 @@ def headers(bodies: list[bytes]) -> list[dict]:
             continue
         first, sender, link, seq, counter = HEADER.unpack_from(body)
         try:
-            kind = Kind(first & 0x0F).name
+            kind = FrameKind(first & 0x0F).name
         except ValueError:
             kind = first & 0x0F
         out.append({**row, "version": first >> 4, "kind": kind, "sender": sender, "link": link,
@@ -71,7 +71,8 @@ def authenticated(bodies: list[bytes], key: bytes) -> list[dict]:
         k = (f.sender, f.link)
         if k not in links:  # a receiver per sender, as the peer would run
             links[k] = Link((f.sender + 1) % 256, f.sender, f.link, key, MemoryCounterStore())
-        for ev in links[k].receive(b"\x00" + raw + b"\x00", float(i)):
+        links[k].receive(b"\x00" + raw + b"\x00", float(i))
+        for ev in links[k].pop_events():
             if isinstance(ev, Delivered):
                 try:
                     out.append({"message": ev.msg_id, "sender": ev.sender, **packet_json(pk.decode(ev.payload))})

@@ -1,11 +1,12 @@
-"""`btf-host linktest`: a robot end and a host end through the seeded channel simulator."""
+"""`btf-host linktest`: a robot end and a host end through the seeded channel simulator
+(`radio.linktest`)."""
 from __future__ import annotations
 
 import argparse
 import dataclasses
 import json
 
-from radio.channel import ChannelConfig, run_linktest
+from radio.channel import ChannelConfig
 from tools.cli import CliError
 
 
@@ -41,6 +42,8 @@ def run(args: argparse.Namespace) -> int:
                             packet_size=args.mtu, buffer=4 * args.mtu)
     except ValueError as exc:
         raise CliError(str(exc)) from None
+    from radio.linktest import run_linktest
+
     result = run_linktest(cfg, args.packets, args.seed, forged=args.forged, mtu=args.mtu)
     report = dataclasses.asdict(result)
     if args.json:

@@ -12,7 +12,8 @@ from tools.cli import CliError
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("listen", help="receive captures over a serial link into a database")
-    p.add_argument("--port", required=True, help="pyserial URL: /dev/ttyUSB0, a pty path, socket://host:port")
+    p.add_argument("--port", required=True, help="pyserial URL: /dev/ttyUSB0, a pty path, socket://host:port, "
+                   "btfsim://?port=URL&loss=0.2 (a simulated lossy radio)")
     p.add_argument("--db", required=True, help="SQLite database (created if missing)")
     p.add_argument("--key", required=True, help="link key file (btf-host keygen)")
     p.add_argument("--baud", type=int, default=115200)
@@ -28,7 +29,8 @@ def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene:
     from radio.auth import FileCounterStore
     from radio.keys import KeyFileError, load_key
     from radio.link import Link
-    from radio.serial_port import open_url
+    from radio.ports import open_url
+    from radio.pump import LinkPump
     from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, Receiver
     from tools.store import CorruptDatabase, Store
 
@@ -59,7 +61,7 @@ def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene:
             store.close()
         raise CliError(f"port {port_url}: cannot open: {exc}") from None
     link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, key, counters, heartbeat=1.0, link_timeout=5.0)
-    return HostSession(link, port, Receiver(store, scene)), store
+    return HostSession(LinkPump(link, port), Receiver(store, scene)), store
 
 
 def run(args: argparse.Namespace) -> int:
@@ -89,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
         pass
     finally:
         bar.close()
-        session.port.close()
+        session.close()
         store.close()
     st = session.stats()
     c = session.receiver.counts

@@ -2,8 +2,9 @@
 database they fill, and the paper's experiments judged against the issue's bars.
 
 The robot (`btf-robot run --hal fake`) runs as a subprocess on the slave side of a pty;
-the host reads the master side and passes every byte through two seeded
-`radio.channel.Channel`s (one per direction) before its Link sees it. The robot sends
+the host's link reads the master side through the simulated radio
+(`radio.channel_port.ChannelPort`, one seeded lossy channel per direction), with the
+`LinkPump` every other end uses. The robot sends
 models, not images, so the host re-renders each capture's view (hal.scene.render with
 the fake camera's seed) to compare against: the same pixels the robot's camera saw.
 """
@@ -29,11 +30,13 @@ from onboard.fit import FrameFitter, fit_histogram
 from radio import FrameError
 from radio import packet as pk
 from radio.auth import MemoryCounterStore
-from radio.channel import Channel, ChannelConfig
-from radio.frame import Deframer, Kind, decode
+from radio.channel import ChannelConfig
+from radio.channel_port import ChannelPort
+from radio.frame import Deframer, FrameKind, decode
 from radio.keys import load_key, write_key
 from radio.link import Link
-from radio.serial_port import FdPort
+from radio.ports import FdPort
+from radio.pump import LinkPump
 from tools.metrics import compare_bands, correlation, histogram
 from tools.pdfs import table as pdf_table
 from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
@@ -101,9 +104,9 @@ class Resends:
                 f = decode(body, self._key)
             except FrameError:
                 continue
-            if f.kind is Kind.SYN:  # a new session numbers its frames from 0
+            if f.kind is FrameKind.SYN:  # a new session numbers its frames from 0
                 self._next, self._last = 0, None
-            elif f.kind is Kind.DATA:
+            elif f.kind is FrameKind.DATA:
                 if f.seq == self._next:
                     self._next = (f.seq + 1) & 0xFF
                 elif f.seq != self._last:
@@ -111,38 +114,6 @@ class Resends:
                 self._last = f.seq
             else:
                 self._last = None
-
-
-class SimulatedRadio:
-    """A port over a pty fd whose bytes cross a seeded lossy channel in each direction;
-    with the link key, each end's retransmissions are counted on the way (`resends`)."""
-
-    def __init__(self, port: FdPort, config: ChannelConfig, seed: int,
-                 clock: Callable[[], float] = time.monotonic, key: bytes | None = None) -> None:
-        self.port, self.clock = port, clock
-        self.up, self.down = Channel(config, seed), Channel(config, seed + 1)
-        self.resends = None if key is None else {"robot": Resends(key), "host": Resends(key)}
-
-    def read(self, size: int = 4096) -> bytes:
-        data = self.port.read(size)
-        now = self.clock()
-        if data:
-            if self.resends:
-                self.resends["robot"].feed(data)
-            self.up.transmit(data, now)
-        arrived = self.down.deliver(now)
-        if arrived:
-            self.port.write(arrived)
-        return self.up.deliver(now)
-
-    def write(self, data: bytes) -> int:
-        if self.resends:
-            self.resends["host"].feed(data)
-        self.down.transmit(data, self.clock())
-        return len(data)
-
-    def close(self) -> None:
-        self.port.close()
 
 
 def _robot_config(work: Path, scene: str, robot_id: int, size: tuple[int, int]) -> Path:
@@ -184,11 +155,13 @@ class RobotRun:
                  "--config", str(_robot_config(work, scene, robot_id, cfg.size)), "--hal", "fake",
                  "--port", os.ttyname(self.slave), "--max-seconds", str(cfg.robot_timeout_s + 30)],
                 cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err)
-        self.radio = SimulatedRadio(FdPort(self.master, timeout=0.0), cfg.channel, cfg.seed * 101 + robot_id,
-                                    key=key)
+        # Each end's resent frames are counted on its bytes before the channel.
+        self.resends = {"robot": Resends(key), "host": Resends(key)}
+        self.radio = ChannelPort.over(FdPort(self.master), cfg.channel, cfg.seed * 101 + robot_id,
+                                      tap=lambda way, data: self.resends["robot" if way == "in" else "host"].feed(data))
         link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, key, MemoryCounterStore(), heartbeat=0.2,
                     link_timeout=30)
-        self.session = HostSession(link, self.radio, Receiver(store, scene=scene))
+        self.session = HostSession(LinkPump(link, self.radio), Receiver(store, scene=scene))
         self.cid = self.session.command(pk.CommandName.SWEEP,
                                         {"elevations": [float(e) for e in elevations], "azimuths": [0.0]})
         self.done_at: float | None = None
@@ -226,8 +199,8 @@ class RobotRun:
 
     def stats(self) -> dict:
         st = self.session.stats()
-        up, down = self.radio.up, self.radio.down
-        robot, host = self.radio.resends["robot"].count, self.radio.resends["host"].count
+        up, down = self.radio.incoming, self.radio.outgoing
+        robot, host = self.resends["robot"].count, self.resends["host"].count
         return {"rejected": sum(st.rejected.values()), "retransmissions": robot + host,
                 "retransmissions_robot": robot, "retransmissions_host": host, "delivered": st.delivered, "duplicates": st.duplicates,
                 "lost": up.lost + down.lost, "corrupted": up.corrupted + down.corrupted,

@@ -5,25 +5,24 @@ Storing happens before the link's next `poll`, so a packet is acknowledged only 
 is in the database; a crash in between makes the robot send it again, and the database
 keeps it once because captures are unique by (robot, sequence).
 
-`HostSession` binds a `radio.link.Link` to a port (pyserial URL, pty fd, or the channel
-simulator) and pumps it: received payloads go to the Receiver, commands go out, and the
-robot's ACK/NACK answers are collected by command id.
+`HostSession` turns the link (`radio.pump.LinkPump` over any pyserial URL, a pty fd or the
+simulated radio): received payloads go to the Receiver, commands go out, and the robot's
+ACK/NACK answers are collected by command id.
 """
 from __future__ import annotations
 
 import enum
 import secrets
-import time
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from onboard.features import PcaBasis
 from radio import FrameError
 from radio import packet as pk
-from radio.link import Delivered, Link, LinkDown, LinkStats, LinkUp
-from radio.serial_port import Port
+from radio.link import Delivered, LinkDown, LinkStats, LinkUp
+from radio.pump import LinkPump
 from tools.store import Store
 
 HOST_NODE, ROBOT_NODE, LINK_ID = 2, 1, 1
@@ -161,7 +160,7 @@ class Receiver:
             notes.append(f"PCA basis rejected: {exc}")
         new = self.store.add_capture(str(p.robot_id), p.seq, p.time, p.commanded, p.measured,
                                      p.feature_space, p.bands, fits, scene=self.scene,
-                                     dependence=dependence, pca=pca)
+                                     dependence=dependence, pca=pca, levels=p.levels)
         extra = "".join(f"; {n}" for n in notes)
         return Item(ItemKind.CAPTURE, p.robot_id, p.seq, new,
                     f"capture at {p.measured[0]:.1f}° ({len(p.labels)} regions, {len(p.bands)} bands"
@@ -177,46 +176,45 @@ class Receiver:
         basis = self.store.pca_basis(ref.id)
         new = self.store.add_capture(str(p.robot_id), p.seq, p.time, p.commanded, p.measured,
                                      ref.space, ref.band_names, fits, scene=ref.scene,
-                                     dependence=self.store.dependence(ref.id), pca=basis)
+                                     dependence=self.store.dependence(ref.id), pca=basis, levels=ref.levels)
         return Item(ItemKind.UNCHANGED, p.robot_id, p.seq, new,
                     f"unchanged at {p.measured[0]:.1f}°: models of capture {p.ref_seq}", p)
 
 
 class HostSession:
-    """A Link bound to a port, feeding a Receiver; `step` does one read and one write."""
+    """The host's end of the link: a `LinkPump` feeding a Receiver; commands go out and the
+    robot's ACK/NACK answers are collected by command id."""
 
-    def __init__(self, link: Link, port: Port, receiver: Receiver,
-                 clock: Callable[[], float] = time.monotonic) -> None:
-        self.link, self.port, self.receiver, self.clock = link, port, receiver, clock
+    def __init__(self, pump: LinkPump, receiver: Receiver) -> None:
+        self.pump, self.receiver = pump, receiver
         self.answers: dict[int, Item] = {}
-        self.last_delivery = clock()
+        self.last_delivery = pump.clock()
         self.up = False
 
     def step(self) -> list[Item]:
-        data = self.port.read(4096)
-        now = self.clock()
-        events = self.link.receive(data, now) if data else []
+        """One turn: what arrived is stored, then the link writes (so the ACK of a packet
+        leaves only once it is in the database)."""
         items = []
-        for ev in [*events, *self.link.pop_events()]:
+        for ev in self.pump.read():
             if isinstance(ev, Delivered):
                 item = self.receiver.handle(ev.payload)
-                self.last_delivery = now
+                self.last_delivery = self.pump.clock()
                 if item.kind is ItemKind.ANSWER and item.seq is not None:
                     self.answers[item.seq] = item
                 items.append(item)
             elif isinstance(ev, (LinkUp, LinkDown)):
                 self.up = isinstance(ev, LinkUp)
-        out = self.link.poll(self.clock())
-        if out:
-            self.port.write(out)
+        self.pump.write()
         return items
 
     def command(self, name: pk.CommandName, args: dict | None = None) -> int:
         """Queue one command; returns its id (the robot's ACK/NACK lands in `answers`)."""
         cid = secrets.randbits(31)
-        body = pk.encode(pk.CommandPacket(cid, name, dict(args or {})))
-        self.link.send(body, self.clock())
+        self.pump.send(pk.encode(pk.CommandPacket(cid, name, dict(args or {}))))
         return cid
 
     def stats(self) -> LinkStats:
-        return self.link.stats()
+        return self.pump.stats()
+
+    def close(self) -> None:
+        self.pump.close()

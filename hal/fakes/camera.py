@@ -47,8 +47,9 @@ def _clamp(value: float, bounds: tuple[float, float]) -> float:
 class FakeCamera:
     """`capture` renders `scene` from `true_view()`; bands "rgb" or "multispectral" as in hal.scene.
 
-    `last_mask` is the scene's true label map of the last frame returned (None before the
-    first), so ground-truth segmentation never renders the view a second time. `reference`
+    `last_mask` (`true_labels()`, its `hal.GroundTruth` capability) is the scene's true label
+    map of the last frame returned (None before the first), so ground-truth segmentation never
+    renders the view a second time. `reference`
     lays the grey reference card in the scene. `honours_lock=False` makes a camera whose
     automatics keep running whatever it is told (as some webcams do).
     """
@@ -155,6 +156,10 @@ class FakeCamera:
             self.last_mask = rendered.mask
             return rendered.image
         raise HalError(f"fake camera: no frame after {self.retries + 1} tries (frames dropped)")
+
+    def true_labels(self) -> np.ndarray | None:
+        """The `hal.GroundTruth` capability: the true label map of the last frame returned."""
+        return self.last_mask
 
     def close(self) -> None:
         self.is_open = False

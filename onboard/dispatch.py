@@ -1,0 +1,228 @@
+"""Command dispatch: each COMMAND from the base runs its handler once and gets one answer.
+
+The command table (`radio.commands`) says which commands move the arm (refused while a pose
+is being measured), which interrupt the pose, and which are queries (answered even in
+failsafe). A handler returns the ACK's extras, or a `Refusal` with its NACK reason; what it
+produces (a capture's packets, a new sweep) goes into an `Effect`, committed with the reply
+and remembered by command id in the same transaction, so a command the base re-sends after a
+restart is answered from memory and never run twice. (A hardware action cannot share the
+transaction: a kill between it and the commit repeats GOTO, ABORT and the like, which are
+harmless to repeat.)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable
+
+from hal.interfaces import ViewAngles
+from onboard import config as config_mod
+from onboard import packet_bodies as wire
+from onboard.capture import PoseSkipped
+from onboard.config import ConfigError
+from onboard.outbox import OutboxFull, Reply
+from onboard.runtime_state import Interrupted
+from onboard.status import flat
+from onboard.sweep import SweepPlan
+from radio import FrameError
+from radio import packet as pk
+from radio.commands import COMMANDS, CommandName
+
+if TYPE_CHECKING:
+    from onboard.runtime import Runtime
+
+C = CommandName
+SETTABLE = {
+    "sweep": ("start", "stop", "step", "azimuths", "settle_timeout_s", "retries", "pose_tolerance_deg"),
+    "skip": ("min_pixels", "percentile_precision", "unchanged_tolerance", "skip_measured_pose"),
+}
+
+
+@dataclass(frozen=True, slots=True)
+class Refusal:
+    """A command refused: the NACK's reason and sentence."""
+
+    reason: pk.Reason
+    text: str
+
+
+@dataclass
+class Effect:
+    """What a command produced: committed with its reply, then `done` (or `undo` if it failed)."""
+
+    packets: list[tuple[int, bytes]] = field(default_factory=list)
+    state: dict[str, str] = field(default_factory=dict)
+    reserve: int = 0
+    done: Callable[[], None] = lambda: None
+    undo: Callable[[], None] = lambda: None
+
+
+Result = dict | Refusal
+
+
+def refusal(exc: Exception) -> Refusal:
+    """The NACK for a handler that raised."""
+    if isinstance(exc, PoseSkipped):
+        return Refusal(pk.Reason.HARDWARE, exc.reason)
+    if isinstance(exc, Interrupted):
+        return Refusal(pk.Reason.BUSY, f"interrupted by {exc}")
+    if isinstance(exc, OutboxFull):
+        return Refusal(pk.Reason.OUTBOX_FULL, str(exc))
+    bad = isinstance(exc, (ConfigError, KeyError, ValueError))
+    return Refusal(pk.Reason.BAD_ARGUMENT if bad else pk.Reason.INTERNAL, f"{type(exc).__name__}: {exc}")
+
+
+class Dispatcher:
+    """Runs the base's commands on the robot's parts (it is the one part that uses them all)."""
+
+    def __init__(self, rt: Runtime) -> None:
+        self.rt = rt
+        self.handlers: dict[CommandName, Callable[[dict, Effect], Result]] = {
+            C.PING: self.ping, C.STATUS: self.status, C.GOTO: self.goto, C.CAPTURE: self.capture,
+            C.SWEEP: self.sweep, C.ABORT: self.abort, C.SET: self.set, C.TORQUE_OFF: self.torque_off,
+            C.REBOOT_SERVO: self.reboot_servo, C.SEND_MASK: self.send_mask,
+        }
+        missing = set(COMMANDS) - set(self.handlers)
+        if missing:
+            raise RuntimeError(f"commands without a handler: {sorted(c.name for c in missing)}")
+
+    def on_body(self, body: bytes) -> None:
+        """A message from the base: a command is answered (once), anything else ignored."""
+        rt = self.rt
+        try:
+            cmd = pk.decode(body)
+        except FrameError as exc:
+            rt.state.errors.append(f"bad packet from base: {exc}")
+            return
+        if not isinstance(cmd, pk.CommandPacket):
+            return  # not a command (e.g. the base's own status): nothing to answer
+        known = rt.outbox.remembered(cmd.command_id)
+        if known is not None:  # run before: answer again, unless that answer is still queued
+            if rt.outbox.kind_of(known.msg_id) is None:
+                rt.link.queue(known.kind, known.body)
+            return
+        effect = Effect()
+        result = self.run(cmd.name, dict(cmd.args), effect)
+        if isinstance(result, Refusal):
+            answer = wire.reply_body(cmd.command_id, False, result.text, reason=result.reason)
+            effect = Effect()  # a refused command produced nothing
+        else:
+            answer = wire.reply_body(cmd.command_id, True, cmd.name.name, result)
+        stands = self._answer(cmd.command_id, answer, effect)
+        if stands and not isinstance(result, Refusal) and COMMANDS[cmd.name].interrupts:
+            rt.state.interrupt_work(cmd.name.name)  # the pose being measured ends at the next service
+
+    def run(self, name: CommandName, args: dict, effect: Effect | None = None) -> Result:
+        """Run one command: the ACK's extras, or a Refusal. What it produces goes into `effect`."""
+        effect = Effect() if effect is None else effect
+        spec, state = COMMANDS[name], self.rt.state
+        if not spec.query and self.rt.failsafe.active:
+            return Refusal(pk.Reason.BUSY, "failsafe active: the link was lost; it clears when the link is back up")
+        if spec.moves_arm and state.busy:
+            return Refusal(pk.Reason.BUSY, "busy: the arm is measuring a pose; send it again, or ABORT first")
+        try:
+            return self.handlers[name](args, effect)
+        except Exception as exc:  # a command that fails is answered, never fatal
+            return refusal(exc)
+
+    def _answer(self, command_id: int, answer: tuple[int, bytes], effect: Effect) -> bool:
+        """Commit a reply with its command's effect, remembered by id; whether the effect stands."""
+        rt = self.rt
+        try:
+            rt.outbox.commit(effect.packets, effect.state, reserve=effect.reserve,
+                             reply=Reply(command_id, *answer))
+        except OutboxFull as exc:
+            effect.undo()
+            if not (effect.packets or effect.state):
+                rt.state.paused_reason = str(exc)  # not even the reply fits: a retry finds room later
+                return False
+            # What the command produced does not fit: refuse it instead, and say why.
+            nack = wire.reply_body(command_id, False, str(exc), reason=pk.Reason.OUTBOX_FULL)
+            try:
+                rt.outbox.commit(reply=Reply(command_id, *nack))
+            except OutboxFull as full:
+                rt.state.paused_reason = str(full)
+            return False
+        rt.state.paused_reason = ""
+        effect.done()
+        return True
+
+    # -- the handlers, one per command -----------------------------------------------------
+    def ping(self, args: dict, effect: Effect) -> Result:
+        return {"time": self.rt.wall()}
+
+    def status(self, args: dict, effect: Effect) -> Result:
+        return flat(self.rt.status.report())
+
+    def goto(self, args: dict, effect: Effect) -> Result:
+        view = ViewAngles(float(args["elevation"]), float(args.get("azimuth", 0.0)))
+        pipeline = self.rt.pipeline
+        with self.rt.state.arm_work():
+            pipeline.move(view)
+            m = pipeline.measure_view()
+        return {"elevation": m.elevation, "azimuth": m.azimuth}
+
+    def capture(self, args: dict, effect: Effect) -> Result:
+        rt = self.rt
+        with rt.state.arm_work():
+            measured = rt.pipeline.measure_view()
+            cap = rt.pipeline.process(rt.pipeline.frame(), measured, measured)
+        seq, effect.packets, effect.state = rt.captures.packets(cap)
+        effect.reserve = rt.sweep.reserve
+        effect.done = lambda: rt.captures.filed(cap, seq)
+        effect.undo = lambda: rt.pipeline.rollback(cap)
+        return {"seq": seq, "models": len(cap.results)}
+
+    def sweep(self, args: dict, effect: Effect) -> Result:
+        # The packet decoder has checked every argument's type and range.
+        sweep = self.rt.sweep
+        azs = tuple(float(a) for a in args.get("azimuths", self.rt.state.cfg.sweep.azimuths))
+        if "elevations" in args:
+            els = tuple(float(e) for e in args["elevations"])
+            plan = SweepPlan(els[0], els[-1], 1.0, azs, els)
+        else:  # SweepPlan bounds the pose count before any list is built
+            plan = SweepPlan(float(args["start"]), float(args["stop"]), float(args["step"]), azs)
+        p = sweep.sweeps.next_sweep(plan)
+        effect.state = sweep.sweeps.entry(p)  # saved with the reply, in one commit
+        effect.done = lambda: sweep.begin(p)
+        return {"sweep": p.sweep_id, "poses": p.plan.count}
+
+    def abort(self, args: dict, effect: Effect) -> Result:
+        self.rt.sweep.stop()
+        self.rt.hal.arm.stop_and_hold()
+        return {"aborted": True}
+
+    def set(self, args: dict, effect: Effect) -> Result:
+        self.set_keys({args["key"]: args["value"]})
+        return {"set": args["key"]}
+
+    def torque_off(self, args: dict, effect: Effect) -> Result:
+        self.rt.sweep.stop()
+        self.rt.hal.arm.torque_off()
+        return {"torque": False}
+
+    def reboot_servo(self, args: dict, effect: Effect) -> Result:
+        sid = int(args["servo_id"])
+        self.rt.hal.servo_bus.reboot(sid)
+        return {"rebooted": sid}
+
+    def send_mask(self, args: dict, effect: Effect) -> Result:
+        packet = self.rt.captures.mask_packet(int(args["seq"]) if "seq" in args else None)
+        if packet is None:  # none yet: the next capture sends its map
+            self.rt.segmenter.force_send()
+            return {"queued": False, "next_capture": True}
+        effect.packets = [packet]
+        return {"queued": True}
+
+    def set_keys(self, settings: dict[str, Any]) -> None:
+        """SET section.key = value for the keys that may change at run time."""
+        state = self.rt.state
+        cfg = state.cfg
+        for dotted, value in settings.items():
+            section, _, key = str(dotted).partition(".")
+            if key not in SETTABLE.get(section, ()):
+                allowed = ", ".join(f"{s}.{k}" for s, ks in SETTABLE.items() for k in ks)
+                raise ConfigError(f"{dotted} cannot be set at run time (settable: {allowed})")
+            cfg = config_mod.with_value(cfg, str(dotted), value)
+        config_mod.check(cfg)
+        state.cfg = cfg
+        self.rt.pipeline.cfg = cfg

@@ -1,0 +1,70 @@
+"""What the robot says about itself: the STATUS packet (boot, skipped poses, sweep done, the
+failsafe, answers to the STATUS command) and the systemd status line."""
+from __future__ import annotations
+
+from typing import Callable
+
+from onboard import packet_bodies as wire
+from onboard.capture import Pipeline
+from onboard.captures import Captures
+from onboard.failsafe import Failsafe
+from onboard.link_service import LinkService
+from onboard.outbox import Outbox
+from onboard.runtime_state import Mode, RuntimeState
+from onboard.watchdog import Notifier
+from radio import packet as pk
+
+
+class Status:
+    def __init__(self, state: RuntimeState, outbox: Outbox, captures: Captures, pipeline: Pipeline,
+                 failsafe: Failsafe, link: LinkService, notifier: Notifier,
+                 wall: Callable[[], float]) -> None:
+        self.state, self.outbox, self.captures, self.pipeline = state, outbox, captures, pipeline
+        self.failsafe, self.link, self.notifier, self.wall = failsafe, link, notifier, wall
+
+    def report(self) -> dict:
+        """The robot's state as a record (`flat` turns it into STATUS extras)."""
+        s, p = self.state, self.state.progress
+        return {
+            "mode": s.mode.value,
+            "sweep": None if p is None else {
+                "id": p.sweep_id, "next": p.next_index, "poses": p.plan.count, "active": p.active,
+                "skipped": [[k.index, k.commanded.elevation, k.commanded.azimuth, k.reason]
+                            for k in p.skipped[-16:]],
+            },
+            "outbox": len(self.outbox),
+            "paused": s.paused_reason,
+            "failsafe": self.failsafe.events[-4:],
+            "faults": self.pipeline.faults[-8:],
+            "errors": list(s.errors)[-8:],
+        }
+
+    def robot_state(self) -> pk.RobotState:
+        if self.state.mode is Mode.FAILSAFE or self.state.paused_reason:
+            return pk.RobotState.PAUSED
+        return pk.RobotState.SWEEPING if self.state.mode is Mode.SWEEPING else pk.RobotState.IDLE
+
+    def packet(self, text: str, extras: dict | None = None,
+               state: pk.RobotState | None = None) -> tuple[int, bytes]:
+        """A STATUS packet (outbox kind, body), for the caller to queue or commit."""
+        return wire.status_body(self.state.cfg.robot_id, self.wall(), state or self.robot_state(),
+                                self.state.pose, len(self.outbox), self.outbox.bytes_used,
+                                self.captures.last_seq, text, extras)
+
+    def send(self, text: str, extras: dict | None = None) -> None:
+        """Queue a STATUS now, and show its text as the service status."""
+        self.link.queue(*self.packet(text, extras))
+        self.notifier.status(text)
+
+
+def flat(st: dict) -> dict:
+    """A status record as packet extras: scalars and short lists only."""
+    sweep = st.get("sweep") or {}
+    out = {"mode": st["mode"], "outbox": st["outbox"], "paused": st["paused"]}
+    if sweep:
+        out.update(sweep_id=sweep["id"], next=sweep["next"], poses=sweep["poses"])
+        out["skipped"] = [f"{i}@{e:.1f}/{a:.1f}: {r}" for i, e, a, r in sweep["skipped"]]
+    out["failsafe"] = [f"{e['since']:.1f}-{e['until'] or 0:.1f}" for e in st["failsafe"]]
+    out["faults"] = list(st["faults"])
+    out["errors"] = list(st["errors"])
+    return out
