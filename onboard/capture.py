@@ -68,10 +68,12 @@ class Pipeline:
         segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple[np.ndarray, bool]],
         pump: Callable[[], None] = lambda: None,
         sleep: Callable[[float], None] = time.sleep,
+        resend_mask: Callable[[], None] = lambda: None,
     ) -> None:
         self.cfg = cfg
         self.hal = hal
         self.segmenter = segmenter
+        self.resend_mask = resend_mask  # the next capture sends its label map (after a rollback)
         self.pump = pump  # keeps the link serviced while the arm moves
         self.sleep = sleep
         self.spec = feature_spec(cfg)
@@ -190,7 +192,7 @@ class Pipeline:
         if cap.pca is not None:
             self.pca_pending = True
         if cap.mask_changed:
-            getattr(self.segmenter, "force_send", lambda: None)()
+            self.resend_mask()
         self._previous.pop(skip.pose_key(cap.commanded), None)  # next one sends full MODELS
 
     def capture(self, commanded: ViewAngles, move: bool = True) -> FittedView:

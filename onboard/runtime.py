@@ -56,7 +56,8 @@ class Runtime:
         self.outbox = outbox if outbox is not None else Outbox(cfg.state_dir / "outbox.sqlite",
                                                                cfg.outbox_quota_bytes)
         self.notifier = notifier if notifier is not None else Notifier(address="")
-        self.pipeline = Pipeline(cfg, hal, segmenter, pump=self._pump, sleep=sleep)
+        self.pipeline = Pipeline(cfg, hal, segmenter, pump=self._pump, sleep=sleep,
+                                 resend_mask=segmenter.force_send)
         self.pipeline.pca = read_pca(self.outbox.state(PCA_KEY), cfg.state_dir / "pca.json")
         self.link = LinkService(transport, self.outbox, self.state, on_ack=self._room_freed)
         self.captures = Captures(self.state, self.outbox, wall)
