@@ -141,7 +141,6 @@ def test_a_gamma_tailed_frame_of_8_labels_by_3_bands_fits_in_300_bytes():
     fitter = FrameFitter(8, 3)
     fitter.add(frame, labels)
     fits = fitter.fit()
-    assert sum(1 for f in fits.values() if f.shift or f.z != fits[(0, 0)].z) >= 2
     assert any(f.censored_high for f in fits.values())
     body = encode_models(fits, bands=("R", "G", "B"), **MAX_HEADER)
     assert len(body) <= 300, len(body)
