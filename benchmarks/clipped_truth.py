@@ -55,13 +55,15 @@ def hidden_error(models: dict[tuple[int, int], Johnson], truth: np.ndarray, mask
     return float(np.mean(np.concatenate(errors))) if errors else 0.0
 
 
-def robot_pipeline(scene: str, size: tuple[int, int], exposure_us: float, bracket_limit: float) -> Pipeline:
+def robot_pipeline(scene: str, size: tuple[int, int], exposure_us: float, bracket_limit: float,
+                   reference: bool = False) -> Pipeline:
     """The robot's pipeline on the fake HAL (the arm straight down, torque on) with the camera
-    locked at `exposure_us`."""
+    locked at `exposure_us`; `reference` lays the grey card and records its level."""
     d = Path(tempfile.mkdtemp(prefix="btf-bracket-"))
     (d / "robot.toml").write_text(
-        f'[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [{size[0]}, {size[1]}]\n[segment]\nmethod = "scene"\n'
-        f'[camera]\nexposure = {exposure_us!r}\ngain = 1\nwhite_balance = "5500K"\nbracket_limit = {bracket_limit!r}\n')
+        f'[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [{size[0]}, {size[1]}]\nreference = {str(reference).lower()}\n'
+        f'[segment]\nmethod = "scene"\n[camera]\nexposure = {exposure_us!r}\ngain = 1\nwhite_balance = "5500K"\n'
+        f'bracket_limit = {bracket_limit!r}\nreference_label = {7 if reference else -1}\n')
     cfg = config.load(d / "robot.toml")
     hal = build_hal(cfg.hal)
     hal.camera.open(size[1], size[0])

@@ -49,8 +49,9 @@ class CaptureSettings:
             raise ValueError("capture settings: white balance is a temperature or gains, not both")
         if self.reference is not None and not all(math.isfinite(v) and v >= 0 for v in self.reference):
             raise ValueError(f"capture settings: reference levels must be finite and >= 0, got {self.reference}")
-        if not 0.0 <= self.reference_clipped <= 1.0:
-            raise ValueError(f"capture settings: reference_clipped {self.reference_clipped} outside [0, 1]")
+        if not 0.0 <= self.reference_clipped <= 1.0 or (self.reference is None and self.reference_clipped):
+            raise ValueError(f"capture settings: reference_clipped {self.reference_clipped} outside [0, 1] "
+                             "or without a reference")
         if len(self.brackets) > MAX_BRACKETS or not all(math.isfinite(e) and e > 0 for e in self.brackets):
             raise ValueError(f"capture settings: at most {MAX_BRACKETS} positive bracket exposures, "
                              f"got {self.brackets}")

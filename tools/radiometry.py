@@ -113,6 +113,22 @@ def adjusted(models: Models, camera: CaptureSettings | None, exposure_us: float 
     return out
 
 
+def sweep_models(store: Any, captures: Mapping[Any, Any], exposure_us: float | None = None,
+                 normalise: bool = False) -> dict[Any, dict[tuple[int, int], Johnson]]:
+    """The models of `captures` (stored captures keyed by angle or direction), each region at
+    its capture's exposure, or normalised to the captures' median reference level (at their
+    median exposure) with `normalise`, then at `exposure_us` when given."""
+    cams = [c.camera for c in captures.values()]
+    target = reference_target(cams) if normalise else None
+    if normalise and target is None:
+        raise ValueError("no capture carries a usable reference level: nothing to normalise by "
+                         "(the robot records one with [camera] reference_label)")
+    base = median_exposure(cams) if normalise else None
+    return {k: dict(adjusted({key: m.model for key, m in store.models(c.id).items()}, c.camera, exposure_us, target,
+                             base, where=f"capture {c.sequence} of robot {c.robot}"))
+            for k, c in captures.items()}
+
+
 def reference_means(image: np.ndarray, mask: np.ndarray, label: int) -> np.ndarray:
     """Mean level per band of region `label` (ValueError when the mask has none of it)."""
     where = mask == label

@@ -14,6 +14,8 @@ import numpy as np
 
 from tools.grid import Grid
 from tools.images import stretched_8bit, write_image
+from tools.radiometry import adjusted
+from tools.radiometry import describe as describe_camera
 from tools.receiver import mask_key
 from tools.store import Store, StoredCapture
 from tools.synth import MissingModels, synthesize
@@ -136,9 +138,10 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
              f"<h1>btfscout report: {html.escape(store.path.name)}"
              + (f" ({html.escape(chosen)})" if chosen else "") + "</h1>",
              "<h2>Captures per angle</h2>",
-             _table(["scene", "robot", "seq", "commanded", "measured", "space", "models"],
+             _table(["scene", "robot", "seq", "commanded", "measured", "space", "models", "camera"],
                     [[c.scene, c.robot, c.sequence, "" if c.commanded[0] is None else f"{c.commanded[0]:.1f}",
-                      f"{c.measured[0]:.2f}", c.space, len(store.models(c.id))] for c in caps])]
+                      f"{c.measured[0]:.2f}", c.space, len(store.models(c.id)), describe_camera(c.camera)]
+                     for c in caps])]
     rows = []
     for c in caps:
         for (label, band), m in store.models(c.id).items():
@@ -151,7 +154,8 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
     shown, unmasked = len(parts), 0
     for c in tqdm(caps, desc="report", unit="capture", disable=not progress):
         mask = capture_mask(store, c)
-        models = {k: m.model for k, m in store.models(c.id).items()}
+        # each region at the capture's exposure (a bracketed region's models scaled back)
+        models = dict(adjusted({k: m.model for k, m in store.models(c.id).items()}, c.camera))
         unmasked += mask is None
         if mask is None or not models:
             continue

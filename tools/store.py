@@ -307,11 +307,18 @@ class Store:
                 latest[c.elevation] = c
         return dict(sorted(latest.items()))
 
+    def latest_by_angle(self, robot: str | None = None, space: str | None = None,
+                        scene: str | None = None) -> dict[float, StoredCapture]:
+        """For every measured elevation, its latest capture."""
+        return self._latest(robot, space, scene)
+
     def models_by_angle(self, robot: str | None = None, space: str | None = None,
                         scene: str | None = None) -> dict[float, dict[tuple[int, int], Johnson]]:
-        """For every measured elevation, the models of its latest capture."""
-        return {a: {k: m.model for k, m in self.models(c.id).items()}
-                for a, c in self._latest(robot, space, scene).items()}
+        """For every measured elevation, the models of its latest capture, each region at the
+        capture's exposure (a bracketed region's models scaled back, `tools.radiometry`)."""
+        from tools.radiometry import sweep_models
+
+        return sweep_models(self, self._latest(robot, space, scene))
 
     def levels(self, robot: str | None = None, space: str | None = None, scene: str | None = None) -> int:
         """The sensor levels of the captures models_by_angle uses (the deepest, when they differ;
