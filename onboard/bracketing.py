@@ -13,20 +13,18 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
+from typing import Callable
 
 from btf.capture_settings import CaptureSettings
 from btf.record import FittedModel
-
-if TYPE_CHECKING:
-    import numpy as np
-
-    from onboard.capture import Pipeline
 
 TOP_PROBABILITY = 0.999
 TOP_TARGET = 0.9  # share of full scale the region's top is brought to
 
 Fits = dict[tuple[int, int], FittedModel]
+# One more frame at the pose: its fits and the exposure the camera reports, or None when the
+# camera would not take or hold it.
+Take = Callable[[float], "tuple[Fits, float] | None"]
 
 
 def clipped(fits: Fits, label: int) -> float:
@@ -48,48 +46,36 @@ def wanted_exposure(fits: Fits, label: int, exposure: float, levels: int) -> flo
     return exposure * TOP_TARGET * (levels - 1) / top
 
 
-def bracket(pipe: Pipeline, fits: Fits, labels: np.ndarray, stride: int, levels: int,
-            camera: CaptureSettings) -> tuple[Fits, CaptureSettings]:
-    """`fits` with each over-limit region taken from the exposure that clips it least, and
+def bracket(fits: Fits, camera: CaptureSettings, levels: int, limit: float, max_brackets: int,
+            min_ratio: float, take: Take) -> tuple[Fits, CaptureSettings]:
+    """`fits` with each region over `limit` taken from the exposure that clips it least, and
     `camera` with the brackets taken and which region each serves."""
-    from onboard.capture import PoseSkipped
-    from onboard.features import compute
-
-    cfg = pipe.cfg.camera
-    todo = over_limit(fits, cfg.bracket_limit)
-    if not todo or camera.exposure_us is None or pipe.lock is None:
+    todo = over_limit(fits, limit)
+    if not todo or camera.exposure_us is None:
         return fits, camera
     out = dict(fits)
     best = {lab: clipped(fits, lab) for lab in todo}
     fitted_at = dict.fromkeys(todo, camera.exposure_us)
-    shortest = camera.exposure_us * cfg.bracket_min_ratio
+    shortest = camera.exposure_us * min_ratio
     brackets: list[float] = []
     chosen: dict[int, int] = {}
     last = camera.exposure_us
-    try:
-        for _ in range(cfg.bracket_max):
-            guess = min(wanted_exposure(out, lab, fitted_at[lab], levels) for lab in todo)
-            asked = max(shortest, min(0.5 * last, guess))
-            granted = pipe.lock.set_exposure(asked)
-            frame = pipe.frame()
-            now = pipe.retry("camera settings", pipe.hal.camera.settings)
-            if not (granted.locked and now.locked) or now.exposure_us is None:
-                break  # a camera that will not hold a shorter exposure: keep what censoring gave
-            feats = compute(frame, pipe.spec, pipe.pca)
-            taken = pipe.fit_frame(feats.data, labels, feats.levels, stride)
-            brackets.append(now.exposure_us)
-            last = asked
-            for lab in todo:
-                share = clipped(taken, lab)
-                keys = [k for k in out if k[0] == lab]
-                if share < best[lab] and all(k in taken for k in keys):
-                    best[lab], fitted_at[lab], chosen[lab] = share, now.exposure_us, len(brackets)
-                    out.update({k: taken[k] for k in keys})
-            todo = [lab for lab in todo if best[lab] > cfg.bracket_limit]
-            if not todo or asked <= shortest:
-                break
-    except PoseSkipped:
-        pass  # a bracket frame that failed: the first frame's fits stand for what it did not serve
-    finally:
-        pipe.lock.restore()
+    for _ in range(max_brackets):
+        guess = min(wanted_exposure(out, lab, fitted_at[lab], levels) for lab in todo)
+        asked = max(shortest, min(0.5 * last, guess))
+        taken = take(asked)
+        if taken is None:
+            break  # keep what censoring gave
+        frame_fits, got = taken
+        brackets.append(got)
+        last = asked
+        for lab in todo:
+            share = clipped(frame_fits, lab)
+            keys = [k for k in out if k[0] == lab]
+            if share < best[lab] and all(k in frame_fits for k in keys):
+                best[lab], fitted_at[lab], chosen[lab] = share, got, len(brackets)
+                out.update({k: frame_fits[k] for k in keys})
+        todo = [lab for lab in todo if best[lab] > limit]
+        if not todo or asked <= shortest:
+            break
     return out, dataclasses.replace(camera, brackets=tuple(brackets), bracketed=chosen)

@@ -213,7 +213,7 @@ class Pipeline:
         if settings is not None and self.lock is not None:
             camera = self.settings_record(settings, data, labels, feats.levels)
             if self.cfg.camera.bracket_limit and settings.locked:
-                results, camera = bracketing.bracket(self, results, labels, stride, feats.levels, camera)
+                results, camera = self.bracket(results, camera, labels, stride, feats.levels)
         dropped = tuple(int(i) for i in np.flatnonzero((counts > 0) & (counts < self.cfg.skip.min_pixels)))
         key = skip.pose_key(commanded)
         same = skip.unchanged(self._previous.get(key), results, self.cfg.skip.unchanged_tolerance)
@@ -226,6 +226,29 @@ class Pipeline:
             dep = dependence.measure(data, labels, {k: r.model for k, r in primary.items()}, feats.levels)
         return FittedView(commanded, measured, feats.band_names, feats.levels, results, dropped,
                           labels, changed, same, stride, pca, dep, camera)
+
+    def bracket(self, results: dict[tuple[int, int], FittedModel], camera: CaptureSettings, labels: np.ndarray,
+                stride: int, levels: int) -> tuple[dict[tuple[int, int], FittedModel], CaptureSettings]:
+        """`onboard.bracketing` at this pose: shorter frames fitted with this frame's labels."""
+        assert self.lock is not None
+        lock, c = self.lock, self.cfg.camera
+
+        def take(exposure_us: float) -> tuple[dict[tuple[int, int], FittedModel], float] | None:
+            try:
+                granted = self.retry("camera controls", lambda: lock.set_exposure(exposure_us))
+                frame = self.frame()
+                now = self.retry("camera settings", self.hal.camera.settings)
+            except PoseSkipped:
+                return None  # a bracket frame that failed: the first frame's fits stand
+            if not (granted.locked and now.locked) or now.exposure_us is None:
+                return None  # a camera that will not hold a shorter exposure
+            feats = compute(frame, self.spec, self.pca)
+            return self.fit_frame(feats.data, labels, feats.levels, stride), now.exposure_us
+
+        try:
+            return bracketing.bracket(results, camera, levels, c.bracket_limit, c.bracket_max, c.bracket_min_ratio, take)
+        finally:
+            lock.restore()
 
     def settings_record(self, settings: CameraSettings, data: np.ndarray, labels: np.ndarray,
                         levels: int) -> CaptureSettings:

@@ -34,7 +34,7 @@ CREATE TABLE pca_bases (
 # What a capture was taken with (btf.capture_settings): the camera's reported settings, whether
 # it held its lock, the reference's level per band (JSON list) and the brackets (JSON).
 _CAMERA = """
-CREATE TABLE capture_camera (
+CREATE TABLE IF NOT EXISTS capture_camera (
     capture INTEGER PRIMARY KEY REFERENCES captures(id) ON DELETE CASCADE,
     exposure_us REAL, gain REAL, wb_kelvin REAL, wb_red REAL, wb_blue REAL, sensor_c REAL,
     unlocked INTEGER NOT NULL DEFAULT 0,
