@@ -146,10 +146,13 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
     for c in caps:
         for (label, band), m in store.models(c.id).items():
             j = m.model
+            fitted_at = c.camera.exposure_of(label) if c.camera is not None else None
             rows.append([c.scene, f"{c.elevation:.1f}", label, c.band_names[band] if band < len(c.band_names)
-                         else band, j.family.value, j.gamma, j.delta, j.xi, j.lam, m.count])
+                         else band, j.family.value, j.gamma, j.delta, j.xi, j.lam, m.count,
+                         "" if fitted_at is None else f"{fitted_at:g}"])
     parts += ["<h2>Models</h2>", _table(["scene", "angle", "label", "band", "family", "gamma", "delta",
-                                         "xi", "lambda", "pixels"], rows) if rows else _note("No models stored.")]
+                                         "xi", "lambda", "pixels", "fitted at (us)"], rows)
+              if rows else _note("No models stored.")]
     parts.append("<h2>Synthetic beside measured</h2>")
     shown, unmasked = len(parts), 0
     for c in tqdm(caps, desc="report", unit="capture", disable=not progress):
