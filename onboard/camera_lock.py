@@ -15,6 +15,7 @@ import numpy as np
 from btf.capture_settings import CaptureSettings
 from hal.controls import AUTO, FALLBACK_LOCK, describe, hold, parse_controls
 from hal.interfaces import Camera, CameraControls, CameraSettings, HalError
+from radio.packet_camera import held_by_wire
 
 if TYPE_CHECKING:
     from onboard.config import CameraConfig
@@ -101,7 +102,7 @@ class CameraLock:
         """The capture's settings as the device reported them, flagged when it was not locked."""
         gains_asked = self.asked is not None and self.asked.white_balance_gains is not None
         kelvin = None if gains_asked and now.white_balance_gains is not None else now.white_balance_kelvin
-        return CaptureSettings(
+        return held_by_wire(CaptureSettings(
             exposure_us=now.exposure_us, gain=now.gain, white_balance_kelvin=kelvin,
             white_balance_gains=None if kelvin is not None else now.white_balance_gains,
-            sensor_temperature_c=now.sensor_temperature_c, unlocked=not now.locked)
+            sensor_temperature_c=now.sensor_temperature_c, unlocked=not now.locked))

@@ -18,6 +18,7 @@ kelvin 2, sensor 2).
 """
 from __future__ import annotations
 
+import dataclasses
 import struct
 
 from btf.capture_settings import MAX_BRACKETS, CaptureSettings
@@ -36,6 +37,20 @@ def _scaled_int(value: float, scale: int, name: str, hi: int = 2**32 - 1) -> int
     if not 0 <= code <= hi:
         raise ValueError(f"camera {name} {value} does not fit the wire (0..{hi / scale:g})")
     return code
+
+
+def held_by_wire(s: CaptureSettings) -> CaptureSettings:
+    """`s` with any value its field cannot carry (a device reporting nonsense) as None: not reported."""
+    def within(v: float | None, scale: int, lo: float = 0.0, hi: float = 2**32 - 1) -> float | None:
+        return v if v is not None and lo <= round(v * scale) <= hi else None
+
+    gains = s.white_balance_gains
+    return dataclasses.replace(
+        s, exposure_us=within(s.exposure_us, 1), gain=within(s.gain, GAIN_SCALE),
+        white_balance_kelvin=within(s.white_balance_kelvin, 1),
+        white_balance_gains=gains if gains is not None and all(within(g, WB_GAIN_SCALE) is not None for g in gains)
+        else None,
+        sensor_temperature_c=within(s.sensor_temperature_c, SENSOR_SCALE, -32768, 32767))
 
 
 def encode_camera(s: CaptureSettings, n_bands: int, codec: PercentileCodec, label_ids: list[int]) -> bytes:
@@ -118,8 +133,6 @@ def decode_camera(blob: bytes, pos: int, n_bands: int, codec: PercentileCodec,
         pos += _SENSOR.size
     if flags & REFERENCE:
         clipped, pos = _byte(blob, pos, "reference")
-        if clipped > CLIPPED_SCALE:
-            raise FrameError(f"camera reference clipped share {clipped} over {CLIPPED_SCALE}")
         width = codec.bits // 8
         if pos + width * n_bands > len(blob):
             raise FrameError("camera section ends inside its reference levels")

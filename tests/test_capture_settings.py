@@ -63,6 +63,15 @@ def test_every_settings_record_comes_back_from_the_wire_as_it_went(s):
     assert end == len(blob) and back == s
 
 
+@given(st.binary(max_size=64), st.sampled_from([256, 65536]))
+def test_arbitrary_bytes_are_a_settings_record_or_a_frame_error(blob, levels):
+    try:
+        s, end = decode_camera(blob, 0, 3, PercentileCodec.for_levels(levels), [3, 6])
+    except FrameError:
+        return
+    assert end <= len(blob) and isinstance(s, CaptureSettings)
+
+
 def test_a_locked_capture_costs_ten_bytes_and_brackets_name_their_labels():
     s = CaptureSettings(20000.0, 2.0, 5000.0, sensor_temperature_c=25.05)
     assert len(encode_camera(s, 3, CODEC, [3])) == 10
@@ -205,3 +214,13 @@ def test_an_older_database_gains_the_camera_table_and_a_bad_row_is_one_line(tmp_
     con.close()
     with Store.open(db) as s, pytest.raises(CorruptDatabase, match="camera settings hold broken JSON"):
         s.captures()
+
+
+def test_nonsense_a_device_reports_is_recorded_as_not_reported():
+    from hal.interfaces import CameraSettings
+    from onboard.camera_lock import CameraLock
+
+    lock = CameraLock(camera=None, cfg=config.CameraConfig())
+    s = lock.record(CameraSettings(1e13, 1e9, 5500.0, sensor_temperature_c=-500.0))
+    assert (s.exposure_us, s.gain, s.white_balance_kelvin, s.sensor_temperature_c) == (None, None, 5500.0, None)
+    assert decode_camera(encode_camera(s, 3, CODEC, []), 0, 3, CODEC, [])[0] == s
