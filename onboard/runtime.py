@@ -118,12 +118,28 @@ class Runtime:
             self.pipeline.retry("torque on", self.hal.arm.enable)
         except PoseSkipped as exc:
             self.state.errors.append(exc.reason)
-        extras = {"mode": self.mode.value}
+        camera = self.lock_camera()
+        extras = {"mode": self.mode.value, "camera": camera}
         if self.cfg.sweep.autostart or self.sweep.new_sweep:
             boot = self.sweep.autostart()
-            extras = {"mode": self.mode.value, "sweep": self.progress.sweep_id, "sweep_state": boot.value}
+            extras.update(mode=self.mode.value, sweep=self.progress.sweep_id, sweep_state=boot.value)
         self.notifier.ready(f"btf-robot running: {self.mode.value}")
         self.status.send("boot", extras)
+
+    def lock_camera(self) -> str:
+        """Lock the camera as `[camera]` says; one line for STATUS, with why it will not measure."""
+        from hal.controls import describe
+
+        try:
+            granted = self.pipeline.lock_camera()
+        except PoseSkipped as exc:
+            self.state.errors.append(exc.reason)
+            return exc.reason
+        why = self.pipeline.lock.refusal(granted) if self.pipeline.lock is not None else ""
+        if why:
+            self.state.errors.append(why)
+            self.notifier.status(why)
+        return why or describe(granted)
 
     def step(self) -> str:
         """One turn of the loop; what the sweep did ("" when nothing). Never raises."""

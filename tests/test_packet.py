@@ -357,7 +357,7 @@ BAD = {
     "which no record uses": _blob(lambda b: None, b"\x02\x00\x00"),
     "after its records": _blob(lambda b: None, b"\x01\x00\x07\x07"),
     "extras": _raw(*_models_fields(), [1, 2]),
-    "reserved bit": _blob(lambda b: b.__setitem__(10, b[10] | 0x40)),
+    "camera section ends inside its flags": _blob(lambda b: b.__setitem__(10, b[10] | 0x40)),
     "dependence section has 0 bytes": _blob(lambda b: b.__setitem__(10, b[10] | 0x80)),
     "no label has a measurement": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80" * 22),
     "dependence code -128": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80" + b"\x00" * 21),

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-SCHEMA_VERSION = 6
+SCHEMA_VERSION = 7
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -29,6 +29,17 @@ _PCA = """
 CREATE TABLE pca_bases (
     capture INTEGER PRIMARY KEY REFERENCES captures(id) ON DELETE CASCADE,
     record TEXT NOT NULL
+);
+"""
+# What a capture was taken with (btf.capture_settings): the camera's reported settings, whether
+# it held its lock, the reference's level per band (JSON list) and the brackets (JSON).
+_CAMERA = """
+CREATE TABLE IF NOT EXISTS capture_camera (
+    capture INTEGER PRIMARY KEY REFERENCES captures(id) ON DELETE CASCADE,
+    exposure_us REAL, gain REAL, wb_kelvin REAL, wb_red REAL, wb_blue REAL, sensor_c REAL,
+    unlocked INTEGER NOT NULL DEFAULT 0,
+    reference TEXT, reference_clipped REAL NOT NULL DEFAULT 0,
+    brackets TEXT NOT NULL DEFAULT '[]', bracketed TEXT NOT NULL DEFAULT '{}'
 );
 """
 _SCHEMA = """
@@ -71,7 +82,7 @@ CREATE TABLE masks (
     data BLOB NOT NULL,
     UNIQUE (robot, key)
 );
-""" + _DEPENDENCE + _PCA
+""" + _DEPENDENCE + _PCA + _CAMERA
 _TABLES = {"captures", "models", "masks"}
 # Upgrades from the keyed version to the next; each keeps every existing row.
 _MIGRATIONS: dict[int, str] = {
@@ -90,6 +101,8 @@ _MIGRATIONS: dict[int, str] = {
        "ALTER TABLE models ADD COLUMN exact_family INTEGER NOT NULL DEFAULT 0;",
     # the sensor's levels (256 for 8-bit, 65536 for 16-bit images), so synthesis keeps the depth
     5: "ALTER TABLE captures ADD COLUMN levels INTEGER NOT NULL DEFAULT 256;",
+    # the camera settings, reference level and brackets of a capture
+    6: _CAMERA,
 }
 
 
