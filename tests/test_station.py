@@ -43,12 +43,22 @@ def run_clients(rig, clients):
 
 
 def test_a_sweep_with_three_concurrent_clients_stores_every_capture_once_and_answers_every_command_once(rig):
+    sweep_with_clients(rig, CLIENTS)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("BTF_STRESS"), reason="stress run only (make stress)")
+def test_a_sweep_over_a_lossy_radio_with_three_busy_clients_stores_and_answers_everything_once(rig):
+    sweep_with_clients(rig, [c * 4 for c in CLIENTS], radio="loss=0.1&ber=1e-4&dup=0.02&seed=9")
+
+
+def sweep_with_clients(rig, clients, radio=""):
     robot = rig.robot()
-    station = rig.station()
+    station = rig.station(*(("--port", f"btfsim://?port={rig.cable.paths[1]}&{radio}") if radio else ()))
     rig.wait_up(station)
     code, (sweep,), _ = rig.cmd("sweep", *PLAN)
     assert code == 0 and sweep["type"] == "ACK" and sweep["extras"]["poses"] == len(POSES)
-    results = run_clients(rig, CLIENTS)
+    results = run_clients(rig, clients)
     rig.wait_for_poses(POSES, robot=robot)
     # every command printed exactly one answer, ACK (0) or NACK (1: a capture while a pose is measured)
     ids = []
@@ -58,7 +68,7 @@ def test_a_sweep_with_three_concurrent_clients_stores_every_capture_once_and_ans
         assert answer["ok"] == (code == 0) and answer["command"] == argv[0]
         assert answer["type"] == "ACK" or answer["reason"] == "BUSY", answer
         ids.append(answer["command_id"])
-    assert len(set(ids)) == len(ids) == sum(map(len, CLIENTS))
+    assert len(set(ids)) == len(ids) == sum(map(len, clients))
     # the station sent each command once and routed one answer for each
     log = rig.log()
     for kind in ("command", "answer"):

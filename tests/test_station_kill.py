@@ -69,5 +69,6 @@ def test_a_station_killed_ten_times_during_a_sweep_loses_and_duplicates_nothing(
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("BTF_STRESS"), reason="stress run only (make stress)")
 def test_a_station_killed_thirty_times_over_a_lossy_radio_loses_and_duplicates_nothing(tmp_path):
     kill_during_sweep(tmp_path, kills=30, radio="loss=0.1&ber=1e-4&seed=3", clients=3)
