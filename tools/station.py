@@ -209,7 +209,7 @@ class Station:
         if name is None and ok and p.text in CommandName.__members__:
             name = CommandName[p.text]  # a command an earlier station sent
         if ok and name is not None:
-            self.snapshot.note_answer(name)
+            self.snapshot.note_answer(name, dict(p.extras))
             if name is CommandName.SWEEP and "sweep" in p.extras:
                 self.snapshot.note_sweep_started(packet_json_args(args), dict(p.extras))
             elif name is CommandName.STATUS:

@@ -94,7 +94,8 @@ class StationSnapshot:
     def note_status(self, p: pk.StatusPacket, wall: float) -> None:
         r = self.robot
         r.robot_id, r.state, r.outbox = p.robot_id, p.state.name.lower(), p.outbox_pending
-        r.pose = r.pose if p.pose is None else (float(p.pose[0]), float(p.pose[1]))
+        if r.pose is None and p.pose is not None:  # its last capture's: captures and GOTO say it first
+            r.pose = (float(p.pose[0]), float(p.pose[1]))
         r.last_status, r.last_status_text = wall, p.text
         x, s = dict(p.extras), self.sweep
         if "mode" in x:
@@ -133,9 +134,11 @@ class StationSnapshot:
         self.sweep = SweepView(int(extras["sweep"]), plan, 0, int(extras["poses"]), True)
         self.robot.mode = "sweeping"
 
-    def note_answer(self, name: pk.CommandName) -> None:
+    def note_answer(self, name: pk.CommandName, extras: dict) -> None:
         """The robot ACKed `name`."""
         C = pk.CommandName
+        if name is C.GOTO and "elevation" in extras:
+            self.robot.pose = (float(extras["elevation"]), float(extras.get("azimuth", 0.0)))
         if name in (C.ABORT, C.TORQUE_OFF):
             self.sweep.active = False
             self.robot.mode = "idle"
