@@ -94,7 +94,7 @@ def _args_text(args: dict) -> str:
         if isinstance(v, (list, tuple)):
             return "[" + ",".join(short(x) for x in v[:8]) + (",..." if len(v) > 8 else "") + "]"
         return str(v)
-    text = "".join(f" {k}={short(v)}" for k, v in args.items())
+    text = "".join(f" {k}={wire.iso_time(v) if k == 'time' else short(v)}" for k, v in args.items())
     return text if len(text) <= 160 else text[:157] + "..."
 
 

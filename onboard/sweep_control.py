@@ -110,6 +110,7 @@ class SweepControl:
         else:
             seq, packets, state = self.captures.packets(cap)
             nxt.record_measured(cap.measured)
+            self.state.pose = cap.measured  # the arm stands there, whether or not the commit fits
             result = "measured"
         if nxt.done:
             nxt.active = False

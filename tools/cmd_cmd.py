@@ -102,6 +102,15 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({"command": args.what, **answer}))
     else:
         verdict = "ACK" if ok else f"NACK {answer.get('reason')}"
-        extras = ", ".join(f"{k}={v}" for k, v in (answer.get("extras") or {}).items())
+        extras = ", ".join(f"{k}={_shown(k, v)}" for k, v in (answer.get("extras") or {}).items())
         print(f"{verdict}: {answer.get('text', '')}" + (f" ({extras})" if extras else ""))
     return 0 if ok else 1
+
+
+def _shown(key: str, value):
+    """An answer's value for a person: short floats, clock times in ISO 8601."""
+    if key == "time" and isinstance(value, (int, float)):
+        from tools.station_snapshot import iso
+
+        return iso(value)
+    return f"{value:.6g}" if isinstance(value, float) else value

@@ -223,9 +223,11 @@ class Station:
             self.bus.publish(event("status", "the robot's report", wall, robot=None, seq=None, stored=False,
                                    packet=answer))
             return
-        verdict = "ACK" if ok else f"NACK {p.reason.name}"
+        said = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items())
+        said = said if len(said) <= 160 else said[:157] + "..."
+        verdict = f"ACK {said}".strip() if ok else f"NACK {p.reason.name}: {p.text}"
         label = name.name if name is not None else f"command {cid}"
-        self.emit(event("answer", f"{label} (command {cid}): {verdict}: {p.text}"
+        self.emit(event("answer", f"{label} (command {cid}): {verdict}"
                         + ("" if futures else " (no client waits for it)"), wall,
                         command_id=cid, ok=ok, answer=answer))
 

@@ -106,7 +106,7 @@ class StationSnapshot:
             self._skip(int(x["skipped_index"]), x.get("skipped_elevation"), x.get("skipped_azimuth"),
                        p.text.removeprefix("skipped pose: "))
         if p.text == "sweep done":
-            s.active, s.next_index = False, s.poses
+            r.mode, s.active, s.next_index = "idle", False, s.poses
             s.measured = int(x.get("measured", s.measured))
         if "failsafe_since" in x:
             r.failsafe = (r.failsafe + [f"{x['failsafe_since']} for {x.get('failsafe_s', '?')} s"])[-4:]
