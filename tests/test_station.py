@@ -164,3 +164,15 @@ def test_cmd_without_a_station_stores_what_arrives_and_acknowledges_nothing_it_d
     # every capture the robot made (sweep and commands) is stored, once: none was ACKed and dropped
     assert sorted(seqs) == list(range(1, max(last, *acked) + 1)) and set(seqs.values()) == {1}
     assert set(acked) <= set(seqs)
+
+
+def test_a_control_socket_path_too_long_for_the_system_is_one_line(tmp_path, capsys):
+    from radio.keys import write_key
+    from tools.cli import main
+
+    key = write_key(tmp_path / "robot.key")
+    long = tmp_path / ("s" * 120)
+    assert main(["station", "--port", "loop://", "--db", str(tmp_path / "h.db"), "--key", str(key),
+                 "--socket", str(long)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "give --socket a shorter one" in err[0]
