@@ -19,7 +19,7 @@ OUTBOX = "outbox_quota_bytes = 4096\n"  # the robot runs at most a few poses ahe
 
 
 def kill_during_sweep(tmp_path, kills: int, radio: str = "", clients: int = 1) -> None:
-    rig = Rig(tmp_path, OUTBOX + ROBOT.replace("size = [40, 60]", "size = [120, 160]") + AUTONOMOUS)
+    rig = Rig(tmp_path, OUTBOX + ROBOT.replace("size = [40, 60]", "size = [80, 100]") + AUTONOMOUS)
     rng = random.Random(int(os.environ.get("BTF_KILL_SEED", "15")))
     answers: list = []
     stop = threading.Event()
