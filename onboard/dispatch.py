@@ -137,7 +137,8 @@ class Dispatcher:
             log.info("%s: NACK %s: %s", said, result.reason.name, result.text)
         else:
             answer = wire.reply_body(cmd.command_id, True, cmd.name.name, result)
-            log.info("%s: ACK%s", said, _args_text(result))
+            # a query's answer is the robot's state, which STATUS carries: the line stays short
+            log.info("%s: ACK%s", said, "" if COMMANDS[cmd.name].query else _args_text(result))
         stands = self._answer(cmd.command_id, answer, effect)
         if stands and not isinstance(result, Refusal) and COMMANDS[cmd.name].interrupts:
             rt.state.interrupt_work(cmd.name.name)  # the pose being measured ends at the next service
