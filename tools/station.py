@@ -34,8 +34,11 @@ The interface for code inside the station (the control socket, the operator's pa
   its own (`StationFailure`: a wrong key, a store that cannot be written, a port that failed).
 
 Every event is a dict `{"kind", "time" (ISO 8601, UTC), "t" (epoch s), "text", ...}` with kind
-one of: capture, unchanged, mask, status, log, bad, other (a packet: `robot`, `seq`, `stored`,
-`packet` as `tools.receiver.packet_json`), failsafe (the robot's report of one), command (sent:
+one of: capture, unchanged, mask (`robot`, `seq`, `stored`, and `capture`: where it was filed),
+status, log, bad, other (a packet: `robot`, `seq`, `stored`, `packet` as
+`tools.receiver.packet_json`; a status event is also the answer to the station's own STATUS
+request, published every `status_every` seconds and not logged), failsafe (the robot's report of
+one), command (sent:
 `command_id`, `name`, `args`), answer (`command_id`, `ok`, `answer`), link (`up`), rejected
 (`reason`, `count`, `total`, the likely `cause`), station (started, stopping, failed); the
 subscriber's own `lost` (`count`). The log (`tools.station_log`) writes each one.
