@@ -3,10 +3,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import logging
+import os
 import signal
 import sqlite3
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 from onboard import config as config_mod
 from onboard.cli_runner import CliError
@@ -36,6 +40,7 @@ def _setup(args: argparse.Namespace):
             cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, url=args.port))
         config_mod.check(cfg)
         config_mod.check_key_file(cfg)
+        _check_state_dir(cfg.state_dir)
         from radio.keys import KeyFileError, load_key
 
         try:
@@ -63,14 +68,46 @@ def _calibrated_exposure(cfg):
     return dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, exposure=CameraValue(repr(stored))))
 
 
+def _check_state_dir(path: Path) -> None:
+    """The state directory exists (or is made) and takes a durable write: else one ConfigError."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise ConfigError(f"state_dir {path}: exists and is not a directory") from None
+    except OSError as exc:
+        raise ConfigError(f"state_dir {path}: cannot create it: {exc.strerror or exc}") from None
+    try:
+        with tempfile.TemporaryFile(dir=path) as probe:
+            probe.write(b"x")
+            probe.flush()
+            os.fsync(probe.fileno())
+    except OSError as exc:
+        raise ConfigError(f"state_dir {path}: cannot write in it: {exc.strerror or exc}") from None
+
+
 def _open_port(url: str, baud: int):
     from radio.ports import open_url
 
     return open_url(url, baud, timeout=0.005)
 
 
+def console_log() -> None:
+    """One short line per pose, command and link change on stderr: plain text for journald,
+    which stamps each line; a terminal gets the time in front."""
+    log = logging.getLogger("btf.robot")
+    for old in list(log.handlers):
+        log.removeHandler(old)
+    handler = logging.StreamHandler(sys.stderr)
+    tty = hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
+    handler.setFormatter(logging.Formatter("%(asctime)s %(message)s" if tty else "%(message)s", "%H:%M:%S"))
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    log.propagate = False
+
+
 def run(args: argparse.Namespace) -> int:
     cfg, key = _setup(args)
+    console_log()
     from hal.factory import build_hal
     from hal.interfaces import HalError
     from onboard.outbox import OutboxError
@@ -81,7 +118,6 @@ def run(args: argparse.Namespace) -> int:
     from radio.link import Link
     from radio.pump import LinkPump
 
-    cfg.state_dir.mkdir(parents=True, exist_ok=True)
     cfg = _calibrated_exposure(cfg)
     try:
         hal = build_hal(cfg.hal, state_dir=cfg.state_dir)  # with the arm calibration stored there

@@ -31,6 +31,7 @@ class RuntimeState:
     pose: ViewAngles | None = None  # the last measured view
     paused_reason: str = ""  # why acquisition waits (the outbox is full), "" when it does not
     errors: deque[str] = field(default_factory=lambda: deque(maxlen=16))
+    torque: bool = True  # the servos hold; False after TORQUE_OFF or a power-on that failed at boot
     # Commands are answered while the arm works (the pipeline services the link), so an
     # interrupting command or the failsafe must end that work, not be undone by it.
     busy: bool = False

@@ -8,6 +8,7 @@ retries, then a skipped pose with its reason; the sweep goes on.
 from __future__ import annotations
 
 import copy
+import logging
 
 from onboard.capture import FittedView, Pipeline, PoseSkipped
 from onboard.captures import Captures
@@ -17,6 +18,8 @@ from onboard.status import Status
 from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore
 from onboard.watchdog import Notifier
 from radio import packet as pk
+
+log = logging.getLogger("btf.robot")
 
 
 class SweepControl:
@@ -107,6 +110,7 @@ class SweepControl:
         else:
             seq, packets, state = self.captures.packets(cap)
             nxt.record_measured(cap.measured)
+            self.state.pose = cap.measured  # the arm stands there, whether or not the commit fits
             result = "measured"
         if nxt.done:
             nxt.active = False
@@ -125,8 +129,16 @@ class SweepControl:
         if cap is not None:
             self.captures.filed(cap, seq)
         self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {nxt.next_index} of {nxt.plan.count}")
+        where = p.current()
+        pose = f"sweep {p.sweep_id} pose {nxt.next_index}/{nxt.plan.count} at {where.elevation:.1f}°/{where.azimuth:.1f}°"
+        if cap is None:
+            log.info("%s: skipped: %s", pose, reason)
+        else:
+            log.info("%s: seq %d, measured %.1f°/%.1f°, %d models%s", pose, seq, cap.measured.elevation,
+                     cap.measured.azimuth, len(cap.results), " (unchanged)" if cap.unchanged else "")
         if nxt.done:
             self.state.mode = Mode.IDLE
-            self.notifier.status(f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, "
-                                 f"{len(nxt.skipped)} skipped")
+            done = f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, {len(nxt.skipped)} skipped"
+            self.notifier.status(done)
+            log.info("%s", done)
         return result
