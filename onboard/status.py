@@ -1,7 +1,10 @@
 """What the robot says about itself: the STATUS packet (boot, skipped poses, sweep done, the
-failsafe, answers to the STATUS command) and the systemd status line."""
+failsafe, answers to the STATUS command) and the systemd status line. The answer to STATUS
+carries the sweep's plan (as JSON, `onboard.sweep.SweepPlan.to_record`) and the robot's
+`failsafe_s`, so the station can draw the sweep's grid and knows when the arm is held."""
 from __future__ import annotations
 
+import json
 from typing import Callable
 
 from onboard import packet_bodies as wire
@@ -13,6 +16,8 @@ from onboard.outbox import Outbox
 from onboard.runtime_state import Mode, RuntimeState
 from onboard.watchdog import Notifier
 from radio import packet as pk
+
+PLAN_TEXT = 500  # characters of the plan's JSON a STATUS carries (a packet string holds 512)
 
 
 class Status:
@@ -29,12 +34,15 @@ class Status:
             "mode": s.mode.value,
             "sweep": None if p is None else {
                 "id": p.sweep_id, "next": p.next_index, "poses": p.plan.count, "active": p.active,
+                "plan": p.plan.to_record(),
                 "skipped": [[k.index, k.commanded.elevation, k.commanded.azimuth, k.reason]
                             for k in p.skipped[-16:]],
             },
             "outbox": len(self.outbox),
             "paused": s.paused_reason,
             "failsafe": self.failsafe.events[-4:],
+            "failsafe_s": s.cfg.link.failsafe_s,
+            "torque": s.torque,
             "faults": self.pipeline.faults[-8:],
             "errors": list(s.errors)[-8:],
         }
@@ -63,9 +71,16 @@ def flat(st: dict) -> dict:
     out = {"mode": st["mode"], "outbox": st["outbox"], "paused": st["paused"]}
     if sweep:
         out.update(sweep_id=sweep["id"], next=sweep["next"], poses=sweep["poses"])
+        plan = json.dumps(sweep["plan"], separators=(",", ":")) if "plan" in sweep else ""
+        if plan and len(plan) <= PLAN_TEXT:  # a plan of many listed angles goes without
+            out["plan"] = plan
         out["skipped"] = [f"{i}@{e:.1f}/{a:.1f}: {r}" for i, e, a, r in sweep["skipped"]]
     out["failsafe"] = [f"{wire.iso_time(e['since'])} for {e['until'] - e['since']:.1f} s" if e["until"]
                        else f"{wire.iso_time(e['since'])}, ongoing" for e in st["failsafe"]]
+    if "failsafe_s" in st:
+        out["failsafe_s"] = float(st["failsafe_s"])
+    if st.get("torque") is not None:
+        out["torque"] = bool(st["torque"])
     out["faults"] = list(st["faults"])
     out["errors"] = list(st["errors"])
     return out

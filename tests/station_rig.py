@@ -12,7 +12,7 @@ from collections import Counter
 from pathlib import Path
 
 from radio.keys import write_key
-from tests.ptys import PtyCable
+from tools.pty_cable import PtyCable
 from tools.station_control import StationClient, socket_path
 from tools.store import Store
 

@@ -56,7 +56,7 @@ def test_captures_with_dependence_show_independent_and_correlated_synthesis_besi
         rx.handle(_dependence(1, 60.0)[0])
         rx.handle(models_body(2, 70.0)[0])  # no dependence: independent synthesis only
         page = write_report(s, tmp_path / "rep",
-                            measured=lambda scene, a: render(scene, ViewAngles(a, 0.0), (40, 48), seed=0).image)
+                            measured=lambda c: render(c.scene, ViewAngles(c.elevation, 0.0), (40, 48), seed=0).image)
         html = page.read_text()
     pngs = {p.name for p in (tmp_path / "rep").glob("*.png")}
     assert {p for p in pngs if p.endswith("_correlated.png")} == {"mixed_060.2_1_correlated.png"}

@@ -388,6 +388,6 @@ def run_demo(out: Path, cfg: DemoConfig = DemoConfig(), progress: bool = True) -
         # The report states the run time, so it is taken before the report is written.
         res.seconds = time.monotonic() - t0
         write_report(store, out / "report", demo=res, progress=progress,
-                     measured=lambda scene, angle: capture(scene, angle, cfg.size).image if scene else None)
+                     measured=lambda c: capture(c.scene, c.elevation, cfg.size).image if c.scene else None)
     res.report_seconds = time.monotonic() - t0 - res.seconds
     return res

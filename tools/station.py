@@ -167,6 +167,7 @@ class Station:
         for ev in self.pump.feed(data, now):
             if isinstance(ev, Delivered):
                 self.last_delivery = now
+                self.snapshot.note_delivered(len(ev.payload), wall)
                 self._delivered(self.receiver.handle(ev.payload), wall)
             elif isinstance(ev, (LinkUp, LinkDown)):
                 up = isinstance(ev, LinkUp)
@@ -212,7 +213,7 @@ class Station:
         if name is None and ok and p.text in CommandName.__members__:
             name = CommandName[p.text]  # a command an earlier station sent
         if ok and name is not None:
-            self.snapshot.note_answer(name, dict(p.extras))
+            self.snapshot.note_answer(name, dict(p.extras), args)
             if name is CommandName.SWEEP and "sweep" in p.extras:
                 self.snapshot.note_sweep_started(packet_json_args(args), dict(p.extras))
             elif name is CommandName.STATUS:

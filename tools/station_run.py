@@ -114,15 +114,23 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
     return StationParts(station, path, store, fd)
 
 
-async def serve(parts: StationParts, until: Callable[[], bool] | None = None) -> None:
-    """Run the station and its control socket until stopped (SIGTERM, SIGINT, `until()`), or
-    until it fails (`parts.station.failure`)."""
+async def serve(parts: StationParts, until: Callable[[], bool] | None = None, page=None,
+                echo: TextIO | None = sys.stderr) -> None:
+    """Run the station and its control socket (and, given `page`, a `tools.page_server.PageOptions`,
+    the operator's page) until stopped (SIGTERM, SIGINT, `until()`), or until it fails
+    (`parts.station.failure`). The page's address with its token goes to `echo` only."""
     station = parts.station
     server = ControlServer(station, parts.socket)
     try:
         await server.start()
     except OSError as exc:
         raise CliError(f"control socket {parts.socket}: {exc.strerror or exc}") from None
+    web = None
+    if page is not None:
+        web = await _start_page(parts, page, echo)
+        if web is None:
+            await server.close()
+            raise CliError(f"--http {page.host}:{page.port}: cannot listen there (in use, or not this machine's)")
     loop = asyncio.get_running_loop()
     handled = []
     for sig in (signal.SIGTERM, signal.SIGINT):
@@ -140,4 +148,24 @@ async def serve(parts: StationParts, until: Callable[[], bool] | None = None) ->
     finally:
         for sig in handled:
             loop.remove_signal_handler(sig)
+        if web is not None:
+            await web.close()
         await server.close()
+
+
+async def _start_page(parts: StationParts, options, echo: TextIO | None):
+    """The page server, started (None when its address cannot be had)."""
+    from tools.page_server import PageServer
+    from tools.station_log import event
+
+    web = PageServer(parts.station, parts.station.snapshot.db, options)
+    try:
+        url = await web.start()
+    except OSError:
+        await web.close()
+        return None
+    who = "anyone who can reach it watches; commands need the token" if options.public else "it needs the token"
+    parts.station.emit(event("station", f"page at {url} ({who})", parts.station.wall()))
+    if echo is not None:  # the token goes to the operator's terminal only, never to the log file
+        print(f"page: {url}?token={options.token}", file=echo, flush=True)
+    return web

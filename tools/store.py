@@ -231,6 +231,14 @@ class Store:
         sql, args = self._capture_filter(robot, space, scene)
         return self._select_captures(sql, args)
 
+    def capture_by_id(self, capture_id: int) -> StoredCapture | None:
+        found = self._select_captures(" WHERE captures.id = ?", [int(capture_id)])
+        return found[0] if found else None
+
+    def captures_after(self, capture_id: int) -> list[StoredCapture]:
+        """The captures stored after the one with id `capture_id` (0: all), by elevation."""
+        return self._select_captures(" WHERE captures.id > ?", [int(capture_id)])
+
     def _select_captures(self, where: str, args: list) -> list[StoredCapture]:
         camera = ", ".join(f"k.{c}" for c in CAMERA_COLUMNS)
         rows = self._conn.execute(

@@ -1,0 +1,317 @@
+// The operator page: everything the station pushes over /events (server-sent events) drawn
+// at once; commands posted to /api/command with their answers inline. No framework: the
+// page is small, and the station serves it offline.
+"use strict";
+
+const $ = (id) => document.getElementById(id);
+const state = {snap: null, cards: new Map(), rev: 0, authorized: false, token: "", selected: null,
+  follow: true, received: 0, answers: new Map(), waiting: new Map(), newest: null};
+window.btfPage = {shown: {}, hello: 0};  // when each capture was first drawn (tests, benchmarks)
+
+function esc(s) {
+  return String(s ?? "").replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c]));
+}
+const deg = (v) => (v === null || v === undefined ? "?" : `${Number(v).toFixed(1)}°`);
+const pose = (p) => (p ? `${deg(p.elevation)} / ${deg(p.azimuth)}` : "unknown");
+function ago(s) {
+  if (s === null || s === undefined) return "never";
+  return s < 60 ? `${s.toFixed(1)} s ago` : s < 3600 ? `${Math.floor(s / 60)} min ${Math.round(s % 60)} s ago` : `${(s / 3600).toFixed(1)} h ago`;
+}
+function bytes(n) {
+  if (n === null || n === undefined) return "?";
+  const u = ["B", "kB", "MB", "GB", "TB"];
+  let i = 0;
+  while (n >= 1000 && i < u.length - 1) { n /= 1000; i++; }
+  return `${n.toFixed(i ? 1 : 0)} ${u[i]}`;
+}
+const clock = (iso) => (iso ? iso.slice(11, 19) : "");
+function rows(table, list) {
+  table.innerHTML = list.filter(Boolean).map(([k, v, cls]) =>
+    `<tr><th>${esc(k)}</th><td${cls ? ` class=${cls}` : ""}>${v}</td></tr>`).join("");
+}
+function badge(el, text, cls) {
+  el.textContent = text;
+  el.className = `badge ${cls}`;
+}
+
+// -- the link and the robot ------------------------------------------------------------------
+function heardText() {
+  const l = state.snap && state.snap.link;
+  if (!l || l.last_heard_s === null) return "robot never heard";
+  return `heard ${ago(l.last_heard_s + (Date.now() - state.received) / 1000)}`;
+}
+
+function drawLink(s) {
+  const l = s.link, r = s.robot;
+  badge($("link-badge"), l.up ? "link up" : "link down", l.up ? "ok" : "bad");
+  $("heard").textContent = heardText();
+  const rejected = Object.entries(l.rejected || {});
+  const total = rejected.reduce((a, [, n]) => a + n, 0);
+  const resent = l.frames_sent ? (100 * l.retransmissions / l.frames_sent).toFixed(1) : "0.0";
+  const refused = l.frames_accepted + total ? (100 * total / (l.frames_accepted + total)).toFixed(1) : "0.0";
+  const robotRejected = Object.entries(r.rejected || {});
+  rows($("link-table"), [
+    ["state", `${l.up ? "up" : "DOWN"}${l.changed ? ` since ${clock(l.changed)}` : ""}`, l.up ? "ok" : "bad"],
+    ["last heard", `<span id=heard-cell>${esc(heardText())}</span>`],
+    ["loss (resent / sent)", `${resent}% (${l.retransmissions} of ${l.frames_sent} frames)`,
+      Number(resent) > 20 ? "warn" : ""],
+    ["refused frames", `${refused}% (${total})` + (rejected.length ? "<br>" + rejected.map(([k, n]) =>
+      `<span title="${esc(k)}">${esc(k)} ${n}</span>`).join(", ") : ""), total ? "warn" : ""],
+    ["goodput", `${bytes(l.goodput_bps)}/s (last 10 s)`],
+    ["delivered", `${l.delivered} messages, ${bytes(l.delivered_bytes)}; ${l.duplicates} duplicates`],
+    ["robot's outbox", r.outbox === null ? "?" : `${r.outbox} waiting`, r.outbox > 20 ? "warn" : ""],
+    ["robot's disk", r.disk === null ? "not reported (ok)" : `${esc(r.disk)}${r.disk_free !== null ? `, ${bytes(r.disk_free)} free` : ""}`,
+      r.disk && r.disk !== "ok" ? "bad" : ""],
+    robotRejected.length ? ["robot refused", robotRejected.map(([k, n]) => `${esc(k)} ${n}`).join(", "), "warn"] : null,
+  ]);
+}
+
+function modeOf(s) {
+  const r = s.robot;
+  if (r.failsafe_assumed) return ["failsafe", "bad", `assumed: the link has been silent past the robot's failsafe (${r.failsafe_s ?? 5} s); it reports when the link returns`];
+  if (r.mode === "failsafe") return ["failsafe", "bad", "the robot holds the arm"];
+  if (r.disk && r.disk !== "ok") return [`paused: disk ${r.disk}`, "warn", ""];
+  if (r.paused) return [`paused`, "warn", r.paused];
+  if (r.mode === "sweeping") return ["sweeping (autonomous)", "busy", ""];
+  if (r.mode === "idle") return ["idle (remote)", "idle", "waiting for commands"];
+  return [r.mode || "unknown", "unknown", "the robot has not reported yet"];
+}
+
+function drawRobot(s) {
+  const r = s.robot, [mode, cls, why] = modeOf(s);
+  badge($("mode-badge"), mode, cls);
+  $("mode-badge").title = why;
+  rows($("robot-table"), [
+    ["mode", `${esc(mode)}${why ? `<br><span class=note>${esc(why)}</span>` : ""}`, cls === "bad" ? "bad" : ""],
+    ["robot", r.id === null ? "?" : `${r.id}`],
+    ["pose measured", pose(r.pose)],
+    ["pose commanded", pose(r.commanded)],
+    ["torque", r.torque === null ? "?" : r.torque ? "on" : "OFF (torque-on holds the arm)", r.torque === false ? "warn" : ""],
+    ["last report", `${ago(r.last_status_s)}${r.last_status_text && r.last_status_text !== "status" ? `: ${esc(r.last_status_text)}` : ""}`],
+    ["servo/tracker faults", r.faults.length ? r.faults.map(esc).join("<br>") : "none", r.faults.length ? "bad" : "ok"],
+    r.errors.length ? ["errors", r.errors.map(esc).join("<br>"), "bad"] : null,
+    r.failsafe.length ? ["failsafes", r.failsafe.map(esc).join("<br>"), "warn"] : null,
+  ]);
+}
+
+// -- the sweep -----------------------------------------------------------------------------
+function drawSweep(s) {
+  const w = s.sweep, g = w.grid;
+  $("sweep-title").textContent = w.id === null ? "" : `#${w.id}${w.active ? ", running" : w.active === false ? ", stopped" : ""}`;
+  let done = 0, skipped = 0, total = w.poses || 0;
+  if (g) {
+    for (const c of g.cells) { if (c === "d") done++; if (c === "s") skipped++; }
+    total = g.cells.replace(/ /g, "").length;
+  } else if (w.next !== null) {
+    done = w.next - w.skipped.length; skipped = w.skipped.length;
+  }
+  const pct = total ? (100 * (done + skipped)) / total : 0;
+  $("progress-bar").style.width = `${pct}%`;
+  $("progress-text").textContent = total ? `sweep ${w.id ?? "?"}: ${done + skipped} of ${total} poses` +
+    (skipped ? ` (${skipped} skipped)` : "") : "no sweep";
+  if (!g) return;
+  const key = JSON.stringify([g.elevations, g.azimuths]);
+  const box = $("grid");
+  if (box.dataset.key !== key) {
+    const head = `<tr><th>el \\ az</th>${g.azimuths.map((a) => `<th>${a}°</th>`).join("")}</tr>`;
+    box.innerHTML = `<table>${head}${g.elevations.map((e, r) => `<tr><th>${e}°</th>${g.azimuths.map((a, c) =>
+      `<td class=cell data-rc="${r},${c}" data-pose="${e}|${a}"></td>`).join("")}</tr>`).join("")}</table>`;
+    box.dataset.key = key;
+  }
+  const mark = {d: "✓", s: "✗", m: "●", p: ""}, word = {d: "done", s: "skipped", m: "being measured", p: "pending"};
+  box.querySelectorAll("td.cell").forEach((td) => {
+    const [r, c] = td.dataset.rc.split(",").map(Number), st = g.cells[r * g.azimuths.length + c];
+    const [e, a] = td.dataset.pose.split("|");
+    td.className = `cell ${st}` + (td.dataset.pose === selectedPose() ? " sel" : "");
+    td.textContent = mark[st] ?? "";
+    td.title = `${e}° / ${a}°: ${word[st] ?? st}` + (st === "s" ? `: ${g.reasons[`${r},${c}`] ?? ""}` : "");
+  });
+}
+
+// -- captures ------------------------------------------------------------------------------
+function selectedPose() {
+  const c = state.cards.get(state.selected);
+  return c && c.commanded ? `${Number(c.commanded[0])}|${Number(c.commanded[1])}` : null;
+}
+
+function cardHtml(c) {
+  const src = `capture/${c.id}/thumb.png?r=${state.rev}`;
+  return `<img loading=lazy src="${src}" alt="capture ${c.seq}">${deg(c.elevation)} / ${deg(c.azimuth)}<br>seq ${c.seq}`;
+}
+
+function drawCards(list, fresh) {
+  const box = $("cards");
+  for (const c of list) {
+    const old = state.cards.get(c.key);
+    state.cards.set(c.key, c);
+    let el = box.querySelector(`[data-key="${CSS.escape(c.key)}"]`);
+    if (!el) {
+      el = document.createElement("div");
+      el.dataset.key = c.key;
+      el.onclick = () => select(c.key, false);
+      box.append(el);
+    }
+    el.className = "card" + (c.unlocked ? " unlocked" : "") + (fresh ? " new" : "") + (c.key === state.selected ? " sel" : "");
+    el.dataset.seq = c.seq;
+    el.dataset.id = c.id;
+    el.title = `${c.scene || "robot " + c.robot} seq ${c.seq} at ${clock(c.time)}${c.camera ? "\n" + c.camera : ""}`;
+    if (!old || old.id !== c.id) el.innerHTML = cardHtml(c);
+    if (!(c.id in window.btfPage.shown)) window.btfPage.shown[c.id] = Date.now();
+    if (!state.newest || c.id > state.newest.id) state.newest = c;
+  }
+  const sorted = [...box.children].sort((a, b) => {
+    const x = state.cards.get(a.dataset.key), y = state.cards.get(b.dataset.key);
+    return y.elevation - x.elevation || x.azimuth - y.azimuth;
+  });
+  if (sorted.some((el, i) => el !== box.children[i])) box.append(...sorted);
+  $("captures-count").textContent = `latest of ${state.cards.size} pose${state.cards.size === 1 ? "" : "s"}`;
+  if (state.follow && state.newest && state.newest.key !== state.selected) select(state.newest.key, true);
+  else if (state.follow && state.newest && fresh && list.some((c) => c.key === state.selected)) select(state.selected, true);
+}
+
+async function select(key, following) {
+  state.follow = following;
+  $("follow").className = following ? "" : "off";
+  $("follow").textContent = following ? "following newest" : "follow newest";
+  state.selected = key;
+  document.querySelectorAll("#cards .card").forEach((el) => el.classList.toggle("sel", el.dataset.key === key));
+  if (state.snap) drawSweep(state.snap);
+  const c = state.cards.get(key);
+  if (!c) return;
+  const want = `${c.id}:${state.rev}`;
+  $("detail").dataset.want = want;
+  try {
+    const resp = await fetch(`capture/${c.id}/section?r=${state.rev}`);
+    const text = await resp.text();
+    if ($("detail").dataset.want !== want) return;  // another capture was chosen meanwhile
+    $("detail").innerHTML = resp.ok ? text : `<p class=note>capture ${c.seq}: ${esc(text)}</p>`;
+  } catch (e) {
+    $("detail").innerHTML = `<p class=bad>capture ${c.seq}: ${esc(e)}</p>`;
+  }
+}
+
+$("grid").addEventListener("click", (ev) => {
+  const td = ev.target.closest("td.cell");
+  if (!td) return;
+  const [e, a] = td.dataset.pose.split("|").map(Number);
+  for (const c of state.cards.values()) {
+    if (c.commanded && Math.abs(c.commanded[0] - e) < 0.05 && Math.abs(((c.commanded[1] - a + 540) % 360) - 180) < 0.05) {
+      select(c.key, false);
+      return;
+    }
+  }
+});
+$("follow").onclick = () => { if (state.newest) select(state.newest.key, true); };
+
+// -- events --------------------------------------------------------------------------------
+const LOG_KEPT = 80;
+function logEvent(ev) {
+  if (ev.kind === "status" && !ev.stored && ev.text === "the robot's report") return;  // the station's own poll
+  const bad = (ev.kind === "link" && !ev.up) || ev.kind === "failsafe" || ev.kind === "rejected" ||
+    (ev.kind === "answer" && !ev.ok) || (ev.kind === "station" && /failed/.test(ev.text));
+  const good = (ev.kind === "link" && ev.up) || (ev.kind === "answer" && ev.ok);
+  const li = document.createElement("li");
+  li.className = bad ? "bad" : good ? "ok" : "";
+  li.innerHTML = `<span class=t>${clock(ev.time)}</span> ${esc(ev.kind)}: ${esc(ev.text)}`;
+  $("log").prepend(li);
+  while ($("log").children.length > LOG_KEPT) $("log").lastChild.remove();
+  if (ev.kind === "answer") answered(ev.command_id, ev.answer);
+}
+
+function answerText(a) {
+  if (a.ok) {
+    const said = Object.entries(a.extras || {}).map(([k, v]) => `${k}=${typeof v === "number" ? +v.toFixed(3) : v}`).join(" ");
+    return [`ACK${said ? ": " + said : ""}`, "ok"];
+  }
+  return [`NACK ${a.reason}: ${a.text}`, "bad"];
+}
+
+function answered(cid, answer) {
+  const out = state.waiting.get(cid);
+  if (!out) { state.answers.set(cid, answer); return; }
+  state.waiting.delete(cid);
+  const [text, cls] = answerText(answer);
+  out.textContent = text;
+  out.className = `answer ${cls}`;
+}
+
+// -- commands ------------------------------------------------------------------------------
+function drawAuth() {
+  const can = state.authorized || state.token;
+  $("token-box").hidden = !!can;
+  document.querySelectorAll("form.command button").forEach((b) => { b.disabled = !can; });
+}
+
+document.querySelectorAll("form.command").forEach((form) => {
+  form.addEventListener("submit", async (ev) => {
+    ev.preventDefault();
+    const out = form.querySelector("output.answer");
+    const fields = {};
+    form.querySelectorAll("input[name]").forEach((i) => { fields[i.name] = i.value; });
+    out.className = "answer note";
+    out.textContent = "sending…";
+    const headers = {"Content-Type": "application/json"};
+    if (state.token) headers["X-BTF-Token"] = state.token;
+    try {
+      const resp = await fetch("api/command", {method: "POST", headers, body: JSON.stringify({name: form.dataset.command, fields})});
+      const body = await resp.json();
+      if (!resp.ok && resp.status !== 202) {
+        out.className = "answer bad";
+        out.textContent = body.error || `refused (${resp.status})`;
+        return;
+      }
+      if (body.answer) { state.waiting.set(body.command_id, out); answered(body.command_id, body.answer); return; }
+      state.waiting.set(body.command_id, out);
+      out.textContent = `sent (command ${body.command_id}); waiting for the robot` +
+        (state.snap && !state.snap.link.up ? ": the link is down, it goes when the robot is heard" : "…");
+      if (state.answers.has(body.command_id)) answered(body.command_id, state.answers.get(body.command_id));
+    } catch (e) {
+      out.className = "answer bad";
+      out.textContent = `not sent: ${e}`;
+    }
+  });
+});
+$("token-use").onclick = () => { state.token = $("token-input").value.trim(); drawAuth(); };
+
+// -- the stream ----------------------------------------------------------------------------
+function drawAll() {
+  const s = state.snap;
+  drawLink(s);
+  drawRobot(s);
+  drawSweep(s);
+}
+
+function connect() {
+  const es = new EventSource("events");
+  es.addEventListener("hello", (m) => {
+    const h = JSON.parse(m.data);
+    state.snap = h.snapshot; state.received = Date.now(); state.rev = h.rev; state.authorized = h.authorized;
+    document.title = `btfscout: ${h.db}`;
+    drawAll();
+    drawCards(h.cards, false);
+    drawAuth();
+    $("log").innerHTML = "";
+    h.events.forEach(logEvent);
+    $("conn").textContent = "live";
+    $("conn").className = "note ok";
+    if (!window.btfPage.hello) { window.btfPage.hello = Date.now(); performance.mark("btf-first-data"); }
+  });
+  es.addEventListener("snapshot", (m) => { state.snap = JSON.parse(m.data).snapshot; state.received = Date.now(); drawAll(); });
+  es.addEventListener("cards", (m) => drawCards(JSON.parse(m.data).cards, true));
+  es.addEventListener("event", (m) => logEvent(JSON.parse(m.data).event));
+  es.addEventListener("rev", (m) => {
+    state.rev = JSON.parse(m.data).rev;
+    document.querySelectorAll("#cards .card").forEach((el) => { el.innerHTML = cardHtml(state.cards.get(el.dataset.key)); });
+    if (state.selected) select(state.selected, state.follow);
+  });
+  es.onerror = () => { $("conn").textContent = "station unreachable: retrying"; $("conn").className = "note bad"; };
+}
+
+setInterval(() => {
+  if (!state.snap) return;
+  const t = heardText();
+  $("heard").textContent = t;
+  const cell = $("heard-cell");
+  if (cell) cell.textContent = t;
+}, 250);
+connect();
