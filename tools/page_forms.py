@@ -71,6 +71,8 @@ def parse_form(name: Any, fields: Any) -> tuple[CommandName, dict]:
     for arg in cmd.args:
         text = fields.get(arg.key)
         if text is None or (isinstance(text, str) and not text.strip()):
+            if arg.default is not None:  # as `btf-host cmd` fills in an option left out
+                given[arg.key] = arg.default
             continue
         if not isinstance(text, str):
             raise ValueError(f"{cmd.cli} {arg.cli.lstrip('-')}: expected text")
@@ -79,8 +81,10 @@ def parse_form(name: Any, fields: Any) -> tuple[CommandName, dict]:
         except ValueError as exc:
             raise ValueError(f"{cmd.cli} {arg.cli.lstrip('-')}: {exc}") from None
     if not any(set(given) - cmd.optional == form for form in cmd.key_sets()):
-        usage = _usage(cmd) or ("give " + "/".join(a.cli.lstrip("-") for a in cmd.args) if cmd.args else "")
-        raise ValueError(f"{cmd.cli}: {usage or 'takes no fields'}")
+        if _usage(cmd):
+            raise ValueError(f"{cmd.cli}: {_usage(cmd)}")
+        missing = [cmd.arg(k).cli.lstrip("-") for k in _ordered(cmd, cmd.key_sets()[0] - set(given))]
+        raise ValueError(f"{cmd.cli}: {', '.join(missing)} needed")
     try:
         check_args(cmd.name, given)
     except FrameError as exc:
