@@ -1,54 +1,16 @@
-"""Debian's chromium, driven from Python with Playwright (never a browser of Playwright's own),
-for the operator page's tests and benchmarks; and the page's address a station printed."""
+"""The operator page's tests drive Debian's chromium (`benchmarks.browser`): skipped where it is
+missing, except in CI, where `make browser` installs it and the tests must run."""
 from __future__ import annotations
 
 import os
-import re
-import shutil
-import time
-from contextlib import contextmanager
-from pathlib import Path
-from typing import Iterator
 
 import pytest
 
-CHROMIUM = "/usr/bin/chromium"
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking", "--disable-component-update",
-         "--disable-sync", "--no-first-run"]
-
-
-def available() -> bool:
-    return Path(CHROMIUM).is_file() or shutil.which("chromium") is not None
+from benchmarks.browser import CHROMIUM, available, chromium, page_address  # noqa: F401  (the tests' tools)
 
 
 def need_chromium() -> None:
-    """Skip when chromium is missing, except in CI, where the test must run (make browser installs it)."""
     if not available():
         if os.environ.get("CI"):
             pytest.fail(f"{CHROMIUM} is missing in CI: `make browser` installs Debian's chromium")
         pytest.skip("chromium not installed (make browser installs it)")
-
-
-@contextmanager
-def chromium(width: int = 1400, height: int = 900) -> Iterator:
-    """A new page of a headless chromium."""
-    from playwright.sync_api import sync_playwright
-
-    exe = CHROMIUM if Path(CHROMIUM).is_file() else shutil.which("chromium")
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=exe, args=FLAGS)
-        try:
-            yield browser.new_page(viewport={"width": width, "height": height})
-        finally:
-            browser.close()
-
-
-def page_address(stderr: Path, limit_s: float = 60.0) -> str:
-    """The `page: URL?token=T` line a station prints on stderr at start-up."""
-    end = time.monotonic() + limit_s
-    while time.monotonic() < end:
-        m = re.search(r"^page: (\S+)$", stderr.read_text(errors="replace") if stderr.exists() else "", re.M)
-        if m:
-            return m.group(1)
-        time.sleep(0.05)
-    raise AssertionError(f"no page address on the station's stderr: {stderr.read_text(errors='replace')}")

@@ -12,7 +12,7 @@ from tests.station_rig import ROBOT, Rig
 
 # The robot holds the arm after 1.5 s without the base (the station calls the link down after 5 s).
 CONFIG = ROBOT.replace("failsafe_s = 30", "failsafe_s = 1.5") + "[sweep]\nautostart = false\n"
-PLAN = "90,70,50,30,10"  # 20° apart: each move takes the fake servos a sixth of a second
+PLAN = "90,70,50,30,10"  # 20° apart (a sixth of a second for the fake servos), at azimuths 0 and 90
 
 # Every value the progress text and the link and mode badges take, in order (the page's DOM).
 WATCH = """() => {
@@ -53,15 +53,16 @@ def test_the_page_follows_a_sweep_commands_the_robot_and_shows_the_link_lost_and
         page.evaluate(WATCH)
         # the sweep, started from its form, advances pose by pose on the grid and the bar
         page.fill("form[data-command=SWEEP] input[name=elevations]", PLAN)
+        page.fill("form[data-command=SWEEP] input[name=azimuths]", "0,90")
         page.click("form[data-command=SWEEP] button")
         assert answer_of(page, "SWEEP").startswith("ACK: sweep=")
-        page.wait_for_function("() => document.getElementById('progress-text').textContent.includes('5 of 5')",
+        page.wait_for_function("() => document.getElementById('progress-text').textContent.includes('10 of 10')",
                                timeout=60_000)
         progress = page.evaluate("window.seen.progress")
-        done = [int(t.split(": ")[1].split(" of ")[0]) for t in progress if " of 5" in t]
-        assert done == sorted(done) and done[-1] == 5 and len({d for d in done if 0 < d < 5}) >= 3, progress
-        assert page.locator("#grid td.cell.d").count() == 5 and page.locator("#grid td.cell.p").count() == 0
-        assert page.locator("#cards .card").count() == 5
+        done = [int(t.split(": ")[1].split(" of ")[0]) for t in progress if " of 10" in t]
+        assert done == sorted(done) and done[-1] == 10 and len({d for d in done if 0 < d < 10}) >= 5, progress
+        assert page.locator("#grid td.cell.d").count() == 10 and page.locator("#grid td.cell.p").count() == 0
+        assert page.locator("#cards .card").count() == 10
         # capture: the ACK inline, then its capture on the page, drawn as the report draws it
         page.click("form[data-command=CAPTURE] button")
         ack = answer_of(page, "CAPTURE")

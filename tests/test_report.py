@@ -73,3 +73,28 @@ def test_captures_with_dependence_show_independent_and_correlated_synthesis_besi
     def rg(img):  # red-green correlation inside the largest region: bands drawn apart lose it
         return np.corrcoef(img[region][:, 0].astype(float), img[region][:, 1].astype(float))[0, 1]
     assert abs(rg(cor) - rg(meas)) < 0.1 < abs(rg(ind) - rg(meas))
+
+
+def test_a_dataset_capture_is_shown_beside_the_image_it_was_fitted_from(tmp_path):
+    """The report and the page find a dataset's frame where ingest found it (`Frames`)."""
+    from hal.interfaces import ViewAngles
+    from hal.scene import render
+    from onboard.fit import FrameFitter
+    from tools.capture_views import Frames
+    from tools.images import read_image, write_image
+
+    view = render("mixed", ViewAngles(50.0, 0.0), (40, 48), seed=0)
+    write_image(tmp_path / "plate.png", view.image)
+    fitter = FrameFitter(4, 3)
+    fitter.add(view.image, view.mask)
+    robot = f"dataset:{tmp_path}"
+    with Store.open(tmp_path / "scene.db") as s:
+        s.add_capture(robot, 1, 0.0, None, (50.0, 0.0), "rgb", ("R", "G", "B"), fitter.fit(),
+                      scene="plates", source="plate.png")
+        s.add_mask(f"{robot}/1", view.mask, robot)
+        html = write_report(s, tmp_path / "rep", measured=Frames()).read_text()
+        (cap,) = s.captures()
+    assert np.array_equal(read_image(tmp_path / "rep" / "plates_050.0_1_measured.png"), view.image)
+    assert html.index("measured") < html.index("synthesized")
+    (tmp_path / "plate.png").unlink()  # a dataset moved away: no frame, no error
+    assert Frames()(cap) is None

@@ -27,6 +27,7 @@ def _check_out(out: Path, force: bool) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from tools.capture_views import Frames
     from tools.images import ImageError
     from tools.report import write_report
     from tools.store import CorruptDatabase, Store
@@ -45,7 +46,8 @@ def run(args: argparse.Namespace) -> int:
                 kept = [c for c in caps if args.robot in (None, c.robot) and args.scene in (None, c.scene)]
                 if not kept:
                     choose_source(caps, args.db, args.robot, args.scene)  # names what the database holds
-            path = write_report(store, out, seed=args.seed, robot=args.robot, scene=args.scene,
+            # an ingested dataset's captures are shown beside the image each was fitted from
+            path = write_report(store, out, measured=Frames(), seed=args.seed, robot=args.robot, scene=args.scene,
                                 progress=not args.quiet)
     except CorruptDatabase as exc:
         raise CliError(str(exc)) from None

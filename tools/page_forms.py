@@ -22,9 +22,10 @@ def _value(default: Any) -> str:
 def _field(cmd: Command, key: str) -> str:
     arg = cmd.arg(key)
     label = arg.cli.lstrip("-")
+    example = arg.help.rpartition("e.g. ")[2] if "e.g. " in arg.help else ""  # the help's example as the hint
     return (f"<label title='{html.escape(arg.help)}'>{html.escape(label)} "
             f"<input name='{html.escape(key)}' value='{html.escape(_value(arg.default))}' "
-            f"placeholder='{html.escape(arg.help)}' size=8 autocomplete=off></label>")
+            f"placeholder='{html.escape(example)}' autocomplete=off></label>")
 
 
 def _usage(cmd: Command) -> str:
@@ -48,9 +49,9 @@ def forms_html() -> str:
         usage = _usage(cmd)
         out.append(
             f"<form class='command {kind}' data-command='{cmd.name.name}' title='{html.escape(cmd.help)}'>"
-            f"<button type=submit>{html.escape(cmd.cli)}</button>{fields}"
+            f"<button type=submit>{html.escape(cmd.cli)}</button><span class=fields>{fields}"
             + (f"<span class=usage>{html.escape(usage)}</span>" if usage else "")
-            + "<output class=answer></output></form>")
+            + "</span><output class=answer></output></form>")
     return "".join(out)
 
 

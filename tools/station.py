@@ -48,6 +48,7 @@ from __future__ import annotations
 import asyncio
 import secrets
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
@@ -63,6 +64,7 @@ from tools.station_snapshot import StationSnapshot
 WRONG_KEY_FRAMES = 8  # frames failing authentication, none passing: the key is wrong
 REJECTED_EVERY_S = 1.0  # rejected-frame events, per reason, at most this often
 SENT_KEPT = 1024  # commands remembered until answered (for the snapshot)
+POLLS_KEPT = 16  # the station's own STATUS requests it recognises the answers of
 
 
 class StationFailure(Exception):
@@ -88,6 +90,7 @@ class Station:
         self._waiting: dict[int, list[asyncio.Future]] = {}
         self._sent: dict[int, tuple[CommandName, dict]] = {}
         self._poll: tuple[int, float] | None = None  # the STATUS this station asked for, and when
+        self._polls: deque[int] = deque(maxlen=POLLS_KEPT)  # its earlier ones: answered late, still its own
         self._rejected: dict[str, int] = {}  # counts already reported
         self._rejected_at: dict[str, float] = {}
         self._accepted = 0
@@ -222,8 +225,9 @@ class Station:
         for f in futures:
             if not f.done():
                 f.set_result(answer)
-        if self._poll is not None and cid == self._poll[0]:
-            self._poll = None
+        if cid in self._polls:
+            if self._poll is not None and cid == self._poll[0]:
+                self._poll = None
             self.bus.publish(event("status", "the robot's report", wall, robot=None, seq=None, stored=False,
                                    packet=answer))
             return
@@ -273,6 +277,7 @@ class Station:
         cid = secrets.randbits(31)
         self.pump.send(pk.encode(pk.CommandPacket(cid, CommandName.STATUS, {})))
         self._poll, self._polled_at = (cid, now), now
+        self._polls.append(cid)
 
 
 def packet_json_args(args: dict) -> dict:

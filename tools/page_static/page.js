@@ -6,7 +6,7 @@
 const $ = (id) => document.getElementById(id);
 const state = {snap: null, cards: new Map(), rev: 0, authorized: false, token: "", selected: null,
   follow: true, received: 0, answers: new Map(), waiting: new Map(), newest: null};
-window.btfPage = {shown: {}, hello: 0};  // when each capture was first drawn (tests, benchmarks)
+window.btfPage = {shown: {}, hello: 0};  // when each capture ("robot:seq") was first drawn (benchmarks)
 
 function esc(s) {
   return String(s ?? "").replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c]));
@@ -97,7 +97,8 @@ function drawRobot(s) {
 // -- the sweep -----------------------------------------------------------------------------
 function drawSweep(s) {
   const w = s.sweep, g = w.grid;
-  $("sweep-title").textContent = w.id === null ? "" : `#${w.id}${w.active ? ", running" : w.active === false ? ", stopped" : ""}`;
+  const over = w.poses !== null && w.next !== null && w.next >= w.poses;
+  $("sweep-title").textContent = w.id === null ? "" : `#${w.id}${w.active ? ", running" : over ? ", done" : w.active === false ? ", stopped" : ""}`;
   let done = 0, skipped = 0, total = w.poses || 0;
   if (g) {
     for (const c of g.cells) { if (c === "d") done++; if (c === "s") skipped++; }
@@ -156,7 +157,8 @@ function drawCards(list, fresh) {
     el.dataset.id = c.id;
     el.title = `${c.scene || "robot " + c.robot} seq ${c.seq} at ${clock(c.time)}${c.camera ? "\n" + c.camera : ""}`;
     if (!old || old.id !== c.id) el.innerHTML = cardHtml(c);
-    if (!(c.id in window.btfPage.shown)) window.btfPage.shown[c.id] = Date.now();
+    const seen = `${c.robot}:${c.seq}`;
+    if (!(seen in window.btfPage.shown)) window.btfPage.shown[seen] = Date.now();
     if (!state.newest || c.id > state.newest.id) state.newest = c;
   }
   const sorted = [...box.children].sort((a, b) => {
