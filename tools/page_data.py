@@ -81,10 +81,14 @@ def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
     cap = store.capture_by_id(capture_id)
     if cap is None:
         return {"missing": f"no capture {capture_id} in the database"}
-    v = views(store, cap, np.random.default_rng(capture_id), Frames(fake), histograms=what != "thumb")
-    if what == "thumb":
+    rng = np.random.default_rng(capture_id)  # the same drawing every time
+    if what == "thumb":  # the synthesis, or the measured frame when there is none
+        v = views(store, cap, rng, None, histograms=False)
+        if not v.images:
+            v = views(store, cap, rng, Frames(fake), histograms=False)
         name = next((k for k in SHOWN_FIRST if k in v.images), None)
         return {"png": png(v.images[name])} if name else {"missing": v.problem or "nothing to draw"}
+    v = views(store, cap, rng, Frames(fake))
     html = capture_section(v, lambda k: f"capture/{capture_id}/{k}.png?r={rev}")
     return {"html": html, "images": {k: png(img) for k, img in v.images.items()}}
 

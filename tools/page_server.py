@@ -160,7 +160,7 @@ class PageServer:
             return await handler(request)  # the page's code and style: no data in them
         if request.method == "GET" and request.path == "/" and "token" in request.query:
             if not self._is_token(request.query["token"]):
-                return _refused(401, "wrong token: open the address the station printed at start-up")
+                return _refused(401, "wrong token: open the address the station printed at start-up", plain=True)
             resp = web.HTTPSeeOther("/")
             resp.set_cookie(self._cookie, self.options.token, httponly=True, samesite="Strict", path="/")
             return resp
@@ -174,7 +174,7 @@ class PageServer:
         elif not (request["authorized"] or self.options.public):
             return _refused(401, "this page needs the station's token: open the address the station printed "
                                  "at start-up (.../?token=...), or start the station with --http-public to "
-                                 "let anyone on this address watch")
+                                 "let anyone on this address watch", plain=request.path == "/")
         return await handler(request)
 
     def _refuse_change(self, request: web.Request, by_header: bool, by_cookie: bool) -> str:
@@ -268,8 +268,9 @@ async def _send(resp: web.StreamResponse, msg: dict) -> None:
     await resp.write(f"event: {msg['kind']}\ndata: {json.dumps(msg, separators=(',', ':'))}\n\n".encode())
 
 
-def _refused(status: int, text: str) -> web.Response:
-    return web.json_response({"error": text}, status=status)
+def _refused(status: int, text: str, plain: bool = False) -> web.Response:
+    """A refusal: JSON for the page's requests, a line of text for a person at the address bar."""
+    return web.Response(text=text + "\n", status=status) if plain else web.json_response({"error": text}, status=status)
 
 
 def _escape(text: str) -> str:

@@ -18,10 +18,12 @@ The interface for code inside the station (the control socket, the operator's pa
 - `station.snapshot_json() -> dict`: `tools.station_snapshot.StationSnapshot.to_json`, every
   field named there: `station` (port, db, started, clients, subscribers, commands_pending),
   `link` (up, changed, last_heard, last_heard_s, and `radio.events.LinkStats`: frames_sent,
-  frames_accepted, retransmissions, delivered, duplicates, rejected {reason: n}, ...),
-  `robot` (id, mode, state, pose, outbox, paused, torque, faults, errors, failsafe,
+  frames_accepted, retransmissions, delivered, duplicates, rejected {reason: n}, ...;
+  delivered_bytes, goodput_bps), `robot` (id, mode, state, pose, commanded, outbox, paused,
+  torque, faults, errors, failsafe, failsafe_s, failsafe_assumed, disk, disk_free, rejected,
   last_status), `sweep` (id, plan, next, poses, active, measured, skipped [{index, elevation,
-  azimuth, reason}]) and `captures` (stored, duplicates, masks, bad, latest [...]).
+  azimuth, reason}], grid: `tools.sweep_grid.grid_json`) and `captures` (stored, duplicates,
+  masks, bad, latest [...]).
 - `sub = station.bus.subscribe(maxsize)`, then `await sub.get()`: every event in order; a
   subscriber that falls behind loses the oldest and is told how many (`tools.station_bus`).
   `sub.close()` when done.
