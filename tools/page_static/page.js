@@ -222,7 +222,9 @@ function logEvent(ev) {
 
 function answerText(a) {
   if (a.ok) {
-    const said = Object.entries(a.extras || {}).map(([k, v]) => `${k}=${typeof v === "number" ? +v.toFixed(3) : v}`).join(" ");
+    const shown = (k, v) => (k === "time" && typeof v === "number" && v > 1e9 ? new Date(v * 1000).toISOString().slice(0, 19) + "Z"
+      : typeof v === "number" ? +v.toFixed(3) : v);  // the robot's clock as a time, not epoch seconds
+    const said = Object.entries(a.extras || {}).map(([k, v]) => `${k}=${shown(k, v)}`).join(" ");
     return [`ACK${said ? ": " + said : ""}`, "ok"];
   }
   return [`NACK ${a.reason}: ${a.text}`, "bad"];
