@@ -93,6 +93,18 @@ def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
     return {"html": html, "images": {k: png(img) for k, img in v.images.items()}}
 
 
+def end_with_parent() -> None:
+    """In a child process of the station: SIGTERM when the station dies, even by SIGKILL
+    (Linux's PR_SET_PDEATHSIG), so no drawing worker or demo robot outlives it."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        pass  # not Linux: the station's own exit path ends them
+
+
 def _warm() -> None:
     """Load the worker's libraries before the first request needs them."""
     import tools.capture_views  # noqa: F401
@@ -123,7 +135,8 @@ class PageData:
 
     def start_worker(self) -> None:
         if self._pool is None:
-            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=end_with_parent)
             self._pool.submit(_warm)
 
     async def drawn(self, capture_id: int, what: str) -> dict:

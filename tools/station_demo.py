@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from onboard.cli_runner import CliError
+from tools.page_data import end_with_parent
 
 ROBOT_CONFIG = """\
 # The fake robot of `btf-host station --demo`.
@@ -57,23 +58,11 @@ def prepare(where: Path) -> tuple[Path, Path, Path]:
     return key, config, where / "scene.db"
 
 
-def _end_with_parent() -> None:
-    """In the robot's process before it runs: SIGTERM when the station dies, even by SIGKILL
-    (Linux's PR_SET_PDEATHSIG), so no demo robot outlives its station."""
-    import ctypes
-    import signal
-
-    try:
-        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
-    except (OSError, AttributeError):
-        pass  # not Linux: the station's own exit path stops it
-
-
 def start_robot(config: Path, port: str, log: Path) -> subprocess.Popen:
     with open(log, "ab") as err:
         return subprocess.Popen([sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())",
                                  "run", "--config", str(config), "--port", port], cwd=config.parent,
-                                stdout=subprocess.DEVNULL, stderr=err, preexec_fn=_end_with_parent)
+                                stdout=subprocess.DEVNULL, stderr=err, preexec_fn=end_with_parent)
 
 
 def stop_robot(robot: subprocess.Popen) -> None:
