@@ -4,7 +4,7 @@ import tty
 
 import pytest
 
-from radio.auth import FileCounterStore, MemoryCounterStore
+from radio.auth import FileCounterStore, MemoryCounterStore, write_fresh
 from radio.link import Acked, Delivered, Link, LinkDown, LinkUp, QueueFull
 from radio.ports import FdPort, open_url
 from radio.pump import LinkPump
@@ -63,6 +63,7 @@ def test_commands_flow_the_other_way_with_automatic_ids():
 
 
 def test_sender_restart_resends_unacked_and_receiver_reacks_without_redelivery(tmp_path):
+    write_fresh(tmp_path / "c.json")  # a new key's counters (keygen): nothing used yet
     store = FileCounterStore(tmp_path / "c.json")
     host = Link(0, 1, 5, KEY, MemoryCounterStore())
     robot = Link(1, 0, 5, KEY, store)
@@ -111,6 +112,7 @@ def test_replayed_frames_are_rejected_and_counted():
 
 
 def test_replay_after_receiver_restart_is_not_accepted(tmp_path):
+    write_fresh(tmp_path / "host.json")
     store = FileCounterStore(tmp_path / "host.json")
     robot = Link(1, 0, 5, KEY, MemoryCounterStore())
     host = Link(0, 1, 5, KEY, store)
