@@ -6,9 +6,16 @@ The measured view (from the tracker) is what a capture is filed under. Each devi
 step gets bounded retries; when they run out the pose is skipped with a reason
 (`PoseSkipped`) and the caller records it. The fitter is preallocated once and reset
 per capture, so memory does not grow with the mission.
+
+Given a `pump` (the runtime's link service), the pipeline keeps the link serviced while the
+arm works: between polls of a moving arm, and while a camera frame or its processing, which
+take longer the larger the frame, runs in a worker thread. So the failsafe holds the arm
+within `link.failsafe_s` of the base falling silent at any frame size. Only this thread
+touches the link, the arm and the runtime's state; the worker touches the camera and numbers.
 """
 from __future__ import annotations
 
+import concurrent.futures
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, TypeVar
@@ -25,6 +32,7 @@ from onboard.fit import FrameFitter
 
 T = TypeVar("T")
 MAX_POSES_REMEMBERED = 512  # previous models kept per pose for the UNCHANGED rule
+PUMP_S = 0.01  # how often the link is serviced while a step runs in the worker
 
 
 class PoseSkipped(Exception):
@@ -66,13 +74,15 @@ class Pipeline:
         cfg: Config,
         hal: Hal,
         segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple[np.ndarray, bool]],
-        pump: Callable[[], None] = lambda: None,
+        pump: Callable[[], None] | None = None,
         sleep: Callable[[float], None] = time.sleep,
     ) -> None:
         self.cfg = cfg
         self.hal = hal
         self.segmenter = segmenter
-        self.pump = pump  # keeps the link serviced while the arm moves
+        self.pump = pump or (lambda: None)  # keeps the link serviced while the arm works
+        self._worker = (None if pump is None else
+                        concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="pose-step"))
         self.sleep = sleep
         self.spec = feature_spec(cfg)
         self.pca: PcaBasis | None = None
@@ -82,6 +92,23 @@ class Pipeline:
         self.faults: list[str] = []  # every retried fault, for STATUS
 
     # -- device steps ------------------------------------------------------------------
+
+    def pumping(self, step: Callable[[], T], undo: Callable[[T], None] | None = None) -> T:
+        """`step()` in the worker while this thread services the link every PUMP_S. When the
+        pump raises (an interrupt: the failsafe, ABORT), the step is waited for and its result
+        undone, then the interrupt goes on up. Without a pump, `step()` here."""
+        if self._worker is None:
+            return step()
+        future = self._worker.submit(step)
+        try:
+            while not concurrent.futures.wait([future], timeout=PUMP_S)[0]:
+                self.pump()
+        except BaseException:
+            concurrent.futures.wait([future])
+            if undo is not None and future.exception() is None:
+                undo(future.result())
+            raise
+        return future.result()
 
     def retry(self, step: str, fn: Callable[[], T]) -> T:
         """`fn()`, tried `sweep.retries` more times on a device fault; PoseSkipped with the last one."""
@@ -131,7 +158,7 @@ class Pipeline:
                 raise ValueError(f"camera returned an unusable frame {getattr(frame, 'shape', None)}")
             return frame
 
-        return self.retry("camera", grab)
+        return self.retry("camera", lambda: self.pumping(grab))
 
     # -- the capture -------------------------------------------------------------------
 
@@ -147,7 +174,12 @@ class Pipeline:
         return self._fitter
 
     def process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles) -> FittedView:
-        """Features, segmentation, skip rules and the fit for one frame."""
+        """Features, segmentation, skip rules and the fit for one frame (in the worker, the link
+        serviced meanwhile)."""
+        return self.pumping(lambda: self._process(frame, commanded, measured), undo=self.rollback)
+
+    def _process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles) -> FittedView:
+        cfg = self.cfg  # a SET while this runs applies from the next frame
         try:
             if self.spec.space is FeatureSpace.PCA and self.pca is None:
                 self.pca = PcaBasis.fit(frame)  # once per scene; sent with the scene
@@ -156,11 +188,11 @@ class Pipeline:
         except ValueError as exc:  # e.g. a band the camera does not have: skip with the reason
             raise PoseSkipped(f"features: {exc}") from None
         labels, changed = self.segmenter(feats, frame, measured)
-        n_labels = self.cfg.segment.n_labels
+        n_labels = cfg.segment.n_labels
         counts = skip.label_counts(labels, n_labels)
-        keep = skip.kept_labels(counts, self.cfg.skip.min_pixels)
+        keep = skip.kept_labels(counts, cfg.skip.min_pixels)
         data = feats.data
-        stride = skip.subsample_stride(counts, keep, self.cfg.skip.percentile_precision, data.shape[1])
+        stride = skip.subsample_stride(counts, keep, cfg.skip.percentile_precision, data.shape[1])
         fitter = self.fitter(data.shape[2], feats.levels)
         fitter.reset()
         if stride > 1:
@@ -170,17 +202,17 @@ class Pipeline:
             fitter.add(flat_d[:, None, :], flat_l[:, None])
         else:
             fitter.add(data, labels)
-        results = fitter.fit(min_count=max(1, self.cfg.skip.min_pixels // stride))
+        results = fitter.fit(min_count=max(1, cfg.skip.min_pixels // stride))
         results = {k: r for k, r in results.items() if k[0] in keep}
-        dropped = tuple(int(i) for i in np.flatnonzero((counts > 0) & (counts < self.cfg.skip.min_pixels)))
+        dropped = tuple(int(i) for i in np.flatnonzero((counts > 0) & (counts < cfg.skip.min_pixels)))
         key = skip.pose_key(commanded)
-        same = skip.unchanged(self._previous.get(key), results, self.cfg.skip.unchanged_tolerance)
+        same = skip.unchanged(self._previous.get(key), results, cfg.skip.unchanged_tolerance)
         if not same:  # compare with the last models sent, so slow drift is still caught
             remember(self._previous, key, results)
         pca = self.pca if self.pca_pending else None
         self.pca_pending = False
         dep = None
-        if self.cfg.features.dependence and results and not same:  # a bounded second pass
+        if cfg.features.dependence and results and not same:  # a bounded second pass
             dep = dependence.measure(data, labels, {k: r.model for k, r in results.items()}, feats.levels)
         return FittedView(commanded, measured, feats.band_names, feats.levels, results, dropped,
                        labels, changed, same, stride, pca, dep)

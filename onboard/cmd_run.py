@@ -1,4 +1,8 @@
-"""`btf-robot run`: the robot's runtime, autonomous sweeps and remote control over the link."""
+"""`btf-robot run`: the robot's runtime, autonomous sweeps and remote control over the link.
+
+Exit status 2: the configuration is wrong (restarting cannot mend it); 1: the environment is
+(a full disk, a device or port not there yet: systemd restarts it, see examples/btf-robot.service).
+"""
 from __future__ import annotations
 
 import argparse
@@ -9,7 +13,7 @@ import sys
 import time
 
 from onboard import config as config_mod
-from onboard.cli_runner import CliError
+from onboard.cli_runner import CliError, RetryLater
 from onboard.config import ConfigError
 
 
@@ -24,6 +28,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--new-sweep", action="store_true",
                    help="start a new sweep of the config's plan even if its last sweep finished "
                         "(by default an interrupted sweep resumes and a finished one is not repeated)")
+    p.add_argument("--new-key", action="store_true",
+                   help="link.key_file holds a key never used before (just made by `btf-host keygen`): "
+                        "start its link counters afresh; only needed with [link] clock = \"none\"")
     return p
 
 
@@ -53,48 +60,91 @@ def _open_port(url: str, baud: int):
     return open_url(url, baud, timeout=0.005)
 
 
+def _counters(cfg, new_key: bool):
+    """The robot's link counters (state_dir/counters.json); CliError when only a new key helps."""
+    from radio.auth import CounterFileLost, FileCounterStore, write_fresh
+
+    path = cfg.state_dir / "counters.json"
+    try:
+        if new_key:
+            write_fresh(path)
+        return FileCounterStore(path, clock=cfg.link.clock == "rtc")
+    except CounterFileLost as exc:
+        raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise RetryLater(f"state_dir {cfg.state_dir}: counters: {exc}") from None
+
+
+def _build(cfg, key: bytes, args: argparse.Namespace, hal, port):
+    """The runtime on its link; what opening its state had to say is in its notes."""
+    from onboard.outbox import OutboxError
+    from onboard.runtime import Runtime, open_state
+    from onboard.segmentation import Segmentation
+    from onboard.watchdog import Notifier
+    from radio.link import Link
+    from radio.pump import LinkPump
+
+    segment = Segmentation(cfg, hal)
+    counters = _counters(cfg, args.new_key)
+    try:
+        outbox, disk, note = open_state(cfg)
+    except (OutboxError, OSError) as exc:
+        raise RetryLater(f"state_dir {cfg.state_dir}: {exc}") from None
+    link = Link(cfg.link.node_id, cfg.link.peer_id, cfg.link.link_id, key, counters,
+                mtu=cfg.link.mtu, heartbeat=cfg.link.heartbeat_s, link_timeout=cfg.link.failsafe_s,
+                incarnation=bytes.fromhex(outbox.incarnation))
+    h, w = cfg.hal.size
+    hal.camera.open(w, h)
+    rt = Runtime(cfg, hal, LinkPump(link, port), segment, outbox=outbox, disk=disk, notifier=Notifier(),
+                 new_sweep=args.new_sweep)
+    for line in (note, counters.note):
+        if line:
+            rt.note(line)
+    return rt
+
+
 def run(args: argparse.Namespace) -> int:
     cfg, key = _setup(args)
     from hal.factory import build_hal
     from hal.interfaces import HalError
-    from onboard.outbox import OutboxError
-    from onboard.runtime import Runtime
-    from onboard.segmentation import Segmentation
-    from onboard.watchdog import Notifier
-    from radio.auth import FileCounterStore
-    from radio.link import Link
-    from radio.pump import LinkPump
 
-    cfg.state_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        cfg.state_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RetryLater(f"state_dir {cfg.state_dir}: {exc.strerror}") from None
     try:
         hal = build_hal(cfg.hal, state_dir=cfg.state_dir)  # with the arm calibration stored there
     except HalError as exc:
-        raise CliError(f"hal: {exc}") from None
+        raise RetryLater(f"hal: {exc}") from None
     try:
         port = _open_port(cfg.link.url, cfg.link.baud)
     except Exception as exc:
         hal.close()
-        raise CliError(f"link.url {cfg.link.url}: cannot open: {exc}") from None
+        raise RetryLater(f"link.url {cfg.link.url}: cannot open: {exc}") from None
     try:
-        segment = Segmentation(cfg, hal)
-        link = Link(cfg.link.node_id, cfg.link.peer_id, cfg.link.link_id, key,
-                    FileCounterStore(cfg.state_dir / "counters.json"), mtu=cfg.link.mtu,
-                    heartbeat=cfg.link.heartbeat_s, link_timeout=cfg.link.failsafe_s)
-        h, w = cfg.hal.size
-        hal.camera.open(w, h)
-        rt = Runtime(cfg, hal, LinkPump(link, port), segment, notifier=Notifier(),
-                     new_sweep=args.new_sweep)
-    except (ConfigError, ValueError, HalError, OutboxError) as exc:
+        rt = _build(cfg, key, args, hal, port)
+    except (CliError, RetryLater):
         hal.close()
+        port.close()
+        raise
+    except (ConfigError, ValueError) as exc:
+        hal.close()
+        port.close()
         raise CliError(str(exc)) from None
+    except HalError as exc:
+        hal.close()
+        port.close()
+        raise RetryLater(f"hal: {exc}") from None
     stopping = []
     signal.signal(signal.SIGTERM, lambda *_: stopping.append(1))
     t0 = time.monotonic()
 
-    def stop(r: Runtime) -> bool:
+    def stop(r) -> bool:
         if stopping or (args.max_seconds and time.monotonic() - t0 > args.max_seconds):
             return True
         return bool(args.exit_when_idle and r.idle())
+
+    from onboard.outbox import OutboxError
 
     try:
         return rt.run(stop)

@@ -107,7 +107,7 @@ class Dispatcher:
             effect = Effect()  # a refused command produced nothing
         else:
             answer = wire.reply_body(cmd.command_id, True, cmd.name.name, result)
-        stands = self._answer(cmd.command_id, answer, effect)
+        stands = self._answer(cmd.command_id, answer, effect, COMMANDS[cmd.name].query)
         if stands and not isinstance(result, Refusal) and COMMANDS[cmd.name].interrupts:
             rt.state.interrupt_work(cmd.name.name)  # the pose being measured ends at the next service
 
@@ -124,7 +124,7 @@ class Dispatcher:
         except Exception as exc:  # a command that fails is answered, never fatal
             return refusal(exc)
 
-    def _answer(self, command_id: int, answer: tuple[int, bytes], effect: Effect) -> bool:
+    def _answer(self, command_id: int, answer: tuple[int, bytes], effect: Effect, query: bool = False) -> bool:
         """Commit a reply with its command's effect, remembered by id; whether the effect stands."""
         rt = self.rt
         try:
@@ -133,7 +133,10 @@ class Dispatcher:
         except OutboxFull as exc:
             effect.undo()
             if not (effect.packets or effect.state):
-                rt.state.paused_reason = str(exc)  # not even the reply fits: a retry finds room later
+                if query:  # a query is harmless to answer again: straight on the link
+                    rt.link.send_direct(*answer)
+                else:
+                    rt.state.paused_reason = str(exc)  # not even the reply fits: a retry finds room later
                 return False
             # What the command produced does not fit: refuse it instead, and say why.
             nack = wire.reply_body(command_id, False, str(exc), reason=pk.Reason.OUTBOX_FULL)

@@ -62,15 +62,18 @@ class CounterStore(Protocol):
 
 
 class MemoryCounterStore:
-    """Counters that live as long as the process: for simulations and tests."""
+    """Counters that live as long as the process: for simulations and tests. With a `wall`
+    clock they follow it as a file's do, so a peer that lost its own file accepts them."""
 
-    def __init__(self, start: int = 1) -> None:
+    def __init__(self, start: int = 1, wall: Callable[[], float] | None = None) -> None:
         self._next: dict[tuple[int, int], int] = {}
         self._floor: dict[tuple[int, int], int] = {}
-        self._start = start
+        self._start, self._wall = start, wall
 
     def next_tx(self, sender: int, link: int) -> int:
         c = self._next.get((sender, link), self._start)
+        if self._wall is not None:
+            c = max(c, clock_counter(self._wall()))
         if c > MAX_COUNTER:
             raise CounterExhausted(f"counter of sender {sender} link {link} exhausted; rotate the key")
         self._next[(sender, link)] = c + 1

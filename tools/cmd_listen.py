@@ -5,7 +5,6 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 from tools.cli import CliError
 
@@ -27,7 +26,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
 def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene: str = ""):
     """(HostSession, Store or None) for the CLI commands; CliError for any bad input."""
     from radio.auth import FileCounterStore
-    from radio.keys import KeyFileError, load_key
+    from radio.keys import KeyFileError, counters_beside, load_key
     from radio.link import Link
     from radio.ports import open_url
     from radio.pump import LinkPump
@@ -45,11 +44,9 @@ def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene:
         except CorruptDatabase as exc:
             raise CliError(str(exc)) from None
     try:
-        # Counters survive restarts, so replays stay refused and a running robot accepts
-        # the next session. They live beside the key: listen and cmd speak as the same
-        # host, one after the other on the same port, so they must share one counter.
-        where = Path(key_file)
-        counters = FileCounterStore(where.with_name(where.name + ".counters.json"))
+        # Counters survive restarts (and, by the clock, a lost file), so replays stay refused
+        # and a running robot accepts the next session. listen and cmd speak as one host.
+        counters = FileCounterStore(counters_beside(key_file))
     except ValueError as exc:
         if store is not None:
             store.close()
