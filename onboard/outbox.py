@@ -26,6 +26,7 @@ aside and starts a new one); any other failure to open is `OutboxError`.
 """
 from __future__ import annotations
 
+import os
 import secrets
 import sqlite3
 import threading
@@ -232,7 +233,7 @@ class Outbox:
             try:
                 return write()
             except sqlite3.OperationalError as exc:
-                if not _full(exc):
+                if not _full(exc, self.path.parent):
                     raise OutboxError(f"outbox {self.path}: write failed: {exc}") from exc
                 if not attempt:
                     self.on_full()
@@ -333,8 +334,25 @@ class Outbox:
         self.close()
 
 
-def _full(exc: sqlite3.Error) -> bool:
-    return getattr(exc, "sqlite_errorname", "") == "SQLITE_FULL" or "full" in str(exc).lower()
+NO_ROOM = 1 << 20  # an I/O error with less free than this is the disk being full (tmpfs, ext4)
+
+
+def _full(exc: sqlite3.Error, where: Path) -> bool:
+    """Whether a failed write failed for lack of room. SQLite says SQLITE_FULL when a write
+    returns ENOSPC, but an I/O error when growing the WAL or its index fails for the same cause."""
+    name = getattr(exc, "sqlite_errorname", "") or ""
+    if name == "SQLITE_FULL" or "full" in str(exc).lower():
+        return True
+    return name.startswith("SQLITE_IOERR") and free_bytes(where) < NO_ROOM
+
+
+def free_bytes(where: Path) -> int:
+    """Bytes free for an unprivileged writer under `where` (a large number when unknown)."""
+    try:
+        st = os.statvfs(where)
+    except OSError:
+        return 1 << 62
+    return st.f_bavail * st.f_frsize
 
 
 def _damaged(exc: sqlite3.Error) -> bool:

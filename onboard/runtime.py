@@ -23,7 +23,7 @@ from onboard.disk import Disk, Pressure
 from onboard.dispatch import Dispatcher
 from onboard.failsafe import Failsafe
 from onboard.link_service import LinkService
-from onboard.outbox import Outbox, OutboxError, open_outbox
+from onboard.outbox import NO_ROOM, Outbox, OutboxError, free_bytes, open_outbox
 from onboard.runtime_state import Mode, RuntimeState
 from onboard.segmentation import Segmentation
 from onboard.status import Status
@@ -46,7 +46,7 @@ def open_state(cfg: Config) -> tuple[Outbox, Disk, str]:
     try:
         outbox, note = open_outbox(path, cfg.outbox_quota_bytes)
     except OutboxError as exc:
-        if "full" not in str(exc).lower():
+        if "full" not in str(exc).lower() and free_bytes(cfg.state_dir) >= NO_ROOM:
             raise
         disk.write_failed(str(exc))  # the reserve is for this: room to open the outbox and drain it
         outbox, note = open_outbox(path, cfg.outbox_quota_bytes)

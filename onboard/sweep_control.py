@@ -125,8 +125,6 @@ class SweepControl:
                 self.pipeline.rollback(cap)
             # A full disk (the outbox told the runtime's disk watch) resumes when there is room.
             self.state.paused_reason, self.full_until_ack = str(exc), not isinstance(exc, DiskFull)
-            if isinstance(exc, DiskFull):
-                self.state.disk = "full"
             return "paused"
         self.state.paused_reason = ""
         self.state.progress = nxt

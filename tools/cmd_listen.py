@@ -1,4 +1,8 @@
-"""`btf-host listen`: receive, authenticate, store and acknowledge the robot's packets."""
+"""`btf-host listen`: receive, authenticate, store and acknowledge the robot's packets.
+
+A packet that cannot be stored ends it with one line and nothing of it acknowledged: status 1
+for a database the disk has no room for (run it again once there is), 2 for a damaged one.
+"""
 from __future__ import annotations
 
 import argparse
@@ -6,6 +10,7 @@ import json
 import sys
 import time
 
+from onboard.cli_runner import RetryLater
 from tools.cli import CliError
 
 
@@ -31,16 +36,20 @@ def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene:
     from radio.ports import open_url
     from radio.pump import LinkPump
     from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, Receiver
-    from tools.store import CorruptDatabase, Store
+    from tools.store import CorruptDatabase, Store, StoreUnavailable
 
     try:
         key = load_key(key_file)
     except KeyFileError as exc:
         raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise RetryLater(f"key file {key_file}: {exc}") from None
     store = None
     if db is not None:
         try:
             store = Store.open(db)
+        except StoreUnavailable as exc:  # a full disk, an I/O error: not the file's fault
+            raise RetryLater(str(exc)) from None
         except CorruptDatabase as exc:
             raise CliError(str(exc)) from None
     try:
@@ -57,6 +66,8 @@ def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene:
         if store is not None:
             store.close()
         raise CliError(f"port {port_url}: cannot open: {exc}") from None
+    if counters.note:  # the counters file was lost (or this host's first run with this key)
+        print(f"btf-host: {counters.note}", file=sys.stderr)
     link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, key, counters, heartbeat=1.0, link_timeout=5.0)
     return HostSession(LinkPump(link, port), Receiver(store, scene)), store
 
@@ -64,10 +75,13 @@ def open_session(port_url: str, key_file: str, db: str | None, baud: int, scene:
 def run(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
+    from tools.receiver import StoreFailed
+
     if args.until_idle < 0:
         raise CliError(f"--until-idle {args.until_idle}: must not be negative")
     session, store = open_session(args.port, args.key, args.db, args.baud, args.scene)
     bar = tqdm(desc="captures", unit="cap", file=sys.stderr, disable=args.json or not sys.stderr.isatty())
+    failed = None
     try:
         while True:
             for item in session.step():
@@ -86,10 +100,16 @@ def run(args: argparse.Namespace) -> int:
                 break
     except KeyboardInterrupt:
         pass
+    except StoreFailed as exc:  # nothing unstored was acknowledged: the robot sends it again
+        failed = exc
     finally:
         bar.close()
         session.close()
-        store.close()
+        if store is not None:
+            store.close()
+    if failed is not None:
+        text = f"{failed}; nothing unstored was acknowledged (the robot keeps it)"
+        raise (CliError if failed.damaged else RetryLater)(text)
     st = session.stats()
     c = session.receiver.counts
     summary = {"captures": c["capture"] + c["unchanged"], "masks": c["mask"], "status": c["status"],
