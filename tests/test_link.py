@@ -239,3 +239,17 @@ def test_single_bit_errors_are_repaired_and_counted():
         t += 0.01
     assert flipped and got == [(1, b"q" * 60)]
     assert host.stats().repaired == 1 and robot.stats().retransmissions == 0
+
+
+def test_small_messages_with_clock_sized_automatic_ids_share_frames_and_all_arrive():
+    """Automatic ids follow the counters, which follow the wall clock: 7-byte varints. A
+    segment marked MORE must leave room for the next one's head, or the frame is refused."""
+    from collections import deque
+
+    from radio.fragment import AUTO_BASE, StreamAssembler, StreamPacker
+
+    queue = deque((AUTO_BASE + 37_992_960_000_000 + i, b"CAPTURE %d" % i) for i in range(20))
+    packer, assembler, got = StreamPacker(), StreamAssembler(4096), []
+    while (nxt := packer.next_payload(queue, 78)) is not None:
+        got += [msg for _, msg in assembler.add(nxt[0])]
+    assert got == [b"CAPTURE %d" % i for i in range(20)]
