@@ -130,3 +130,32 @@ def test_a_bit_rotted_outbox_is_moved_aside_and_the_robot_runs_on_a_new_one(tmp_
     damaged = sqlite3.connect(next(p for p in aside if not p.name.endswith(("-wal", "-shm"))))
     assert damaged.execute("SELECT COUNT(*) FROM outbox").fetchone()[0] == 1
     damaged.close()
+
+
+def test_a_schema_6_database_keeps_every_row_and_its_models_when_captures_gain_incarnations(tmp_path):
+    """Schema 7 rebuilds the captures table (a UNIQUE constraint changes only so); with foreign
+    keys on, dropping the old table would have cascaded to every model."""
+    from tests.test_ingest import _SCHEMA_1
+    from tools.store_schema import _MIGRATIONS, APPLICATION_ID
+
+    db = tmp_path / "v6.sqlite"
+    con = sqlite3.connect(db)
+    con.executescript(_SCHEMA_1 + "".join(_MIGRATIONS[v] for v in range(1, 6))
+                      + f"PRAGMA user_version = 6; PRAGMA application_id = {APPLICATION_ID};")
+    con.close()
+    with Store.open(tmp_path / "new.sqlite") as fresh:  # the rows a version-6 host wrote
+        Receiver(fresh).handle(models_body(4)[0])
+        rows = fresh._conn.execute("SELECT * FROM models").fetchall()
+    con = sqlite3.connect(db)
+    con.execute("INSERT INTO captures (id, robot, sequence, time, elevation, azimuth, space, bands)"
+                " VALUES (1, '3', 4, 104.0, 60.2, 0.1, 'rgb', '[\"R\", \"G\", \"B\"]')")
+    con.executemany(f"INSERT INTO models VALUES ({','.join('?' * len(rows[0]))})", rows)
+    con.commit()
+    con.close()
+    with Store.open(db) as store:
+        (old,) = store.captures()
+        assert old.incarnation == "" and old.sequence == 4 and len(store.models(old.id)) == len(rows)
+        receiver = Receiver(store)
+        assert not receiver.handle(models_body(4)[0]).stored  # the same capture, sent again
+        assert receiver.handle(models_body(4)[0], "0123456789abcdef").stored  # a new robot state's
+        assert store._conn.execute("PRAGMA foreign_key_check").fetchall() == []
