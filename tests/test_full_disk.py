@@ -226,3 +226,15 @@ def test_listen_whose_disk_fills_says_so_in_one_line_and_acknowledges_nothing_it
     assert "nothing unstored was acknowledged" in lines[-1] and "Traceback" not in err
     # The robot keeps the capture and sends it again to a host with room.
     assert not [e for e in listener.events if isinstance(e, Acked) and e.msg_id == sent]
+
+
+def test_the_systemd_unit_retries_exit_1_for_as_long_as_it_takes_and_never_exit_2():
+    import configparser
+
+    unit = configparser.ConfigParser(interpolation=None, strict=False)
+    unit.optionxform = str
+    unit.read(ROOT / "examples" / "btf-robot.service")
+    assert unit["Service"]["Restart"] == "on-failure"  # any non-zero exit, 1 included
+    assert unit["Service"]["RestartPreventExitStatus"].split() == ["2"]
+    assert unit["Unit"]["StartLimitIntervalSec"] == "0"  # a disk that stays full is retried, not given up on
+    assert "time-sync.target" in unit["Unit"]["After"]  # [link] clock = "rtc" trusts the clock from the start
