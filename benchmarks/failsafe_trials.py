@@ -29,7 +29,9 @@ from radio.pump import LinkPump
 
 CONFIG = ('robot_id = 9\nstate_dir = "state"\n[hal]\nbody = "fake"\nscene = "mixed"\nsize = [{h}, {w}]\n'
           '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = {failsafe}\n'
-          '[sweep]\nstart = 90\nstop = 0\nstep = 1\nazimuths = [0, 30, 60, 90, 120, 150, 180, 210, 240, 270, 300, 330]\n[segment]\nmethod = "scene"\n'
+          '[sweep]\nstart = 90\nstop = 0\nstep = 1\n'
+          'azimuths = [0, 30, 60, 90, 120, 150, 180, 210, 240, 270, 300, 330]\n'
+          '[segment]\nmethod = "scene"\n'
           '[skip]\nmin_pixels = 20\nskip_measured_pose = false\n')
 
 

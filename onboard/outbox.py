@@ -21,8 +21,9 @@ A new outbox draws a random `incarnation`: its row ids and capture numbers start
 the host tells them from the old ones' by it. On a full disk the writes that free room or say
 why (acknowledgement deletes, replies, STATUS: every write without a `reserve`) restart the
 WAL and try once more after `on_full` (called on every write that finds the disk full: the
-robot releases its disk reserve); bulk data raises `DiskFull` at once. A damaged file raises `OutboxDamaged` (`open_outbox` moves it
-aside and starts a new one); any other failure to open is `OutboxError`.
+robot releases its disk reserve); bulk data raises `DiskFull` at once. A damaged file raises
+`OutboxDamaged` (`open_outbox` moves it aside and starts a new one); any other failure to open
+is `OutboxError`.
 """
 from __future__ import annotations
 
