@@ -5,7 +5,7 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
 PYTEST_ARGS ?=
 
-.PHONY: setup demo test bench bench-peers stress fuzz clean
+.PHONY: setup demo test browser bench bench-peers stress fuzz clean
 
 setup: $(STAMP)
 
@@ -18,8 +18,13 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/btf-host demo --out demo-out
 
-test: $(STAMP)
+test: $(STAMP) browser
 	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
+
+# The operator page's tests drive a real browser: Debian's chromium (root or sudo installs it).
+browser:
+	command -v chromium >/dev/null || { $$(command -v sudo) apt-get update -qq && \
+	  $$(command -v sudo) apt-get install -y -qq --no-install-recommends chromium; }
 
 bench: $(STAMP)
 	$(BIN)/python -m benchmarks

@@ -30,6 +30,18 @@ class Tolerance:
 
 
 EXACT = Tolerance(relative=1e-9)
+# Where a camera that does not report a control is asked to lock it.
+FALLBACK_LOCK = CameraControls(exposure_us=10_000.0, gain=1.0, white_balance_kelvin=5000.0)
+
+
+def hold(now: CameraSettings) -> CameraControls:
+    """A manual lock at the values the camera stands at (`FALLBACK_LOCK`'s where it reports none)."""
+    if now.white_balance_kelvin is None and now.white_balance_gains is not None:
+        wb: dict = {"white_balance_gains": now.white_balance_gains}
+    else:
+        wb = {"white_balance_kelvin": now.white_balance_kelvin or FALLBACK_LOCK.white_balance_kelvin}
+    return CameraControls(now.exposure_us or FALLBACK_LOCK.exposure_us,
+                          FALLBACK_LOCK.gain if now.gain is None else now.gain, **wb)
 
 
 def _number(text: str | float, name: str) -> float | None:

@@ -10,22 +10,27 @@ per capture, so memory does not grow with the mission.
 Given a `pump` (the runtime's link service), the pipeline keeps the link serviced while the
 arm works: between polls of a moving arm, and while a camera frame or its processing, which
 take longer the larger the frame, runs in a worker thread. So the failsafe holds the arm
-within `link.failsafe_s` of the base falling silent at any frame size. Only this thread
-touches the link, the arm and the runtime's state; the worker touches the camera and numbers.
+within `link.failsafe_s` of the base falling silent at any frame size. Only the calling thread
+touches the link, the arm and the runtime's state; the worker touches the camera and numbers
+(a step the worker runs calls the pump not at all, and runs its own frames inline).
 """
 from __future__ import annotations
 
 import concurrent.futures
+import dataclasses
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, TypeVar
 
 import numpy as np
 
+from btf.capture_settings import CaptureSettings
 from btf.dependence import Dependence
 from btf.record import FittedModel
-from hal.interfaces import Hal, HalError, ViewAngles, view_from_orientation
-from onboard import dependence, skip
+from hal.interfaces import CameraSettings, Hal, HalError, ViewAngles, view_from_orientation
+from onboard import bracketing, dependence, skip
+from onboard.camera_lock import CameraLock, reference_level
 from onboard.config import Config
 from onboard.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from onboard.fit import FrameFitter
@@ -59,6 +64,7 @@ class FittedView:
     stride: int = 1
     pca: PcaBasis | None = None  # the scene's basis, on the first capture made with it
     dependence: dict[int, Dependence] | None = None  # grain and band correlation, when configured
+    camera: CaptureSettings | None = None  # what it was taken with (None: a frame from elsewhere)
 
 
 def feature_spec(cfg: Config) -> FeatureSpec:
@@ -76,13 +82,16 @@ class Pipeline:
         segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple[np.ndarray, bool]],
         pump: Callable[[], None] | None = None,
         sleep: Callable[[float], None] = time.sleep,
+        resend_mask: Callable[[], None] = lambda: None,
     ) -> None:
         self.cfg = cfg
         self.hal = hal
         self.segmenter = segmenter
-        self.pump = pump or (lambda: None)  # keeps the link serviced while the arm works
+        self.resend_mask = resend_mask  # the next capture sends its label map (after a rollback)
+        self._service = pump  # keeps the link serviced while the arm works
         self._worker = (None if pump is None else
                         concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="pose-step"))
+        self._here = threading.local()  # `in_worker`: this thread is the worker
         self.sleep = sleep
         self.spec = feature_spec(cfg)
         self.pca: PcaBasis | None = None
@@ -90,16 +99,30 @@ class Pipeline:
         self._fitter: FrameFitter | None = None
         self._previous: dict[tuple[int, int], dict[tuple[int, int], FittedModel]] = {}
         self.faults: list[str] = []  # every retried fault, for STATUS
+        self.lock = CameraLock(hal.camera, cfg.camera) if hal is not None else None
 
     # -- device steps ------------------------------------------------------------------
+
+    def pump(self) -> None:
+        """Service the link, from the calling thread only (the worker leaves it alone)."""
+        if self._service is not None and not getattr(self._here, "in_worker", False):
+            self._service()
 
     def pumping(self, step: Callable[[], T], undo: Callable[[T], None] | None = None) -> T:
         """`step()` in the worker while this thread services the link every PUMP_S. When the
         pump raises (an interrupt: the failsafe, ABORT), the step is waited for and its result
-        undone, then the interrupt goes on up. Without a pump, `step()` here."""
-        if self._worker is None:
+        undone, then the interrupt goes on up. Without a pump, or in the worker, `step()` here."""
+        if self._worker is None or getattr(self._here, "in_worker", False):
             return step()
-        future = self._worker.submit(step)
+
+        def in_worker() -> T:
+            self._here.in_worker = True
+            try:
+                return step()
+            finally:
+                self._here.in_worker = False
+
+        future = self._worker.submit(in_worker)
         try:
             while not concurrent.futures.wait([future], timeout=PUMP_S)[0]:
                 self.pump()
@@ -160,6 +183,27 @@ class Pipeline:
 
         return self.retry("camera", lambda: self.pumping(grab))
 
+    def lock_camera(self) -> CameraSettings:
+        """Apply `[camera]` to the camera (at start, and when SET changes it); what it granted."""
+        assert self.lock is not None
+        return self.retry("camera controls", lambda: self.lock.apply(self.cfg.camera))
+
+    def exposed_frame(self) -> tuple[np.ndarray, CameraSettings]:
+        """A frame and the settings the camera reports for it; PoseSkipped when the camera does
+        not hold its lock and `[camera] allow_auto` is false."""
+        assert self.lock is not None
+        if self.lock.asked is None or self.lock.cfg != self.cfg.camera:
+            self.lock_camera()
+        why = self.lock.refusal()  # known before the frame: do not take it
+        if why:
+            raise PoseSkipped(why)
+        frame = self.frame()
+        now = self.retry("camera settings", self.hal.camera.settings)
+        why = self.lock.refusal(now)  # the camera let go of the lock while taking it
+        if why:
+            raise PoseSkipped(why)
+        return frame, now
+
     # -- the capture -------------------------------------------------------------------
 
     def fitter(self, n_bands: int, levels: int = 256) -> FrameFitter:
@@ -173,12 +217,34 @@ class Pipeline:
             self._fitter = FrameFitter(n_labels, n_bands, bins=bins, value_range=span)
         return self._fitter
 
-    def process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles) -> FittedView:
-        """Features, segmentation, skip rules and the fit for one frame (in the worker, the link
-        serviced meanwhile)."""
-        return self.pumping(lambda: self._process(frame, commanded, measured), undo=self.rollback)
+    def fit_frame(self, data: np.ndarray, labels: np.ndarray, levels: int,
+                  stride: int) -> dict[tuple[int, int], FittedModel]:
+        """Every region of one frame's feature bands fitted, on the subsample lattice `stride`."""
+        fitter = self.fitter(data.shape[2], levels)
+        fitter.reset()
+        if stride > 1:
+            # A deterministic lattice: every stride-th pixel in row-major order.
+            flat_d = data.reshape(-1, data.shape[2])[::stride]
+            flat_l = labels.reshape(-1)[::stride]
+            fitter.add(flat_d[:, None, :], flat_l[:, None])
+        else:
+            fitter.add(data, labels)
+        return fitter.fit(min_count=max(1, self.cfg.skip.min_pixels // stride))
 
-    def _process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles) -> FittedView:
+    def shoot(self, commanded: ViewAngles, measured: ViewAngles) -> FittedView:
+        """Capture at the pose the arm holds and process it, with the camera's settings, the
+        reference's level and, where a region clips past `[camera] bracket_limit`, brackets."""
+        frame, now = self.exposed_frame()
+        return self.process(frame, commanded, measured, now)
+
+    def process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles,
+                settings: CameraSettings | None = None) -> FittedView:
+        """Features, segmentation, skip rules and the fit for one frame (taken with `settings`),
+        in the worker, the link serviced meanwhile."""
+        return self.pumping(lambda: self._process(frame, commanded, measured, settings), undo=self.rollback)
+
+    def _process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles,
+                 settings: CameraSettings | None) -> FittedView:
         cfg = self.cfg  # a SET while this runs applies from the next frame
         try:
             if self.spec.space is FeatureSpace.PCA and self.pca is None:
@@ -193,17 +259,12 @@ class Pipeline:
         keep = skip.kept_labels(counts, cfg.skip.min_pixels)
         data = feats.data
         stride = skip.subsample_stride(counts, keep, cfg.skip.percentile_precision, data.shape[1])
-        fitter = self.fitter(data.shape[2], feats.levels)
-        fitter.reset()
-        if stride > 1:
-            # A deterministic lattice: every stride-th pixel in row-major order.
-            flat_d = data.reshape(-1, data.shape[2])[::stride]
-            flat_l = labels.reshape(-1)[::stride]
-            fitter.add(flat_d[:, None, :], flat_l[:, None])
-        else:
-            fitter.add(data, labels)
-        results = fitter.fit(min_count=max(1, cfg.skip.min_pixels // stride))
-        results = {k: r for k, r in results.items() if k[0] in keep}
+        results = {k: r for k, r in self.fit_frame(data, labels, feats.levels, stride).items() if k[0] in keep}
+        primary, camera = results, None  # `primary`: the models of this frame's own pixels
+        if settings is not None and self.lock is not None:
+            camera = self.settings_record(settings, data, labels, feats.levels)
+            if cfg.camera.bracket_limit and settings.locked:
+                results, camera = self.bracket(results, camera, labels, stride, feats.levels)
         dropped = tuple(int(i) for i in np.flatnonzero((counts > 0) & (counts < cfg.skip.min_pixels)))
         key = skip.pose_key(commanded)
         same = skip.unchanged(self._previous.get(key), results, cfg.skip.unchanged_tolerance)
@@ -213,24 +274,56 @@ class Pipeline:
         self.pca_pending = False
         dep = None
         if cfg.features.dependence and results and not same:  # a bounded second pass
-            dep = dependence.measure(data, labels, {k: r.model for k, r in results.items()}, feats.levels)
+            dep = dependence.measure(data, labels, {k: r.model for k, r in primary.items()}, feats.levels)
         return FittedView(commanded, measured, feats.band_names, feats.levels, results, dropped,
-                       labels, changed, same, stride, pca, dep)
+                          labels, changed, same, stride, pca, dep, camera)
+
+    def bracket(self, results: dict[tuple[int, int], FittedModel], camera: CaptureSettings, labels: np.ndarray,
+                stride: int, levels: int) -> tuple[dict[tuple[int, int], FittedModel], CaptureSettings]:
+        """`onboard.bracketing` at this pose: shorter frames fitted with this frame's labels."""
+        assert self.lock is not None
+        lock, c = self.lock, self.cfg.camera
+
+        def take(exposure_us: float) -> tuple[dict[tuple[int, int], FittedModel], float] | None:
+            try:
+                granted = self.retry("camera controls", lambda: lock.set_exposure(exposure_us))
+                frame = self.frame()
+                now = self.retry("camera settings", self.hal.camera.settings)
+            except PoseSkipped:
+                return None  # a bracket frame that failed: the first frame's fits stand
+            if not (granted.locked and now.locked) or now.exposure_us is None:
+                return None  # a camera that will not hold a shorter exposure
+            feats = compute(frame, self.spec, self.pca)
+            return self.fit_frame(feats.data, labels, feats.levels, stride), now.exposure_us
+
+        try:
+            return bracketing.bracket(results, camera, levels, c.bracket_limit, c.bracket_max, c.bracket_min_ratio, take)
+        finally:
+            lock.restore()
+
+    def settings_record(self, settings: CameraSettings, data: np.ndarray, labels: np.ndarray,
+                        levels: int) -> CaptureSettings:
+        """The capture's settings, with the reference region's level when one is declared."""
+        assert self.lock is not None
+        record = self.lock.record(settings)
+        ref = self.cfg.camera.reference_label
+        found = reference_level(data, labels, ref, levels) if ref >= 0 else None
+        if found is None:
+            return record
+        return dataclasses.replace(record, reference=found[0], reference_clipped=found[1])
 
     def rollback(self, cap: FittedView) -> None:
         """`cap` could not be queued: the next capture carries what it would have sent."""
         if cap.pca is not None:
             self.pca_pending = True
         if cap.mask_changed:
-            getattr(self.segmenter, "force_send", lambda: None)()
+            self.resend_mask()
         self._previous.pop(skip.pose_key(cap.commanded), None)  # next one sends full MODELS
 
     def capture(self, commanded: ViewAngles, move: bool = True) -> FittedView:
         if move:
             self.move(commanded)
-        measured = self.measure_view()
-        frame = self.frame()
-        return self.process(frame, commanded, measured)
+        return self.shoot(commanded, self.measure_view())
 
 
 def remember(table: dict, key: Any, value: Any, limit: int = MAX_POSES_REMEMBERED) -> None:

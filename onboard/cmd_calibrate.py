@@ -1,9 +1,12 @@
-"""`btf-robot calibrate arm | tracker`: the arm's joint offsets and signs, and the tracker's axis remap.
+"""`btf-robot calibrate arm | tracker | exposure`: the arm's joint offsets and signs, the
+tracker's axis remap, and the exposure a sweep keeps.
 
-Both move the arm and read the tracker. `arm` stores its fit in the state dir
+`arm` and `tracker` move the arm and read the tracker. `arm` stores its fit in the state dir
 (`arm_calibration.json`), which `run` and `selftest --config` apply; `tracker` names the
-BNO055 axis remap to set (`[hal] tracker_remap`). Exit 0 when the result is good, 1 when
-the hardware needs a person (what to do is printed), 2 for bad usage.
+BNO055 axis remap to set (`[hal] tracker_remap`). `exposure` measures the extremes of the
+config's sweep plan and stores the exposure that keeps its brightest view below saturation
+by `[camera] calibrate_margin` (`camera_exposure.json`, which `run` applies). Exit 0 when the
+result is good, 1 when the hardware needs a person (what to do is printed), 2 for bad usage.
 """
 from __future__ import annotations
 
@@ -22,14 +25,17 @@ if TYPE_CHECKING:
 
 
 def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser("calibrate", help="fit the arm's joints to the tracker, or check the tracker's axis remap")
-    p.add_argument("what", choices=("arm", "tracker"))
+    p = sub.add_parser("calibrate", help="fit the arm's joints to the tracker, check the tracker's axis remap, "
+                                         "or choose the sweep's exposure")
+    p.add_argument("what", choices=("arm", "tracker", "exposure"))
     p.add_argument("--hal", choices=("fake", "emulated", "real"), help="device body (default: config or BTF_HAL)")
     p.add_argument("--config", metavar="FILE", help="robot TOML config: its [hal] section and state_dir")
     p.add_argument("--state-dir", metavar="DIR", help="where the arm calibration is kept (default: the config's, "
                                                       "else ./state)")
     p.add_argument("--tracker-remap", metavar="P", help="try this BNO055 remap (P0..P7 or CONFIG/SIGN) instead of "
                                                         "the config's")
+    p.add_argument("--start-exposure", type=float, metavar="US",
+                   help="exposure: the first exposure tried, in microseconds (default: where the camera stands)")
     p.add_argument("--json", action="store_true", help="one JSON object instead of text")
     fake = p.add_argument_group("deliberate faults of the fake and emulated bodies")
     fake.add_argument("--fake-joint-offset", action="append", default=[], metavar="JOINT=DEG",
@@ -69,6 +75,8 @@ def _options(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
 def run(args: argparse.Namespace) -> int:
     from hal.factory import HalConfigError, build_hal
 
+    if args.start_exposure is not None and not (args.start_exposure > 0 and args.start_exposure < float("inf")):
+        raise CliError(f"--start-exposure must be a positive number of microseconds, got {args.start_exposure:g}")
     options, state_dir = _options(args)
     try:
         hal = build_hal(options, state_dir=state_dir)
@@ -81,7 +89,10 @@ def run(args: argparse.Namespace) -> int:
             if not hal.tracker.calibration().ok:
                 _say(args, "calibrate: the tracker reports itself uncalibrated: turn the rig slowly through a "
                            "figure eight until its calibration status is at least 1, then run this again")
-        result = _arm(args, hal, state_dir) if args.what == "arm" else _tracker(args, hal)
+        if args.what == "exposure":
+            result = _exposure(args, hal, state_dir)
+        else:
+            result = _arm(args, hal, state_dir) if args.what == "arm" else _tracker(args, hal)
     except Exception as exc:  # noqa: BLE001 - a device that fails mid-way is one clear line
         print(f"btf-robot calibrate {args.what}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
@@ -152,3 +163,63 @@ def _tracker(args: argparse.Namespace, hal: Hal) -> int:
           "the BNO055 forgets it at power-off), or remount the tracker upright; then run "
           "`btf-robot calibrate tracker` again (try it now with --tracker-remap " + setting + ")")
     return 1
+
+
+def _exposure(args: argparse.Namespace, hal: Hal, state_dir: Path) -> int:
+    from hal.controls import describe
+    from onboard.camera_lock import CameraLock
+    from onboard.config import Config, SweepConfig, load
+    from onboard.exposure_calibration import calibrate_exposure, plan_extremes, save_exposure
+    from onboard.sweep import SweepPlan
+
+    cfg = load(args.config) if args.config else Config()
+    s: SweepConfig = cfg.sweep
+    views = plan_extremes(SweepPlan(s.start, s.stop, s.step, s.azimuths))
+    h, w = hal.size
+    hal.camera.open(w, h)
+    lock = CameraLock(hal.camera, cfg.camera)
+    granted = lock.apply(cfg.camera)
+    if args.start_exposure is not None:
+        granted = lock.set_exposure(args.start_exposure)
+    if not granted.locked:
+        print(f"calibrate exposure: the camera does not hold a manual exposure ({describe(granted)}); lock it "
+              "first (`btf-robot selftest` names what it refuses)", file=sys.stderr)
+        return 1
+    hal.arm.enable()
+
+    def shoot(exposure_us: float) -> tuple[Any, float]:
+        lock.set_exposure(exposure_us)
+        frame = hal.camera.capture()
+        return frame, hal.camera.settings().exposure_us or exposure_us
+
+    report = calibrate_exposure(views, lambda v: hal.arm.move_to(v), shoot, granted.exposure_us or 10_000.0,
+                                cfg.camera.calibrate_margin)
+    stored = None
+    if report.ok:
+        final = lock.set_exposure(report.exposure_us)
+        stored = str(save_exposure(state_dir, report, final.exposure_us or report.exposure_us))
+    return _exposure_said(args, hal, report, stored)
+
+
+def _exposure_said(args: argparse.Namespace, hal: Hal, report: Any, stored: str | None) -> int:
+    if args.json:
+        print(json.dumps({"what": "exposure", "body": hal.body.value, "ok": report.ok, "stored": stored,
+                          "exposure_us": report.exposure_us, "margin": report.margin, "problem": report.problem,
+                          "brightest": None if report.brightest is None else dataclasses.asdict(report.brightest),
+                          "readings": [dataclasses.asdict(r) for r in report.readings]}))
+        return 0 if report.ok else 1
+    print(f"calibrate exposure ({hal.body.value} HAL): the plan's extremes, halving the exposure while more than "
+          "0.1% of a frame clips")
+    for r in report.readings:
+        print(f"  elevation {r.elevation:5.1f} azimuth {r.azimuth:5.1f}: {r.exposure_us:9.0f} us, "
+              f"{100 * r.saturated:5.1f}% saturated, top {r.top:.0f}")
+    if not report.ok:
+        print(f"NOT stored: {report.problem}. On real hardware: close the aperture, add a neutral density filter "
+              "or lower [camera] gain, then run this again.")
+        return 1
+    b = report.brightest
+    print(f"  chosen: {report.exposure_us:.0f} us, the brightest view (elevation {b.elevation:g}, azimuth "
+          f"{b.azimuth:g}) topping at {100 * (1 - report.margin):.0f}% of full scale")
+    print(f"stored in {stored}; `btf-robot run` applies it over [camera] exposure (remove the file to go back to "
+          "the config's)")
+    return 0

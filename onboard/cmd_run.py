@@ -54,6 +54,22 @@ def _setup(args: argparse.Namespace):
     return cfg, key
 
 
+def _calibrated_exposure(cfg):
+    """`cfg` with the exposure `btf-robot calibrate exposure` stored, when there is one."""
+    from onboard.config import CameraValue
+    from onboard.exposure_calibration import EXPOSURE_FILE, load_exposure
+
+    try:
+        stored = load_exposure(cfg.state_dir)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if stored is None:
+        return cfg
+    print(f"btf-robot: camera exposure {stored:g} us from {cfg.state_dir / EXPOSURE_FILE} "
+          "(btf-robot calibrate exposure)", file=sys.stderr)
+    return dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, exposure=CameraValue(repr(stored))))
+
+
 def _open_port(url: str, baud: int):
     from radio.ports import open_url
 
@@ -112,6 +128,7 @@ def run(args: argparse.Namespace) -> int:
         cfg.state_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise RetryLater(f"state_dir {cfg.state_dir}: {exc.strerror}") from None
+    cfg = _calibrated_exposure(cfg)
     try:
         hal = build_hal(cfg.hal, state_dir=cfg.state_dir)  # with the arm calibration stored there
     except HalError as exc:

@@ -13,8 +13,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hal.controls import describe
-from hal.interfaces import CameraControls, Hal, ViewAngles, view_from_orientation
+from hal.controls import describe, hold
+from hal.interfaces import Hal, ViewAngles, view_from_orientation
 from onboard.cli_runner import CliError
 
 POSES = (ViewAngles(60.0, 0.0), ViewAngles(90.0, 0.0))
@@ -23,8 +23,6 @@ SERVO_NUDGE_DEG = 5.0
 TRACKER_TOLERANCE_DEG = 3.0
 SETTLE_TIMEOUT_S = 10.0
 LOCK_FRAMES = 3  # frames the exposure lock must survive
-# Where a camera that does not report a control is asked to lock it.
-FALLBACK_LOCK = CameraControls(exposure_us=10_000.0, gain=1.0, white_balance_kelvin=5000.0)
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,11 +157,7 @@ def _camera(hal: Hal) -> str:
     h, w = hal.size
     cam.open(w, h)
     try:
-        now = cam.settings()
-        lock = CameraControls(now.exposure_us or FALLBACK_LOCK.exposure_us,
-                              FALLBACK_LOCK.gain if now.gain is None else now.gain,
-                              now.white_balance_kelvin or FALLBACK_LOCK.white_balance_kelvin)
-        granted = cam.set_controls(lock)
+        granted = cam.set_controls(hold(cam.settings()))
         frames = [cam.capture() for _ in range(LOCK_FRAMES)]
         held = cam.settings()
     finally:

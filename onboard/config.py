@@ -17,6 +17,10 @@ from typing import Any, Mapping
 
 from onboard.sweep import SweepPlan
 
+# A camera control: a number, "auto" (the camera's automatic) or "hold" (locked at what the
+# camera stands at when the robot starts). TOML gives it as a number or a string.
+CameraValue = typing.NewType("CameraValue", str)
+
 
 class ConfigError(ValueError):
     """The configuration cannot be used; the message is one line naming the problem."""
@@ -35,6 +39,7 @@ class HalConfig:
     camera: str = ""  # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0
     seed: int = 0
     tracker_remap: str = ""  # BNO055 axis remap, P0..P7 or "0x24/0x03"; `btf-robot calibrate tracker` names it
+    reference: bool = False  # fake and emulated scenes: lay the grey reference card (label 7) in the plate
 
 
 @dataclass(frozen=True, slots=True)
@@ -102,6 +107,19 @@ class SkipConfig:
 
 
 @dataclass(frozen=True, slots=True)
+class CameraConfig:
+    exposure: CameraValue = CameraValue("hold")  # µs
+    gain: CameraValue = CameraValue("hold")  # a multiple (picamera2, fakes) or the V4L2 driver's units
+    white_balance: CameraValue = CameraValue("hold")  # "5500K" or "RED,BLUE" gains
+    allow_auto: bool = False  # measure even when the camera does not hold the lock (captures flagged)
+    reference_label: int = -1  # the mask label of the grey reference card; -1: none
+    bracket_limit: float = 0.0  # a region censored past this share gets a shorter exposure; 0: never
+    bracket_max: int = 2  # shorter exposures per capture
+    bracket_min_ratio: float = 0.0625  # the shortest bracket, as a share of the capture's exposure
+    calibrate_margin: float = 0.15  # calibrate exposure: the brightest view's top level below (1 - margin) of full
+
+
+@dataclass(frozen=True, slots=True)
 class Config:
     robot_id: int = 1
     state_dir: Path = Path("state")
@@ -114,6 +132,7 @@ class Config:
     features: FeatureConfig = field(default_factory=FeatureConfig)
     segment: SegmentConfig = field(default_factory=SegmentConfig)
     skip: SkipConfig = field(default_factory=SkipConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
     source: Path | None = None
 
 
@@ -124,6 +143,7 @@ _SECTIONS: dict[str, type] = {
     "features": FeatureConfig,
     "segment": SegmentConfig,
     "skip": SkipConfig,
+    "camera": CameraConfig,
 }
 
 
@@ -177,6 +197,10 @@ def _convert(name: str, value: Any, kind: Any, base: Path) -> Any:
         if not math.isfinite(value):
             raise ConfigError(f"{name} must be finite, got {value!r}")
         return float(value)
+    if kind is CameraValue and isinstance(value, (int, float)) and not isinstance(value, bool):
+        if not math.isfinite(value):
+            raise ConfigError(f"{name} must be finite, got {value!r}")
+        return CameraValue(str(value))
     if not isinstance(value, str):
         raise ConfigError(f"{name} must be a string, got {value!r}")
     if kind is Path:
@@ -275,6 +299,34 @@ def check(cfg: Config) -> None:
         raise ConfigError("outbox_quota_bytes must be at least 4096")
     if cfg.disk_min_free_bytes < 0 or cfg.disk_reserve_bytes < 0:
         raise ConfigError("disk_min_free_bytes and disk_reserve_bytes must not be negative")
+    check_camera(cfg)
+
+
+def check_camera(cfg: Config) -> None:
+    from btf.capture_settings import LINEAR_SPACES, MAX_BRACKETS
+    from onboard.camera_lock import requested
+
+    c = cfg.camera
+    try:
+        requested(c, None)
+    except ValueError as exc:
+        raise ConfigError(f"[camera]: {exc}") from None
+    if not 0.0 <= c.bracket_limit < 1.0:
+        raise ConfigError(f"camera.bracket_limit must lie in [0, 1), got {c.bracket_limit}")
+    if not 1 <= c.bracket_max <= MAX_BRACKETS or not 0.0 < c.bracket_min_ratio < 1.0:
+        raise ConfigError(f"camera.bracket_max must lie in [1, {MAX_BRACKETS}] and camera.bracket_min_ratio "
+                          "in (0, 1)")
+    if c.bracket_limit and cfg.features.space not in LINEAR_SPACES:
+        raise ConfigError(f"camera.bracket_limit needs features.space {' or '.join(LINEAR_SPACES)} (levels that "
+                          f"scale with exposure), got {cfg.features.space}")
+    if not 0.0 <= c.calibrate_margin < 1.0:
+        raise ConfigError(f"camera.calibrate_margin must lie in [0, 1), got {c.calibrate_margin}")
+    if c.reference_label >= 0 and cfg.segment.method == "isodata":
+        raise ConfigError("camera.reference_label needs segment.method = 'mask' or 'scene' (a label that means "
+                          "the card; ISODATA's classes do not)")
+    if not -1 <= c.reference_label < cfg.segment.n_labels:
+        raise ConfigError(f"camera.reference_label must be -1 (none) or a label below segment.n_labels, "
+                          f"got {c.reference_label}")
 
 
 def with_value(cfg: Config, dotted: str, value: Any) -> Config:

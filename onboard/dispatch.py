@@ -34,6 +34,8 @@ C = CommandName
 SETTABLE = {
     "sweep": ("start", "stop", "step", "azimuths", "settle_timeout_s", "retries", "pose_tolerance_deg"),
     "skip": ("min_pixels", "percentile_precision", "unchanged_tolerance", "skip_measured_pose"),
+    "camera": ("exposure", "gain", "white_balance", "allow_auto", "reference_label", "bracket_limit",
+               "bracket_max", "bracket_min_ratio", "calibrate_margin"),
 }
 
 
@@ -168,7 +170,7 @@ class Dispatcher:
         rt = self.rt
         with rt.state.arm_work():
             measured = rt.pipeline.measure_view()
-            cap = rt.pipeline.process(rt.pipeline.frame(), measured, measured)
+            cap = rt.pipeline.shoot(measured, measured)
         seq, effect.packets, effect.state = rt.captures.packets(cap)
         effect.reserve = rt.sweep.reserve
         effect.done = lambda: rt.captures.filed(cap, seq)
@@ -195,7 +197,15 @@ class Dispatcher:
         return {"aborted": True}
 
     def set(self, args: dict, effect: Effect) -> Result:
+        camera = str(args["key"]).startswith("camera.") and self.rt.pipeline.lock is not None
+        if camera and self.rt.state.busy:  # the pose's frames are being taken, in the worker
+            return Refusal(pk.Reason.BUSY, "busy: the camera is taking a pose's frames; send it again")
         self.set_keys({args["key"]: args["value"]})
+        if camera:
+            from hal.controls import describe
+
+            granted = self.rt.pipeline.lock_camera()  # now, so the answer says what the camera took
+            return {"set": args["key"], "camera": describe(granted), "locked": granted.locked}
         return {"set": args["key"]}
 
     def torque_off(self, args: dict, effect: Effect) -> Result:

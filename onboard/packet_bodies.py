@@ -61,7 +61,7 @@ def models_body(robot_id: int, seq: int, now: float, space: str, cap: FittedView
     body = pk.encode_models(cap.results, robot_id=robot_id, seq=seq, time=now,
                             commanded=_pose(cap.commanded), measured=_pose(cap.measured),
                             feature_space=space, bands=cap.band_names, levels=cap.levels,
-                            extras=extras, dependence=cap.dependence)
+                            extras=extras, dependence=cap.dependence, camera=cap.camera)
     return int(pk.Kind.MODELS), body
 
 

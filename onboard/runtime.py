@@ -87,7 +87,8 @@ class Runtime:
                                                        cfg.disk_reserve_bytes)
         self.outbox.on_full = lambda: self.disk.write_failed("a write found the disk full")
         self.notifier = notifier if notifier is not None else Notifier(address="")
-        self.pipeline = Pipeline(cfg, hal, segmenter, pump=self._pump, sleep=sleep)
+        self.pipeline = Pipeline(cfg, hal, segmenter, pump=self._pump, sleep=sleep,
+                                 resend_mask=segmenter.force_send)
         self.pipeline.pca = read_pca(self.outbox.state(PCA_KEY), cfg.state_dir / "pca.json")
         self.link = LinkService(transport, self.outbox, self.state, on_ack=self._room_freed)
         self.captures = Captures(self.state, self.outbox, wall)
@@ -172,12 +173,28 @@ class Runtime:
         except PoseSkipped as exc:
             self.state.errors.append(exc.reason)
         self.watch_disk()
-        extras = {"mode": self.mode.value}
+        camera = self.lock_camera()
+        extras = {"mode": self.mode.value, "camera": camera}
         if self.cfg.sweep.autostart or self.sweep.new_sweep:
             boot = self.sweep.autostart()
-            extras = {"mode": self.mode.value, "sweep": self.progress.sweep_id, "sweep_state": boot.value}
+            extras.update(mode=self.mode.value, sweep=self.progress.sweep_id, sweep_state=boot.value)
         self.notifier.ready(f"btf-robot running: {self.mode.value}")
         self.status.send("boot", extras)
+
+    def lock_camera(self) -> str:
+        """Lock the camera as `[camera]` says; one line for STATUS, with why it will not measure."""
+        from hal.controls import describe
+
+        try:
+            granted = self.pipeline.lock_camera()
+        except PoseSkipped as exc:
+            self.state.errors.append(exc.reason)
+            return exc.reason
+        why = self.pipeline.lock.refusal(granted) if self.pipeline.lock is not None else ""
+        if why:
+            self.state.errors.append(why)
+            self.notifier.status(why)
+        return why or describe(granted)
 
     def step(self) -> str:
         """One turn of the loop; what the sweep did ("" when nothing). Never raises."""

@@ -97,7 +97,7 @@ class SweepControl:
         if cfg.skip.skip_measured_pose and p.already_measured(measured, cfg.sweep.pose_tolerance_deg):
             raise PoseSkipped(f"already measured in this sweep (measured {measured.elevation:.1f}°, "
                               f"{measured.azimuth:.1f}°)")
-        return self.pipeline.process(self.pipeline.frame(), commanded, measured)
+        return self.pipeline.shoot(commanded, measured)
 
     def _file(self, p: SweepProgress, nxt: SweepProgress, cap: FittedView | None, reason: str) -> str:
         """Commit the pose's packets (or its skip) with the progress past it."""

@@ -17,12 +17,14 @@ The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
   angles   >hHhH commanded and measured (elevation, azimuth)
   levels   >H levels - 1
   labels   one byte: nb (0..32) in the low 6 bits, bit 7 set when a dependence section
-           follows the codes, bit 6 zero; an nb-byte bitmap of the label ids present (bit i of
-           byte j: label 8j + i; the last byte non-zero), then per label, in id order, the
-           varint (LEB128) of count * 16 + z index
+           follows the codes, bit 6 when a camera section does; an nb-byte bitmap of the
+           label ids present (bit i of byte j: label 8j + i; the last byte non-zero), then per
+           label, in id order, the varint (LEB128) of count * 16 + z index
   codes    per label, per band, four codes (>H up to 256 levels, else >I)
   dependence  when flagged: per label, its grain and band correlation in int8
            (`radio.packet_dependence`, 11 bytes per RGB label); never flagged empty
+  camera   when flagged: the capture's camera settings, reference level and brackets
+           (`radio.packet_camera`, 10 bytes for a locked capture without either)
   records  (`radio.packet_records`) absent when every model is plain; else 2 bits per model (model i at bits 2(i%4) of
            byte i//4): 0 plain, 1 a read byte, 2 never, 3 a flagged record; then, for each
            non-plain model in order, for 1 the read byte (bits 0-3 z index, bits 4-5 the
@@ -45,6 +47,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from btf.capture_settings import CaptureSettings
 from btf.codec import SHIFT_SCALE, Z_LADDER, PercentileCodec
 from btf.dependence import Dependence
 from btf.johnson import Johnson
@@ -66,6 +69,7 @@ from radio.packet_base import (
     want_int,
     want_str,
 )
+from radio.packet_camera import decode_camera, encode_camera
 from radio.packet_dependence import decode_dependence, encode_dependence, quantized, section_size
 from radio.packet_records import Tail, censor_code, read_tails, tail_bytes, tail_of
 from radio.varint import get_varint, put_varint
@@ -73,6 +77,7 @@ from radio.varint import get_varint, put_varint
 _HEAD = struct.Struct(">hHhHH")  # angles, levels - 1
 _Z_BITS = 4  # z index in the low bits of a label's count varint
 _HAS_DEPENDENCE = 0x80  # in the bitmap length byte
+_HAS_CAMERA = 0x40
 _NB_MASK = 0x3F
 
 
@@ -120,6 +125,7 @@ class ModelsPacket:
     extras: Mapping[str, Any] = field(default_factory=dict)
     # Grain and band correlation per label id, for some or all labels (empty: none measured).
     dependence: Mapping[int, Dependence] = field(default_factory=dict)
+    camera: CaptureSettings | None = None  # what the capture was taken with (None: not sent)
     # Filled by decode: (label, band index) -> the record, its model recomputed from the codes.
     fits: Mapping[tuple[int, int], FittedModel] = field(default_factory=dict, compare=False, repr=False)
 
@@ -144,7 +150,8 @@ class ModelsPacket:
         bitmap = bytearray(ids[-1] // 8 + 1 if ids else 0)
         for a in ids:
             bitmap[a // 8] |= 1 << (a % 8)
-        out.append(len(bitmap) | (_HAS_DEPENDENCE if self.dependence else 0))
+        out.append(len(bitmap) | (_HAS_DEPENDENCE if self.dependence else 0)
+                   | (_HAS_CAMERA if self.camera is not None else 0))
         out += bitmap
         for x in self.labels:
             if not (0 <= x.count <= MAX_FRAME_PIXELS and 0 <= x.z_index < len(Z_LADDER)):
@@ -159,6 +166,8 @@ class ModelsPacket:
         out += codes.astype(dtype).tobytes()
         if self.dependence:
             out += encode_dependence(self.dependence, ids, len(self.bands))
+        if self.camera is not None:
+            out += encode_camera(self.camera, len(self.bands), codec, ids)
         entries = [tail_bytes(t, lab.z_index) for lab in self.labels
                    for t in (lab.tails + (None,) * len(self.bands))[:len(self.bands)]]
         if any(c for c, _ in entries):
@@ -187,6 +196,7 @@ class ModelsPacket:
         levels = want_int(levels + 1, "levels", MIN_LEVELS, MAX_LEVELS)
         codec = PercentileCodec.for_levels(levels)
         has_dependence = bool(blob[_HEAD.size] & _HAS_DEPENDENCE)
+        has_camera = bool(blob[_HEAD.size] & _HAS_CAMERA)
         ids, pos = _label_ids(blob, _HEAD.size)
         heads = []
         for label in ids:
@@ -216,11 +226,14 @@ class ModelsPacket:
             if not dependence:
                 raise FrameError("dependence section flagged but no label has a measurement")
             pos = end
+        camera = None
+        if has_camera:
+            camera, pos = decode_camera(blob, pos, n_bands, codec, ids)
         tails = read_tails(blob, pos, [z for _, _, z in heads], n_bands)
         records = tuple(
             LabelModels(label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]), tails[i])
             for i, (label, count, z_index) in enumerate(heads))
-        packet = cls(robot, seq, t, commanded, measured, space, bands, levels, records, extras, dependence)
+        packet = cls(robot, seq, t, commanded, measured, space, bands, levels, records, extras, dependence, camera)
         if compute:
             object.__setattr__(packet, "fits", _recompute(packet, codec))
         return packet
@@ -233,9 +246,11 @@ def models_packet(
     censored: Mapping[int, tuple[float, float]] | None = None,
     extras: Mapping[str, Any] | None = None,
     dependence: Mapping[int, Dependence] | None = None,
+    camera: CaptureSettings | None = None,
 ) -> ModelsPacket:
     """Build a MODELS packet from the fitter's results keyed by (label, band index);
-    `dependence` (per label, optional) is stored as the host will receive it (int8 steps)."""
+    `dependence` (per label, optional) is stored as the host will receive it (int8 steps);
+    `camera` is what the capture was taken with."""
     codec = PercentileCodec.for_levels(levels)
     censored = censored or {}
     stray = set(censored) - {lab for lab, _ in fits}
@@ -268,7 +283,7 @@ def models_packet(
     return ModelsPacket(
         robot_id, seq, time, tuple(commanded), tuple(measured), feature_space, tuple(bands),
         levels, tuple(records), dict(extras or {}),
-        quantized(dependence, ids, len(bands)) if dependence else {},
+        quantized(dependence, ids, len(bands)) if dependence else {}, camera,
     )
 
 
@@ -277,8 +292,6 @@ def _special(r: FittedModel) -> bool:
 
 
 def _label_ids(blob: bytes, pos: int) -> tuple[list[int], int]:
-    if blob[pos] & ~(_NB_MASK | _HAS_DEPENDENCE):
-        raise FrameError(f"label bitmap length byte {blob[pos]:#x} has a reserved bit set")
     nb = blob[pos] & _NB_MASK
     pos += 1
     if nb > MAX_LABELS // 8 or pos + nb > len(blob) or (nb and not blob[pos + nb - 1]):

@@ -141,7 +141,6 @@ def test_a_gamma_tailed_frame_of_8_labels_by_3_bands_fits_in_300_bytes():
     fitter = FrameFitter(8, 3)
     fitter.add(frame, labels)
     fits = fitter.fit()
-    assert sum(1 for f in fits.values() if f.shift or f.z != fits[(0, 0)].z) >= 2
     assert any(f.censored_high for f in fits.values())
     body = encode_models(fits, bands=("R", "G", "B"), **MAX_HEADER)
     assert len(body) <= 300, len(body)
@@ -358,7 +357,7 @@ BAD = {
     "which no record uses": _blob(lambda b: None, b"\x02\x00\x00"),
     "after its records": _blob(lambda b: None, b"\x01\x00\x07\x07"),
     "extras": _raw(*_models_fields(), [1, 2]),
-    "reserved bit": _blob(lambda b: b.__setitem__(10, b[10] | 0x40)),
+    "camera section ends inside its flags": _blob(lambda b: b.__setitem__(10, b[10] | 0x40)),
     "dependence section has 0 bytes": _blob(lambda b: b.__setitem__(10, b[10] | 0x80)),
     "no label has a measurement": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80" * 22),
     "dependence code -128": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80" + b"\x00" * 21),

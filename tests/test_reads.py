@@ -121,10 +121,11 @@ def test_censored_regions_still_compare_their_placement_and_fallback():
 def test_the_choice_travels_and_the_host_rebuilds_the_same_models():
     rng = np.random.default_rng(5)
     fits = {}
-    for lab, (a, scale) in enumerate([(1.2, 9), (3, 5), (9, 3)]):
-        v = np.clip(np.rint(rng.gamma(a, scale, 30_000) + 10 * lab), 0, 255).astype(np.int64)
+    for lab, tail in enumerate((0, 8_000, 20_000)):  # a skewed bulk, with a tail or without
+        v = np.concatenate([rng.gamma(1.5, 6, 60_000), 60 + rng.normal(0, 12, tail)]) + 30 + 10 * lab
         for band in range(3):
-            fits[(lab, band)] = fit_histogram(np.bincount(np.roll(v, band), minlength=256))
+            h = np.bincount(np.clip(np.rint(v + 5 * band), 0, 255).astype(np.int64), minlength=256)
+            fits[(lab, band)] = fit_histogram(h)
     assert len({(f.z, f.shift) for f in fits.values()}) > 1
     packet = decode(encode_models(fits, bands=("R", "G", "B"), **HEADER))
     for key, fit in fits.items():
@@ -136,7 +137,7 @@ def _read(fit, z: float, shift: float):
     counts = expected_histogram(Johnson.normal(100, 10), fit.count)
     pct = default_codec(0.0, 1.0, 256).snap(histogram_percentiles(counts, percentile_probs(z, shift)))
     return dataclasses.replace(fit, model=model_from_percentiles(pct, z, fit.count, shift=shift), z=z,
-                               percentiles=pct, shift=shift)
+                               percentiles=pct, shift=shift, exact_family=False)
 
 
 def test_a_read_byte_costs_one_byte():
@@ -181,3 +182,17 @@ def test_the_ranking_cdf_is_accurate_to_3e_7():
     z = np.linspace(-40, 40, 20001)
     exact = np.asarray(Johnson.normal(0.0, 1.0).cdf(z))
     assert np.max(np.abs(phi(z.astype(np.float32)) - exact)) < 3e-7
+
+
+def test_a_small_region_keeps_the_plain_read_rather_than_chase_counting_noise():
+    # 150 pixels of an SU: without the noise margin the other reads fit each draw's noise and
+    # the mean quantile error against the true curve grows from 1.66 to 1.88 gray (60 draws)
+    truth = Johnson(Family.SU, 0.5, 1.5, 100.0, 20.0)
+    u = np.linspace(0.02, 0.98, 49)
+    ours, plain = [], []
+    for seed in range(60):
+        x = truth.sample(150, np.random.default_rng(seed), dtype=np.float64)
+        h = np.bincount(np.clip(np.rint(x), 0, 255).astype(int), minlength=256)
+        ours.append(np.mean(np.abs(fit_histogram(h).model.ppf(u) - truth.ppf(u))))
+        plain.append(np.mean(np.abs(plain_fit(h).ppf(u) - truth.ppf(u))))
+    assert np.mean(ours) <= 1.02 * np.mean(plain)

@@ -70,10 +70,10 @@ def test_an_unforeseen_fault_skips_the_pose_with_its_reason_and_the_sweep_goes_o
     rt, tr = make(fake_robot, "black", extra=PLAN3)
     real = rt.pipeline.process
 
-    def broken_once(frame, commanded, measured):
+    def broken_once(frame, commanded, measured, *settings):
         if commanded.elevation == 80.0:
             raise RuntimeError("fitter state corrupt")
-        return real(frame, commanded, measured)
+        return real(frame, commanded, measured, *settings)
 
     rt.pipeline.process = broken_once
     sweep(rt)

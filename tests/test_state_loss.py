@@ -132,18 +132,18 @@ def test_a_bit_rotted_outbox_is_moved_aside_and_the_robot_runs_on_a_new_one(tmp_
     damaged.close()
 
 
-def test_a_schema_6_database_keeps_every_row_and_its_models_when_captures_gain_incarnations(tmp_path):
-    """Schema 7 rebuilds the captures table (a UNIQUE constraint changes only so); with foreign
+def test_a_schema_7_database_keeps_every_row_and_its_models_when_captures_gain_incarnations(tmp_path):
+    """Schema 8 rebuilds the captures table (a UNIQUE constraint changes only so); with foreign
     keys on, dropping the old table would have cascaded to every model."""
     from tests.test_ingest import _SCHEMA_1
     from tools.store_schema import _MIGRATIONS, APPLICATION_ID
 
-    db = tmp_path / "v6.sqlite"
+    db = tmp_path / "v7.sqlite"
     con = sqlite3.connect(db)
-    con.executescript(_SCHEMA_1 + "".join(_MIGRATIONS[v] for v in range(1, 6))
-                      + f"PRAGMA user_version = 6; PRAGMA application_id = {APPLICATION_ID};")
+    con.executescript(_SCHEMA_1 + "".join(_MIGRATIONS[v] for v in range(1, 7))
+                      + f"PRAGMA user_version = 7; PRAGMA application_id = {APPLICATION_ID};")
     con.close()
-    with Store.open(tmp_path / "new.sqlite") as fresh:  # the rows a version-6 host wrote
+    with Store.open(tmp_path / "new.sqlite") as fresh:  # the rows a version-7 host wrote
         Receiver(fresh).handle(models_body(4)[0])
         rows = fresh._conn.execute("SELECT * FROM models").fetchall()
     con = sqlite3.connect(db)

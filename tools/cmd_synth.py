@@ -32,6 +32,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     add_source_filters(p)
     p.add_argument("--independent", action="store_true",
                    help="draw every pixel on its own even when grain and band correlation are stored")
+    p.add_argument("--exposure", type=float, metavar="US",
+                   help="synthesize as if every capture had been taken at this exposure, in microseconds "
+                        "(--db, rgb or gray; default: each capture's own)")
+    p.add_argument("--normalise-reference", action="store_true",
+                   help="scale each capture so its reference card's level is the sweep's median (takes out "
+                        "drift of the light between captures; --db, rgb or gray)")
     return p
 
 
@@ -88,6 +94,47 @@ def _source(store, args: argparse.Namespace) -> dict:
     return {"robot": robot, "scene": scene, "space": space}
 
 
+def _radiometry(args: argparse.Namespace, space: str) -> bool:
+    """Whether --exposure or --normalise-reference asks for anything (checked for this space)."""
+    import math
+
+    asked = args.exposure is not None or args.normalise_reference
+    if not asked:
+        return False
+    if args.exposure is not None and not (math.isfinite(args.exposure) and args.exposure > 0):
+        raise CliError(f"--exposure must be a positive number of microseconds, got {args.exposure:g}")
+    if not args.db:
+        raise CliError("--exposure and --normalise-reference need --db (a models document carries no camera settings)")
+    from tools.radiometry import check_space
+
+    try:
+        check_space(space, "--exposure and --normalise-reference")
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    return True
+
+
+def _load_models(store, source: dict, args: argparse.Namespace, direction=None) -> dict:
+    """Models by angle (or by direction), each capture's radiometry applied; warnings printed."""
+    from tools.interp import models_by_direction
+    from tools.radiometry import sweep_models
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            if direction is not None:
+                found = models_by_direction(store, **source, exposure_us=args.exposure,
+                                            normalise=args.normalise_reference)
+            elif _radiometry(args, source["space"]):
+                found = sweep_models(store, store.latest_by_angle(**source), args.exposure, args.normalise_reference)
+            else:
+                found = store.models_by_angle(**source)
+        except ValueError as exc:
+            raise CliError(f"database {args.db}: {exc}") from None
+    _warn(caught)
+    return found
+
+
 def _open_db(path: str):
     from tools.store import CorruptDatabase, Store
 
@@ -131,7 +178,7 @@ def _run_direction(args: argparse.Namespace, direction) -> int:
     """Several angles: barycentric quantile blending over the stored directions (tools.interp)."""
     import numpy as np
 
-    from tools.interp import models_by_direction, synthesize_at_direction
+    from tools.interp import synthesize_at_direction
     from tools.synth import ExtrapolationWarning, MissingModels
 
     if not args.db:
@@ -140,7 +187,8 @@ def _run_direction(args: argparse.Namespace, direction) -> int:
         raise CliError("synth --db: pca bases are not stored yet; use --model from `fit --json`")
     with _open_db(args.db) as store:
         source = _source(store, args)
-        by_direction = models_by_direction(store, **source)
+        _radiometry(args, source["space"])
+        by_direction = _load_models(store, source, args, direction)
         levels = store.levels(**source)
     _check_depth(args.out, levels)
     mask = _read_mask(args.mask)
@@ -189,13 +237,14 @@ def run(args: argparse.Namespace) -> int:
         with _open_db(args.db) as store:
             source = _source(store, args)
             space = source["space"]
-            by_angle = store.models_by_angle(**source)
+            by_angle = _load_models(store, source, args)
             levels = store.levels(**source)
             if not args.independent:
                 dependence = store.dependence_by_angle(**source)
             if space == "pca":
                 pca = _stored_basis(store.pca_by_angle(**source), args.db)
     else:
+        _radiometry(args, "rgb")  # refuses --exposure and --normalise-reference without --db
         by_angle, found, space, levels, pca_rec = _from_json(args.model)
         if not args.independent:
             dependence = found

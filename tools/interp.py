@@ -177,8 +177,12 @@ class DirectionInterpolator:
 
 
 def models_by_direction(store, robot: str | None = None, space: str | None = None,
-                        scene: str | None = None) -> dict[Direction, dict[tuple[int, int], Johnson]]:
-    """For every measured direction in a Store, the models of its latest capture."""
+                        scene: str | None = None, exposure_us: float | None = None,
+                        normalise: bool = False) -> dict[Direction, dict[tuple[int, int], Johnson]]:
+    """For every measured direction in a Store, the models of its latest capture, at its
+    exposure or as `tools.radiometry.sweep_models` brings them to `exposure_us` or normalises them."""
+    from tools.radiometry import sweep_models
+
     latest: dict[Direction, object] = {}
     for c in store.captures(robot, space, scene):
         lel, laz = c.illumination
@@ -186,7 +190,7 @@ def models_by_direction(store, robot: str | None = None, space: str | None = Non
                       None if lel is None else round(lel, 6), None if laz is None else round(laz % 360.0, 6))
         if d not in latest or c.id > latest[d].id:
             latest[d] = c
-    return {d: {k: m.model for k, m in store.models(c.id).items()} for d, c in latest.items()}
+    return sweep_models(store, latest, exposure_us, normalise)
 
 
 def synthesize_blend(mask: np.ndarray, neighbours: Sequence[tuple[float, Models]],

@@ -29,6 +29,7 @@ from radio import FrameError
 from radio import packet as pk
 from radio.link import Delivered, LinkDown, LinkStats, LinkUp, PeerStale
 from radio.pump import LinkPump
+from tools.radiometry import settings_json
 from tools.store import CorruptDatabase, Store
 
 HOST_NODE, ROBOT_NODE, LINK_ID = 2, 1, 1
@@ -112,7 +113,7 @@ def packet_json(p: Any) -> dict:
                        {"label": lab, "band": b, "family": m.family.value, "gamma": m.gamma,
                         "delta": m.delta, "xi": m.xi, "lam": m.lam}
                        for (lab, b), m in sorted(p.models.items())],
-                   counts={str(r.label): r.count for r in p.labels})
+                   counts={str(r.label): r.count for r in p.labels}, camera=settings_json(p.camera))
     elif isinstance(p, pk.MaskPacket):
         out.update(robot=p.robot_id, seq=p.seq, frame_shape=list(p.frame_shape), shape=list(p.shape),
                    labels=sorted(int(v) for v in set(p.values)))
@@ -197,7 +198,10 @@ class Receiver:
             notes.append(f"PCA basis rejected: {exc}")
         new = self.store.add_capture(str(p.robot_id), p.seq, p.time, p.commanded, p.measured,
                                      p.feature_space, p.bands, fits, scene=self.scene,
-                                     dependence=dependence, pca=pca, levels=p.levels, incarnation=incarnation)
+                                     dependence=dependence, pca=pca, levels=p.levels, camera=p.camera,
+                                     incarnation=incarnation)
+        if p.camera is not None and p.camera.unlocked:
+            notes.append("taken with the camera NOT locked")
         extra = "".join(f"; {n}" for n in notes)
         return Item(ItemKind.CAPTURE, p.robot_id, p.seq, new,
                     f"capture at {p.measured[0]:.1f}° ({len(p.labels)} regions, {len(p.bands)} bands"
@@ -214,7 +218,7 @@ class Receiver:
         new = self.store.add_capture(str(p.robot_id), p.seq, p.time, p.commanded, p.measured,
                                      ref.space, ref.band_names, fits, scene=ref.scene,
                                      dependence=self.store.dependence(ref.id), pca=basis, levels=ref.levels,
-                                     incarnation=incarnation)
+                                     camera=ref.camera, incarnation=incarnation)
         return Item(ItemKind.UNCHANGED, p.robot_id, p.seq, new,
                     f"unchanged at {p.measured[0]:.1f}°: models of capture {p.ref_seq}", p)
 

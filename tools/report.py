@@ -14,6 +14,8 @@ import numpy as np
 
 from tools.grid import Grid
 from tools.images import stretched_8bit, write_image
+from tools.radiometry import adjusted
+from tools.radiometry import describe as describe_camera
 from tools.receiver import mask_key
 from tools.store import Store, StoredCapture
 from tools.synth import MissingModels, synthesize
@@ -136,22 +138,27 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
              f"<h1>btfscout report: {html.escape(store.path.name)}"
              + (f" ({html.escape(chosen)})" if chosen else "") + "</h1>",
              "<h2>Captures per angle</h2>",
-             _table(["scene", "robot", "seq", "commanded", "measured", "space", "models"],
+             _table(["scene", "robot", "seq", "commanded", "measured", "space", "models", "camera"],
                     [[c.scene, c.robot, c.sequence, "" if c.commanded[0] is None else f"{c.commanded[0]:.1f}",
-                      f"{c.measured[0]:.2f}", c.space, len(store.models(c.id))] for c in caps])]
+                      f"{c.measured[0]:.2f}", c.space, len(store.models(c.id)), describe_camera(c.camera)]
+                     for c in caps])]
     rows = []
     for c in caps:
         for (label, band), m in store.models(c.id).items():
             j = m.model
+            fitted_at = c.camera.exposure_of(label) if c.camera is not None else None
             rows.append([c.scene, f"{c.elevation:.1f}", label, c.band_names[band] if band < len(c.band_names)
-                         else band, j.family.value, j.gamma, j.delta, j.xi, j.lam, m.count])
+                         else band, j.family.value, j.gamma, j.delta, j.xi, j.lam, m.count,
+                         "" if fitted_at is None else f"{fitted_at:g}"])
     parts += ["<h2>Models</h2>", _table(["scene", "angle", "label", "band", "family", "gamma", "delta",
-                                         "xi", "lambda", "pixels"], rows) if rows else _note("No models stored.")]
+                                         "xi", "lambda", "pixels", "fitted at (us)"], rows)
+              if rows else _note("No models stored.")]
     parts.append("<h2>Synthetic beside measured</h2>")
     shown, unmasked = len(parts), 0
     for c in tqdm(caps, desc="report", unit="capture", disable=not progress):
         mask = capture_mask(store, c)
-        models = {k: m.model for k, m in store.models(c.id).items()}
+        # each region at the capture's exposure (a bracketed region's models scaled back)
+        models = dict(adjusted({k: m.model for k, m in store.models(c.id).items()}, c.camera))
         unmasked += mask is None
         if mask is None or not models:
             continue

@@ -17,12 +17,13 @@ from typing import Any, Iterable, Iterator, Mapping
 
 import numpy as np
 
+from btf.capture_settings import CaptureSettings
 from btf.dependence import Dependence
 from btf.johnson import Johnson
 from btf.record import FittedModel
 from onboard.features import PcaBasis
 from tools.images import decode_png, encode_png
-from tools.store_rows import StoredCapture, capture_from_row, mask_png, model_from_row
+from tools.store_rows import CAMERA_COLUMNS, StoredCapture, capture_from_row, mask_png, model_from_row
 from tools.store_schema import SCHEMA_VERSION, CorruptDatabase, StoreUnavailable, connect
 
 __all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "SCHEMA_VERSION"]
@@ -125,13 +126,15 @@ class Store:
         dependence: Mapping[int, Dependence] | None = None,
         pca: PcaBasis | None = None,
         levels: int = 256,
+        camera: CaptureSettings | None = None,
         incarnation: str = "",
     ) -> bool:
         """Stores one capture with its models; False if (robot, incarnation, sequence) was already
         there (`incarnation`: the robot state's id its link session named, "" for none).
         `illumination` is the light's (elevation, azimuth) when known; `source` the image file;
         `pca` the basis the capture arrived with (later captures of the robot inherit it);
-        `levels` the sensor's levels (256 for 8-bit pixels, 65536 for 16-bit)."""
+        `levels` the sensor's levels (256 for 8-bit pixels, 65536 for 16-bit); `camera` what it
+        was taken with."""
         if type(levels) is not int or not 2 <= levels <= 65536:
             raise ValueError(f"levels {levels!r}: expected an integer in 2..65536")
         cmd = _angles(commanded)
@@ -177,8 +180,18 @@ class Store:
             if pca is not None:
                 self._conn.execute("INSERT INTO pca_bases (capture, record) VALUES (?, ?)",
                                    (cid, json.dumps(pca.to_record())))
+            if camera is not None:
+                self._add_camera(cid, camera)
             stored = True
         return stored
+
+    def _add_camera(self, cid: int, s: CaptureSettings) -> None:
+        red, blue = s.white_balance_gains or (None, None)
+        self._conn.execute(
+            f"INSERT INTO capture_camera (capture, {', '.join(CAMERA_COLUMNS)}) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            (cid, s.exposure_us, s.gain, s.white_balance_kelvin, red, blue, s.sensor_temperature_c, int(s.unlocked),
+             None if s.reference is None else json.dumps(list(s.reference)), float(s.reference_clipped),
+             json.dumps(list(s.brackets)), json.dumps({str(k): v for k, v in sorted(s.bracketed.items())})))
 
     def next_sequence(self, robot_id: str) -> int:
         row = self._conn.execute("SELECT MAX(sequence) FROM captures WHERE robot = ?", (robot_id,)).fetchone()
@@ -222,9 +235,11 @@ class Store:
         return self._select_captures(sql, args)
 
     def _select_captures(self, where: str, args: list) -> list[StoredCapture]:
+        camera = ", ".join(f"k.{c}" for c in CAMERA_COLUMNS)
         rows = self._conn.execute(
             "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
-            " space, bands, scene, light_elevation, light_azimuth, source, levels, incarnation FROM captures"
+            " space, bands, scene, light_elevation, light_azimuth, source, levels, incarnation, " + camera
+            + " FROM captures LEFT JOIN capture_camera k ON k.capture = captures.id"
             + where + " ORDER BY elevation, id", args
         ).fetchall()
         return [self._checked(capture_from_row, r, f"capture row {r[0]!r}") for r in rows]
@@ -296,11 +311,18 @@ class Store:
                 latest[c.elevation] = c
         return dict(sorted(latest.items()))
 
+    def latest_by_angle(self, robot: str | None = None, space: str | None = None,
+                        scene: str | None = None) -> dict[float, StoredCapture]:
+        """For every measured elevation, its latest capture."""
+        return self._latest(robot, space, scene)
+
     def models_by_angle(self, robot: str | None = None, space: str | None = None,
                         scene: str | None = None) -> dict[float, dict[tuple[int, int], Johnson]]:
-        """For every measured elevation, the models of its latest capture."""
-        return {a: {k: m.model for k, m in self.models(c.id).items()}
-                for a, c in self._latest(robot, space, scene).items()}
+        """For every measured elevation, the models of its latest capture, each region at the
+        capture's exposure (a bracketed region's models scaled back, `tools.radiometry`)."""
+        from tools.radiometry import sweep_models
+
+        return sweep_models(self, self._latest(robot, space, scene))
 
     def levels(self, robot: str | None = None, space: str | None = None, scene: str | None = None) -> int:
         """The sensor levels of the captures models_by_angle uses (the deepest, when they differ;

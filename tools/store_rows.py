@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+from btf.capture_settings import MAX_BRACKETS, CaptureSettings
 from btf.johnson import Family, Johnson
 from btf.record import FittedModel
 from radio.packet_base import MAX_BANDS, MAX_FRAME_SIDE, MAX_LABELS
@@ -36,6 +37,7 @@ class StoredCapture:
     illumination: tuple[float | None, float | None] = (None, None)
     source: str | None = None
     levels: int = 256  # the sensor's levels: 256 for 8-bit pixels, 65536 for 16-bit
+    camera: CaptureSettings | None = None  # what it was taken with (None: not recorded)
     incarnation: str = ""  # the robot state that numbered it ("" for none): tools.receiver
 
     @property
@@ -45,7 +47,8 @@ class StoredCapture:
 
 def capture_from_row(r: tuple) -> StoredCapture:
     """(id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space,
-    bands, scene, light_elevation, light_azimuth, source, levels, incarnation) -> StoredCapture."""
+    bands, scene, light_elevation, light_azimuth, source, levels[, incarnation[, the capture_camera
+    columns]]) -> StoredCapture."""
     n = [number(v, name, nullable) for v, name, nullable in (
         (r[3], "time", False), (r[4], "commanded elevation", True), (r[5], "commanded azimuth", True),
         (r[6], "elevation", False), (r[7], "azimuth", False),
@@ -53,7 +56,40 @@ def capture_from_row(r: tuple) -> StoredCapture:
     return StoredCapture(integer(r[0], "id"), text(r[1], "robot"), integer(r[2], "sequence"), n[0],
                    (n[1], n[2]), (n[3], n[4]), text(r[8], "space"), band_names(r[9]),
                    text(r[10], "scene"), (n[5], n[6]), None if r[13] is None else text(r[13], "source"),
-                   integer(r[14], "levels", 2, 65536), text(r[15], "incarnation") if len(r) > 15 else "")
+                   integer(r[14], "levels", 2, 65536), camera_from_row(r[16:]) if len(r) > 16 else None,
+                   text(r[15], "incarnation") if len(r) > 15 else "")
+
+
+CAMERA_COLUMNS = ("exposure_us", "gain", "wb_kelvin", "wb_red", "wb_blue", "sensor_c", "unlocked", "reference",
+                  "reference_clipped", "brackets", "bracketed")
+
+
+def camera_from_row(r: tuple) -> CaptureSettings | None:
+    """The capture_camera columns (`CAMERA_COLUMNS`, all None: no row) -> CaptureSettings."""
+    if all(v is None for v in r):
+        return None
+    exposure, gain, kelvin, red, blue, sensor = (number(v, f"camera {n}", True)
+                                                 for v, n in zip(r[:6], CAMERA_COLUMNS))
+    try:
+        reference = None if r[7] is None else json.loads(text(r[7], "camera reference"))
+        brackets, bracketed = json.loads(text(r[9], "camera brackets")), json.loads(text(r[10], "camera bracketed"))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"camera settings hold broken JSON ({exc})") from None
+    if reference is not None and (type(reference) is not list or len(reference) > MAX_BANDS):
+        raise ValueError(f"camera reference is {_shown(reference)}, not a list of levels")
+    if type(brackets) is not list or len(brackets) > MAX_BRACKETS or type(bracketed) is not dict:
+        raise ValueError("camera brackets are not a list of exposures with a map of labels")
+    try:
+        return CaptureSettings(
+            exposure, gain, kelvin, None if red is None or blue is None else (red, blue), sensor,
+            bool(integer(r[6], "camera unlocked", 0, 1)),
+            None if reference is None else tuple(number(v, "camera reference level") for v in reference),
+            number(r[8], "camera reference_clipped"),
+            tuple(number(v, "camera bracket exposure") for v in brackets),
+            {integer(int(k) if str(k).isdigit() else k, "bracketed label", 0, MAX_LABELS - 1):
+             integer(v, "bracket index", 1, MAX_BRACKETS) for k, v in bracketed.items()})
+    except ValueError as exc:
+        raise ValueError(f"camera settings: {exc}") from None
 
 
 def model_from_row(r: tuple) -> tuple[tuple[int, int], FittedModel]:

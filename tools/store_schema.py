@@ -9,7 +9,7 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-SCHEMA_VERSION = 7
+SCHEMA_VERSION = 8
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -29,6 +29,17 @@ _PCA = """
 CREATE TABLE pca_bases (
     capture INTEGER PRIMARY KEY REFERENCES captures(id) ON DELETE CASCADE,
     record TEXT NOT NULL
+);
+"""
+# What a capture was taken with (btf.capture_settings): the camera's reported settings, whether
+# it held its lock, the reference's level per band (JSON list) and the brackets (JSON).
+_CAMERA = """
+CREATE TABLE IF NOT EXISTS capture_camera (
+    capture INTEGER PRIMARY KEY REFERENCES captures(id) ON DELETE CASCADE,
+    exposure_us REAL, gain REAL, wb_kelvin REAL, wb_red REAL, wb_blue REAL, sensor_c REAL,
+    unlocked INTEGER NOT NULL DEFAULT 0,
+    reference TEXT, reference_clipped REAL NOT NULL DEFAULT 0,
+    brackets TEXT NOT NULL DEFAULT '[]', bracketed TEXT NOT NULL DEFAULT '{}'
 );
 """
 # A capture is one robot state's (incarnation's) numbered view: a robot whose state was wiped
@@ -51,8 +62,8 @@ CREATE TABLE {name} (
     UNIQUE (robot, incarnation, sequence)
 );
 """
-_COLUMNS_6 = ("id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space, bands,"
-              " scene, light_elevation, light_azimuth, source, levels")
+_BEFORE_INCARNATIONS = ("id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space, bands,"
+                        " scene, light_elevation, light_azimuth, source, levels")
 _SCHEMA = _CAPTURES.format(name="captures") + """
 CREATE INDEX captures_by_source ON captures (robot, source);
 CREATE TABLE models (
@@ -78,7 +89,7 @@ CREATE TABLE masks (
     data BLOB NOT NULL,
     UNIQUE (robot, key)
 );
-""" + _DEPENDENCE + _PCA
+""" + _DEPENDENCE + _PCA + _CAMERA
 _TABLES = {"captures", "models", "masks"}
 # Upgrades from the keyed version to the next; each keeps every existing row.
 _MIGRATIONS: dict[int, str] = {
@@ -97,11 +108,13 @@ _MIGRATIONS: dict[int, str] = {
        "ALTER TABLE models ADD COLUMN exact_family INTEGER NOT NULL DEFAULT 0;",
     # the sensor's levels (256 for 8-bit, 65536 for 16-bit images), so synthesis keeps the depth
     5: "ALTER TABLE captures ADD COLUMN levels INTEGER NOT NULL DEFAULT 256;",
+    # the camera settings, reference level and brackets of a capture
+    6: _CAMERA,
     # the robot's incarnation: unique by (robot, incarnation, sequence). A table constraint
     # changes only by a new table; foreign keys are off meanwhile (`connect`), so the
-    # models, masks and dependence keep pointing at the same ids.
-    6: _CAPTURES.format(name="captures_new")
-       + f"INSERT INTO captures_new ({_COLUMNS_6}) SELECT {_COLUMNS_6} FROM captures;"
+    # models, masks, dependence and camera rows keep pointing at the same ids.
+    7: _CAPTURES.format(name="captures_new")
+       + f"INSERT INTO captures_new ({_BEFORE_INCARNATIONS}) SELECT {_BEFORE_INCARNATIONS} FROM captures;"
        "DROP TABLE captures; ALTER TABLE captures_new RENAME TO captures;"
        "CREATE INDEX captures_by_source ON captures (robot, source);",
 }
