@@ -120,8 +120,8 @@ class FileCounterStore:
                     "used again; rotate the key (`btf-host keygen --out KEY --force` on the host, copy "
                     "KEY here) and start once with `btf-robot run --new-key`")
             self._lost_floor = max(0, clock_counter(now - SKEW_S))
-            self.note = (f"counters file {self.path} {problem}: counters start from the wall clock, "
-                         f"frames older than {SKEW_S:.0f} s are refused")
+            self.note = (f"counters file {self.path} {problem} (a first start, or a lost file): counters "
+                         f"start from the wall clock, frames older than {SKEW_S:.0f} s are refused")
         # Everything below the last reservation may have been used before a restart.
         self._next = dict(self._reserved)
 

@@ -91,6 +91,37 @@ def test_an_interrupted_pose_is_measured_again_in_full_when_the_link_returns(fak
     assert len(models) == 3  # full MODELS each, no UNCHANGED against the abandoned result
 
 
+def test_a_camera_setting_sent_while_the_worker_takes_the_frame_is_refused_as_busy(fake_robot):
+    """The link is serviced while the camera takes the pose's frame: a SET camera.* then would
+    touch the camera from two threads, so it is refused, and works once the pose is done."""
+    from radio import packet as pk
+    from tests.test_runtime import replies
+
+    rt, tr = make(fake_robot, "black", extra=PLAN3)
+    rt.boot()
+    tr.deliver(LinkUp())
+    camera, real = rt.hal.camera, rt.hal.camera.capture
+    answered = threading.Event()
+
+    def capture():
+        if not answered.is_set():
+            tr.receive(pk.encode(pk.CommandPacket(21, pk.CommandName.SET, {"key": "camera.gain", "value": 2})))
+            for _ in range(500):  # the answer is written by the main thread's link service
+                if 21 in replies(tr):
+                    break
+                threading.Event().wait(0.01)
+            answered.set()
+        return real()
+
+    camera.capture = capture
+    assert rt.sweep.step() == "measured"
+    nack = replies(tr)[21]
+    assert isinstance(nack, pk.NackPacket) and nack.reason is pk.Reason.BUSY and "camera" in nack.text
+    tr.receive(pk.encode(pk.CommandPacket(22, pk.CommandName.SET, {"key": "camera.gain", "value": 2})))
+    rt.step()
+    assert isinstance(replies(tr)[22], pk.AckPacket)
+
+
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("BTF_STRESS"), reason="stress run only (make stress): 20 timed trials, ~1 min")
 def test_the_failsafe_holds_within_failsafe_s_plus_a_tenth_in_20_of_20_trials_at_960x1280():

@@ -31,5 +31,6 @@ def run(args: argparse.Namespace) -> int:
     if tree is not None:
         print(f"warning: {path} is inside the git work tree {tree}; keep keys out of repositories",
               file=sys.stderr)
-    print(f"wrote a 32-byte key to {path} (mode 0600); copy it to both ends of the link")
+    print(f"wrote a 32-byte key to {path} (mode 0600) and this host's fresh link counters for it to "
+          f"{counters_beside(path)}; copy the key to both ends of the link")
     return 0
