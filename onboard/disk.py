@@ -32,6 +32,7 @@ class Disk:
         self.reserve_path = self.state_dir / RESERVE_NAME
         self._statvfs = statvfs
         self.failed = ""  # why the last write failed for lack of room, until room is back
+        self.unheld = ""  # why the reserve cannot be held here at all
 
     def free(self) -> int | None:
         """Bytes an unprivileged writer may still use under the state directory (None: unknown)."""
@@ -48,21 +49,30 @@ class Disk:
             return False
 
     def hold(self) -> bool:
-        """Make the reserve file (allocated, not sparse); whether it is held."""
+        """Make the reserve file (allocated, not sparse); whether it is held. Best effort: a
+        filesystem that cannot hold it leaves the robot without it, said once in `unheld`."""
         if self.reserve <= 0 or self.held():
             return True
+        if self.unheld:
+            return False
         try:
             fd = os.open(self.reserve_path, os.O_WRONLY | os.O_CREAT, 0o600)
             try:
-                os.posix_fallocate(fd, 0, self.reserve)
+                try:
+                    os.posix_fallocate(fd, 0, self.reserve)
+                except OSError as exc:
+                    if exc.errno not in (errno.EOPNOTSUPP, errno.EINVAL):
+                        raise
+                    for start in range(0, self.reserve, 1 << 16):  # no fallocate here: zeros
+                        os.pwrite(fd, bytes(min(1 << 16, self.reserve - start)), start)
                 os.fsync(fd)
             finally:
                 os.close(fd)
             return True
         except OSError as exc:
-            if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
-                raise
             self.reserve_path.unlink(missing_ok=True)
+            if exc.errno not in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG):
+                self.unheld = f"cannot hold {self.reserve_path}: {exc.strerror or exc}"
             return False
 
     def release(self) -> bool:

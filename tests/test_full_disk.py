@@ -238,3 +238,21 @@ def test_the_systemd_unit_retries_exit_1_for_as_long_as_it_takes_and_never_exit_
     assert unit["Service"]["RestartPreventExitStatus"].split() == ["2"]
     assert unit["Unit"]["StartLimitIntervalSec"] == "0"  # a disk that stays full is retried, not given up on
     assert "time-sync.target" in unit["Unit"]["After"]  # [link] clock = "rtc" trusts the clock from the start
+
+
+def test_disk_pressure_follows_the_free_room_and_a_failed_write_holds_until_the_reserve_fits(tmp_path):
+    from types import SimpleNamespace
+
+    from onboard.disk import Disk, Pressure
+
+    free = [100 * MiB]
+    disk = Disk(tmp_path, MIN_FREE, RESERVE, statvfs=lambda _: SimpleNamespace(f_bavail=free[0], f_frsize=1))
+    assert disk.pressure() is Pressure.OK and disk.held()  # room: the reserve is made
+    free[0] = MIN_FREE - 1
+    assert disk.pressure() is Pressure.LOW and disk.held()  # paused before the disk fills
+    disk.write_failed("a write found the disk full")
+    assert not disk.held()  # released for the writes that free room
+    free[0] = MIN_FREE + RESERVE - 1
+    assert disk.pressure() is Pressure.FULL  # room for the minimum, not yet for the reserve too
+    free[0] = MIN_FREE + RESERVE
+    assert disk.pressure() is Pressure.OK and disk.held() and not disk.failed
