@@ -86,6 +86,7 @@ class Runtime:
         self.disk = disk if disk is not None else Disk(cfg.state_dir, cfg.disk_min_free_bytes,
                                                        cfg.disk_reserve_bytes)
         self.outbox.on_full = lambda: self.disk.write_failed("a write found the disk full")
+        self._unheld_said = False
         self.notifier = notifier if notifier is not None else Notifier(address="")
         self.pipeline = Pipeline(cfg, hal, segmenter, pump=self._pump, sleep=sleep,
                                  resend_mask=segmenter.force_send)
@@ -133,6 +134,9 @@ class Runtime:
         """Follow the room under state_dir; a change of pressure is said in a STATUS."""
         s, disk = self.state, self.disk
         pressure, s.disk_free = disk.pressure(), disk.free()
+        if disk.unheld and not self._unheld_said:
+            self._unheld_said = True
+            self.note(f"disk: {disk.unheld}; a full disk may then stop acknowledged rows being deleted")
         if pressure.value == s.disk:
             return
         s.disk = pressure.value
