@@ -7,10 +7,15 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import errno
+import logging
+import os
 import signal
 import sqlite3
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 from onboard import config as config_mod
 from onboard.cli_runner import CliError, RetryLater
@@ -43,6 +48,7 @@ def _setup(args: argparse.Namespace):
             cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, url=args.port))
         config_mod.check(cfg)
         config_mod.check_key_file(cfg)
+        _check_state_dir(cfg.state_dir)
         from radio.keys import KeyFileError, load_key
 
         try:
@@ -68,6 +74,40 @@ def _calibrated_exposure(cfg):
     print(f"btf-robot: camera exposure {stored:g} us from {cfg.state_dir / EXPOSURE_FILE} "
           "(btf-robot calibrate exposure)", file=sys.stderr)
     return dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, exposure=CameraValue(repr(stored))))
+
+
+# A state_dir refusing writes for these reasons needs a person (exit 2: a wrong path or mode, a
+# filesystem gone read-only); a full disk is the robot's to live with (it starts paused and says
+# so); any other failure is the environment's (exit 1, retried).
+_CONFIG_ERRNOS = (errno.EACCES, errno.EPERM, errno.ENOTDIR, errno.EEXIST, errno.ENOENT, errno.ENAMETOOLONG,
+                  errno.ELOOP, errno.EROFS)
+_NO_ROOM_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+
+
+def _check_state_dir(path: Path) -> None:
+    """The state directory exists (or is made) and takes a durable write: else one line, a
+    ConfigError when the setup is wrong, RetryLater when the disk or device is."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise ConfigError(f"state_dir {path}: exists and is not a directory") from None
+    except OSError as exc:
+        _state_dir_failed(path, "cannot create it", exc)
+    try:
+        with tempfile.TemporaryFile(dir=path) as probe:
+            probe.write(b"x")
+            probe.flush()
+            os.fsync(probe.fileno())
+    except OSError as exc:
+        if exc.errno not in _NO_ROOM_ERRNOS:  # a full disk: the runtime releases its reserve
+            _state_dir_failed(path, "cannot write in it", exc)
+
+
+def _state_dir_failed(path: Path, what: str, exc: OSError) -> None:
+    text = f"state_dir {path}: {what}: {exc.strerror or exc}"
+    if exc.errno in _CONFIG_ERRNOS:
+        raise ConfigError(text) from None
+    raise RetryLater(text) from None
 
 
 def _open_port(url: str, baud: int):
@@ -113,21 +153,35 @@ def _build(cfg, key: bytes, args: argparse.Namespace, hal, port):
     hal.camera.open(w, h)
     rt = Runtime(cfg, hal, LinkPump(link, port), segment, outbox=outbox, disk=disk, notifier=Notifier(),
                  new_sweep=args.new_sweep)
-    for line in (note, counters.note):
+    # A missing counters file beside a new outbox is a first start (or a whole state lost, which
+    # the new incarnation tells the host): said only when the rest of the state is there.
+    for line in (note, "" if outbox.new else counters.note):
         if line:
             rt.note(line)
     return rt
 
 
+def console_log() -> None:
+    """One short line per pose, command and link change on stderr: plain text for journald,
+    which stamps each line; a terminal gets the time in front."""
+    log = logging.getLogger("btf.robot")
+    for old in list(log.handlers):
+        log.removeHandler(old)
+    handler = logging.StreamHandler(sys.stderr)
+    tty = hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
+    handler.setFormatter(logging.Formatter("%(asctime)s %(message)s" if tty else "%(message)s", "%H:%M:%S"))
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    log.propagate = False
+
+
 def run(args: argparse.Namespace) -> int:
     cfg, key = _setup(args)
+    console_log()
     from hal.factory import build_hal
     from hal.interfaces import HalError
+    from onboard.outbox import OutboxError
 
-    try:
-        cfg.state_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise RetryLater(f"state_dir {cfg.state_dir}: {exc.strerror}") from None
     cfg = _calibrated_exposure(cfg)
     try:
         hal = build_hal(cfg.hal, state_dir=cfg.state_dir)  # with the arm calibration stored there
@@ -160,8 +214,6 @@ def run(args: argparse.Namespace) -> int:
         if stopping or (args.max_seconds and time.monotonic() - t0 > args.max_seconds):
             return True
         return bool(args.exit_when_idle and r.idle())
-
-    from onboard.outbox import OutboxError
 
     try:
         return rt.run(stop)

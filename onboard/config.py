@@ -178,7 +178,7 @@ CHOICES = {
 def _convert(name: str, value: Any, kind: Any, base: Path) -> Any:
     if isinstance(kind, tuple):
         item, length = kind
-        if not isinstance(value, list):
+        if not isinstance(value, (list, tuple)):  # a tuple: a list as a packet decodes it (SET)
             raise ConfigError(f"{name} must be a list, got {type(value).__name__}")
         if length is not None and len(value) != length:
             raise ConfigError(f"{name} must have {length} items, got {len(value)}")

@@ -11,6 +11,7 @@ harmless to repeat.)
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -30,6 +31,7 @@ from radio.commands import COMMANDS, CommandName
 if TYPE_CHECKING:
     from onboard.runtime import Runtime
 
+log = logging.getLogger("btf.robot")
 C = CommandName
 SETTABLE = {
     "sweep": ("start", "stop", "step", "azimuths", "settle_timeout_s", "retries", "pose_tolerance_deg"),
@@ -61,16 +63,41 @@ class Effect:
 Result = dict | Refusal
 
 
+# What the operator can do about each refusal, said in the NACK itself.
+RECOVERY = {
+    pk.Reason.HARDWARE: "status lists the faults; reboot-servo --servo-id ID clears a servo's alert, "
+                        "torque-on powers released servos",
+    pk.Reason.OUTBOX_FULL: "the base must acknowledge what is queued: is a station receiving?",
+    pk.Reason.INTERNAL: "see the robot's log; status lists its errors",
+}
+TORQUE_IS_OFF = "torque is off (torque-off released the servos): send torque-on, then this command again"
+
+
 def refusal(exc: Exception) -> Refusal:
-    """The NACK for a handler that raised."""
+    """The NACK for a handler that raised, with what the operator can do about it."""
     if isinstance(exc, PoseSkipped):
-        return Refusal(pk.Reason.HARDWARE, exc.reason)
-    if isinstance(exc, Interrupted):
+        reason, text = pk.Reason.HARDWARE, exc.reason
+    elif isinstance(exc, Interrupted):
         return Refusal(pk.Reason.BUSY, f"interrupted by {exc}")
-    if isinstance(exc, OutboxFull):
-        return Refusal(pk.Reason.OUTBOX_FULL, str(exc))
-    bad = isinstance(exc, (ConfigError, KeyError, ValueError))
-    return Refusal(pk.Reason.BAD_ARGUMENT if bad else pk.Reason.INTERNAL, f"{type(exc).__name__}: {exc}")
+    elif isinstance(exc, OutboxFull):
+        reason, text = pk.Reason.OUTBOX_FULL, str(exc)
+    elif isinstance(exc, (ConfigError, KeyError, ValueError)):
+        return Refusal(pk.Reason.BAD_ARGUMENT, f"{type(exc).__name__}: {exc}")
+    else:
+        reason, text = pk.Reason.INTERNAL, f"{type(exc).__name__}: {exc}"
+    return Refusal(reason, f"{text} ({RECOVERY[reason]})")
+
+
+def _args_text(args: dict) -> str:
+    """` key=value ...` for a log line (floats short, long lists cut)."""
+    def short(v: Any) -> str:
+        if isinstance(v, float):
+            return f"{v:.6g}"
+        if isinstance(v, (list, tuple)):
+            return "[" + ",".join(short(x) for x in v[:8]) + (",..." if len(v) > 8 else "") + "]"
+        return str(v)
+    text = "".join(f" {k}={wire.iso_time(v) if k == 'time' else short(v)}" for k, v in args.items())
+    return text if len(text) <= 160 else text[:157] + "..."
 
 
 class Dispatcher:
@@ -81,7 +108,7 @@ class Dispatcher:
         self.handlers: dict[CommandName, Callable[[dict, Effect], Result]] = {
             C.PING: self.ping, C.STATUS: self.status, C.GOTO: self.goto, C.CAPTURE: self.capture,
             C.SWEEP: self.sweep, C.ABORT: self.abort, C.SET: self.set, C.TORQUE_OFF: self.torque_off,
-            C.REBOOT_SERVO: self.reboot_servo, C.SEND_MASK: self.send_mask,
+            C.REBOOT_SERVO: self.reboot_servo, C.SEND_MASK: self.send_mask, C.TORQUE_ON: self.torque_on,
         }
         missing = set(COMMANDS) - set(self.handlers)
         if missing:
@@ -97,18 +124,23 @@ class Dispatcher:
             return
         if not isinstance(cmd, pk.CommandPacket):
             return  # not a command (e.g. the base's own status): nothing to answer
+        said = f"command {cmd.command_id} {cmd.name.name}{_args_text(cmd.args)}"
         known = rt.outbox.remembered(cmd.command_id)
         if known is not None:  # run before: answer again, unless that answer is still queued
             if rt.outbox.kind_of(known.msg_id) is None:
                 rt.link.queue(known.kind, known.body)
+            log.info("%s: sent again, answered from memory", said)
             return
         effect = Effect()
         result = self.run(cmd.name, dict(cmd.args), effect)
         if isinstance(result, Refusal):
             answer = wire.reply_body(cmd.command_id, False, result.text, reason=result.reason)
             effect = Effect()  # a refused command produced nothing
+            log.info("%s: NACK %s: %s", said, result.reason.name, result.text)
         else:
             answer = wire.reply_body(cmd.command_id, True, cmd.name.name, result)
+            # a query's answer is the robot's state, which STATUS carries: the line stays short
+            log.info("%s: ACK%s", said, "" if COMMANDS[cmd.name].query else _args_text(result))
         stands = self._answer(cmd.command_id, answer, effect, COMMANDS[cmd.name].query)
         if stands and not isinstance(result, Refusal) and COMMANDS[cmd.name].interrupts:
             rt.state.interrupt_work(cmd.name.name)  # the pose being measured ends at the next service
@@ -121,6 +153,8 @@ class Dispatcher:
             return Refusal(pk.Reason.BUSY, "failsafe active: the link was lost; it clears when the link is back up")
         if spec.moves_arm and state.busy:
             return Refusal(pk.Reason.BUSY, "busy: the arm is measuring a pose; send it again, or ABORT first")
+        if name in (C.GOTO, C.SWEEP) and not state.torque:
+            return Refusal(pk.Reason.TORQUE_OFF, TORQUE_IS_OFF)
         try:
             return self.handlers[name](args, effect)
         except Exception as exc:  # a command that fails is answered, never fatal
@@ -210,8 +244,14 @@ class Dispatcher:
 
     def torque_off(self, args: dict, effect: Effect) -> Result:
         self.rt.sweep.stop()
+        self.rt.state.torque = False  # even if the bus fails below: the servos may be limp
         self.rt.hal.arm.torque_off()
         return {"torque": False}
+
+    def torque_on(self, args: dict, effect: Effect) -> Result:
+        self.rt.pipeline.retry("torque on", self.rt.hal.arm.enable)
+        self.rt.state.torque = True
+        return {"torque": True}
 
     def reboot_servo(self, args: dict, effect: Effect) -> Result:
         sid = int(args["servo_id"])
@@ -219,12 +259,20 @@ class Dispatcher:
         return {"rebooted": sid}
 
     def send_mask(self, args: dict, effect: Effect) -> Result:
-        packet = self.rt.captures.mask_packet(int(args["seq"]) if "seq" in args else None)
-        if packet is None:  # none yet: the next capture sends its map
+        """The label map of capture `seq`: the robot keeps its last capture's only (the host
+        stores every MASK sent); the next capture's is sent with it."""
+        caps, seq = self.rt.captures, int(args["seq"])
+        if seq == caps.seq.peek() and caps.last_labels is None:
             self.rt.segmenter.force_send()
             return {"queued": False, "next_capture": True}
+        packet = caps.mask_packet(seq) if seq == caps.last_seq else None
+        if packet is None:
+            kept = (f"its last capture's only (seq {caps.last_seq})" if caps.last_labels is not None
+                    else f"none since it started; the next capture is seq {caps.seq.peek()}")
+            return Refusal(pk.Reason.NOT_FOUND, f"capture {seq}'s label map is not kept: the robot keeps "
+                           f"{kept}; the host stores every MASK it received under capture-SEQ")
         effect.packets = [packet]
-        return {"queued": True}
+        return {"queued": True, "seq": seq}
 
     def set_keys(self, settings: dict[str, Any]) -> None:
         """SET section.key = value for the keys that may change at run time."""

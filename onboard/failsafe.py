@@ -7,6 +7,7 @@ from __future__ import annotations
 from typing import Callable
 
 from hal.arm import Arm
+from onboard.packet_bodies import iso_time
 from onboard.runtime_state import Mode, RuntimeState
 
 EVENTS_KEPT = 8
@@ -37,8 +38,9 @@ class Failsafe:
                 event = self.events[-1]
                 event["until"] = self.wall()
                 self.state.mode = self._resume_mode
-                self.send_status("failsafe: link lost, arm held",
-                                 {"failsafe_since": event["since"], "failsafe_until": event["until"]})
+                self.send_status("failsafe: link lost, arm held", {
+                    "failsafe_since": iso_time(event["since"]), "failsafe_until": iso_time(event["until"]),
+                    "failsafe_s": round(event["until"] - event["since"], 1)})
         elif self.ever_up and not self.active:
             self._trip()
 

@@ -120,6 +120,7 @@ class Outbox:
         # Autocommit: each statement is its own durable transaction.
         self._conn = sqlite3.connect(str(self.path), isolation_level=None, check_same_thread=False,
                                      timeout=10.0)
+        self.new = self._conn.execute("SELECT 1 FROM sqlite_master WHERE name = 'outbox'").fetchone() is None
         mode = self._conn.execute("PRAGMA journal_mode=WAL").fetchone()[0]
         if str(mode).lower() != "wal":
             raise OutboxError(f"outbox {self.path}: WAL journal not available (got {mode!r})")

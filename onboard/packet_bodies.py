@@ -7,6 +7,7 @@ outbox database so a restart never reuses one.
 from __future__ import annotations
 
 import time
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +16,11 @@ import numpy as np
 from hal.interfaces import ViewAngles
 from onboard.capture import FittedView
 from radio import packet as pk
+
+
+def iso_time(t: float) -> str:
+    """A wall-clock time as STATUS shows it to a person: ISO 8601 in UTC, to the second."""
+    return datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 class SeqCounter:

@@ -10,7 +10,7 @@ reason; no exception ends the loop. `open_state` opens the outbox a runtime work
 """
 from __future__ import annotations
 
-import sys
+import logging
 import time
 from collections import deque
 from typing import Callable
@@ -34,6 +34,7 @@ from onboard.watchdog import Notifier
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale
 
 __all__ = ["Mode", "Runtime", "open_state"]
+log = logging.getLogger("btf.robot")  # one short line per pose, command and link change
 
 
 def open_state(cfg: Config) -> tuple[Outbox, Disk, str]:
@@ -53,10 +54,6 @@ def open_state(cfg: Config) -> tuple[Outbox, Disk, str]:
     return outbox, disk, note
 
 
-def _stderr(line: str) -> None:
-    print(f"btf-robot: {line}", file=sys.stderr, flush=True)
-
-
 class Runtime:
     def __init__(
         self,
@@ -71,7 +68,7 @@ class Runtime:
         notifier: Notifier | None = None,
         new_sweep: bool = False,
         disk: Disk | None = None,
-        log: Callable[[str], None] = _stderr,
+        log: Callable[[str], None] = log.warning,
     ) -> None:
         self.hal, self.transport, self.segmenter = hal, transport, segmenter
         self.clock, self.wall, self.sleep, self.log = clock, wall, sleep, log
@@ -154,13 +151,22 @@ class Runtime:
         now = self.clock()
         for event in self.link.read(now):
             if isinstance(event, (LinkUp, LinkDown)):
-                self.failsafe.link_changed(isinstance(event, LinkUp))
+                self._link_changed(isinstance(event, LinkUp))
             elif isinstance(event, Delivered):
                 self.dispatch.on_body(event.payload)
             elif isinstance(event, PeerStale):
                 self.note(f"link: {event.text}")
         self.link.write(now)
         self.notifier.kick()
+
+    def _link_changed(self, up: bool) -> None:
+        held = self.failsafe.active
+        self.failsafe.link_changed(up)
+        if up:
+            log.info("link up: the base is heard%s", "; failsafe cleared, resuming" if held else "")
+        else:
+            log.info("link down: the base has been silent for %.1f s%s", self.cfg.link.failsafe_s,
+                     "; failsafe: arm stopped and held" if self.failsafe.active and not held else "")
 
     def _pump(self) -> None:
         """Service the link while the arm works; end that work when it was interrupted."""
@@ -174,7 +180,9 @@ class Runtime:
     def boot(self) -> None:
         try:
             self.pipeline.retry("torque on", self.hal.arm.enable)
+            self.state.torque = True
         except PoseSkipped as exc:
+            self.state.torque = False  # GOTO and SWEEP say to send torque-on
             self.state.errors.append(exc.reason)
         self.watch_disk()
         camera = self.lock_camera()
@@ -184,6 +192,9 @@ class Runtime:
             extras.update(mode=self.mode.value, sweep=self.progress.sweep_id, sweep_state=boot.value)
         self.notifier.ready(f"btf-robot running: {self.mode.value}")
         self.status.send("boot", extras)
+        sweep = "" if "sweep" not in extras else f", sweep {extras['sweep']} {extras['sweep_state']}"
+        log.info("boot: robot %d on the %s HAL, mode %s%s%s", self.cfg.robot_id, self.hal.body.value,
+                 self.mode.value, sweep, "" if self.state.torque else "; torque is off (power-on failed)")
 
     def lock_camera(self) -> str:
         """Lock the camera as `[camera]` says; one line for STATUS, with why it will not measure."""

@@ -74,7 +74,8 @@ def flat(st: dict) -> dict:
     if sweep:
         out.update(sweep_id=sweep["id"], next=sweep["next"], poses=sweep["poses"])
         out["skipped"] = [f"{i}@{e:.1f}/{a:.1f}: {r}" for i, e, a, r in sweep["skipped"]]
-    out["failsafe"] = [f"{e['since']:.1f}-{e['until'] or 0:.1f}" for e in st["failsafe"]]
+    out["failsafe"] = [f"{wire.iso_time(e['since'])} for {e['until'] - e['since']:.1f} s" if e["until"]
+                       else f"{wire.iso_time(e['since'])}, ongoing" for e in st["failsafe"]]
     out["faults"] = list(st["faults"])
     out["errors"] = list(st["errors"])
     return out

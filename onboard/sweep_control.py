@@ -9,6 +9,7 @@ or a disk short of room pauses it; the pose is measured again when there is room
 from __future__ import annotations
 
 import copy
+import logging
 
 from onboard.capture import FittedView, Pipeline, PoseSkipped
 from onboard.captures import Captures
@@ -18,6 +19,8 @@ from onboard.status import Status
 from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore
 from onboard.watchdog import Notifier
 from radio import packet as pk
+
+log = logging.getLogger("btf.robot")
 
 
 class SweepControl:
@@ -112,6 +115,7 @@ class SweepControl:
         else:
             seq, packets, state = self.captures.packets(cap)
             nxt.record_measured(cap.measured)
+            self.state.pose = cap.measured  # the arm stands there, whether or not the commit fits
             result = "measured"
         if nxt.done:
             nxt.active = False
@@ -131,8 +135,16 @@ class SweepControl:
         if cap is not None:
             self.captures.filed(cap, seq)
         self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {nxt.next_index} of {nxt.plan.count}")
+        where = p.current()
+        pose = f"sweep {p.sweep_id} pose {nxt.next_index}/{nxt.plan.count} at {where.elevation:.1f}°/{where.azimuth:.1f}°"
+        if cap is None:
+            log.info("%s: skipped: %s", pose, reason)
+        else:
+            log.info("%s: seq %d, measured %.1f°/%.1f°, %d models%s", pose, seq, cap.measured.elevation,
+                     cap.measured.azimuth, len(cap.results), " (unchanged)" if cap.unchanged else "")
         if nxt.done:
             self.state.mode = Mode.IDLE
-            self.notifier.status(f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, "
-                                 f"{len(nxt.skipped)} skipped")
+            done = f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, {len(nxt.skipped)} skipped"
+            self.notifier.status(done)
+            log.info("%s", done)
         return result

@@ -107,10 +107,12 @@ class ChannelPort(SerialBase):
         if self.is_open:
             raise SerialException("port is already open")
         config, seed, inner_url = parse_url(self.portstr)
-        from radio.ports import open_url
+        from radio.ports import PortBusy, open_url
 
         try:
-            inner = open_url(inner_url, self._baudrate, timeout=SLICE)
+            inner = open_url(inner_url, self._baudrate, timeout=SLICE, exclusive=bool(self._exclusive))
+        except PortBusy:
+            raise
         except (SerialException, ValueError, OSError) as exc:
             raise SerialException(f"btfsim: the wrapped port {inner_url}: {exc}") from None
         self._attach(inner, config, seed, time.monotonic)

@@ -27,6 +27,7 @@ class CommandName(enum.IntEnum):
     TORQUE_OFF = 8
     REBOOT_SERVO = 9
     SEND_MASK = 10
+    TORQUE_ON = 11
 
 
 @dataclass(frozen=True, slots=True)
@@ -114,7 +115,9 @@ COMMANDS: dict[CommandName, Command] = {c.name: c for c in (
         Arg("value", lambda v: check_extras({"value": v}, "setting")["value"], "value", json_or_text,
             "the value (JSON if it parses, else a string)"),
     )),
-    Command(C.TORQUE_OFF, "torque-off", "stop and release the servos", interrupts=True),
+    Command(C.TORQUE_OFF, "torque-off", "stop and release the servos (torque-on brings them back)",
+            interrupts=True),
+    Command(C.TORQUE_ON, "torque-on", "power the servos and hold the arm where it stands", moves_arm=True),
     Command(C.REBOOT_SERVO, "reboot-servo", "reboot one servo (clears its alert)", (
         Arg("servo_id", lambda v: want_int(v, "servo id", 0, 252), "--servo-id", int, "the servo's bus id"),
     ), moves_arm=True),

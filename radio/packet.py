@@ -61,6 +61,7 @@ class Reason(enum.IntEnum):
     OUTBOX_FULL = 6
     NOT_FOUND = 7
     INTERNAL = 8
+    TORQUE_OFF = 9  # the servos were released (TORQUE_OFF): TORQUE_ON first
 
 
 class LogLevel(enum.IntEnum):  # the values of the stdlib logging levels

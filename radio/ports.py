@@ -27,13 +27,26 @@ class Port(Protocol):
     def close(self) -> None: ...
 
 
-def open_url(url: str, baudrate: int = 115200, timeout: float = 0.01) -> Port:
-    """A pyserial port for `url`; raises pyserial's errors (or ValueError) when it cannot be opened."""
+def open_url(url: str, baudrate: int = 115200, timeout: float = 0.01, exclusive: bool = False) -> Port:
+    """A pyserial port for `url`; raises pyserial's errors (or ValueError) when it cannot be opened.
+
+    `exclusive`: hold an advisory lock on the device (flock) for as long as it is open, so a
+    second process asking for it exclusively is refused (`PortBusy`); URLs without a device
+    (loop://, socket://) ignore it."""
     import serial
 
     if HANDLERS not in serial.protocol_handler_packages:
         serial.protocol_handler_packages.append(HANDLERS)
-    return serial.serial_for_url(url, baudrate=baudrate, timeout=timeout)
+    try:
+        return serial.serial_for_url(url, baudrate=baudrate, timeout=timeout, exclusive=exclusive or None)
+    except serial.SerialException as exc:
+        if exclusive and "exclusively lock" in str(exc):
+            raise PortBusy(f"{url} is held by another process") from None
+        raise
+
+
+class PortBusy(OSError):
+    """Another process holds the port (opened with `exclusive`)."""
 
 
 class FdPort:

@@ -35,16 +35,35 @@ class LinkPump:
     def read(self, now: float | None = None) -> list[Event]:
         """Feed what arrived (waiting at most the port's timeout for it) to the link; the
         events it raised. Act on them before `write`: that is what acknowledges a delivery."""
-        data = self.port.read(min(max(self.port.in_waiting, 1), self.chunk))
+        return self.feed(self._read_port(), now)
+
+    def write(self, now: float | None = None) -> None:
+        """Write what the link has due: acknowledgements, retransmissions, new data, paced."""
+        out = self.due(self.room(), now)
+        if out:
+            self.port.write(out)
+
+    # A caller that keeps the port on a thread of its own (the station's event loop must not
+    # wait on it) splits a turn in two: `transfer` there, `feed` and `due` where the link lives.
+    def transfer(self, out: bytes) -> tuple[bytes, int]:
+        """The port's half of a turn: write `out` (what `due` returned), then read what arrived,
+        waiting at most the port's timeout; (bytes read, room for the next `due`)."""
+        if out:
+            self.port.write(out)
+        return self._read_port(), self.room()
+
+    def feed(self, data: bytes, now: float | None = None) -> list[Event]:
+        """The link's half of `read`: bytes from the port in, the link's events out."""
         if data:
             self.link.receive(data, self.clock() if now is None else now)
         return self.link.pop_events()
 
-    def write(self, now: float | None = None) -> None:
-        """Write what the link has due: acknowledgements, retransmissions, new data, paced."""
-        out = self.link.poll(self.clock() if now is None else now, self.room())
-        if out:
-            self.port.write(out)
+    def due(self, room: int, now: float | None = None) -> bytes:
+        """The link's half of `write`: at most `room` bytes it has to send now."""
+        return self.link.poll(self.clock() if now is None else now, room)
+
+    def _read_port(self) -> bytes:
+        return self.port.read(min(max(self.port.in_waiting, 1), self.chunk))
 
     def step(self, now: float | None = None) -> list[Event]:
         """`read`, then `write`, for a caller with nothing to do in between."""

@@ -14,10 +14,10 @@ from onboard import config
 from onboard.config import ConfigError
 from radio import FrameError
 from radio import packet as pk
-from radio.packet_camera import decode_camera, encode_camera
 from radio.auth import MemoryCounterStore
 from radio.keys import load_key, write_key
 from radio.link import Link
+from radio.packet_camera import decode_camera, encode_camera
 from tools.cli import main as host
 from tools.radiometry import settings_json
 from tools.receiver import Receiver

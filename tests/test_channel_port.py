@@ -41,7 +41,8 @@ def test_the_host_commands_refuse_a_bad_lossy_url_with_one_line(tmp_path, capsys
     from radio.keys import write_key
 
     key = write_key(tmp_path / "link.key")
-    assert main(["cmd", "--port", "btfsim://?loss=2", "--key", str(key), "status"]) == 2
+    assert main(["cmd", "--port", "btfsim://?loss=2", "--key", str(key), "--db", str(tmp_path / "h.db"),
+                 "status"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "loss 2.0 outside [0, 1)" in err
 

@@ -25,6 +25,7 @@ TYPED = {
     C.TORQUE_OFF: (["torque-off"], {}),
     C.REBOOT_SERVO: (["reboot-servo", "--servo-id", "2"], {"servo_id": 2}),
     C.SEND_MASK: (["send-mask", "--seq", "7"], {"seq": 7}),
+    C.TORQUE_ON: (["torque-on"], {}),
 }
 
 
@@ -47,7 +48,7 @@ def test_what_the_user_types_is_what_the_robot_checks(name):
 
 
 def test_the_flags_say_which_commands_move_or_free_the_arm():
-    assert {c for c, s in COMMANDS.items() if s.moves_arm} == {C.GOTO, C.CAPTURE, C.REBOOT_SERVO}
+    assert {c for c, s in COMMANDS.items() if s.moves_arm} == {C.GOTO, C.CAPTURE, C.REBOOT_SERVO, C.TORQUE_ON}
     assert {c for c, s in COMMANDS.items() if s.interrupts} == {C.ABORT, C.TORQUE_OFF, C.SWEEP}
     assert {c for c, s in COMMANDS.items() if s.query} == {C.PING, C.STATUS}
 
@@ -58,11 +59,15 @@ def test_the_robot_has_a_handler_for_every_command(fake_robot):
 
 
 def test_refusals_are_values_with_their_reason():
-    assert refusal(PoseSkipped("move failed")) == Refusal(pk.Reason.HARDWARE, "move failed")
+    hardware = refusal(PoseSkipped("move failed"))
+    assert hardware.reason is pk.Reason.HARDWARE and hardware.text.startswith("move failed (")
+    assert "reboot-servo --servo-id" in hardware.text and "torque-on" in hardware.text  # how to recover
     assert refusal(Interrupted("ABORT")) == Refusal(pk.Reason.BUSY, "interrupted by ABORT")
-    assert refusal(OutboxFull("full")).reason is pk.Reason.OUTBOX_FULL
+    full = refusal(OutboxFull("full"))
+    assert full.reason is pk.Reason.OUTBOX_FULL and "station" in full.text
     assert refusal(ConfigError("x")) == Refusal(pk.Reason.BAD_ARGUMENT, "ConfigError: x")
-    assert refusal(RuntimeError("y")) == Refusal(pk.Reason.INTERNAL, "RuntimeError: y")
+    internal = refusal(RuntimeError("y"))
+    assert internal.reason is pk.Reason.INTERNAL and internal.text.startswith("RuntimeError: y (see the robot's log")
 
 
 def test_a_handler_refusal_reaches_the_nack_unchanged(fake_robot):

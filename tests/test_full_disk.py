@@ -158,12 +158,12 @@ class Listener:
     """`btf-host listen` on a small disk (its database there), and a robot link here."""
 
     def __init__(self, tmp_path: Path) -> None:
-        from tests.test_host_link_cli import _PtyBridge
+        from tests.ptys import PtyCable
 
         self.key = write_key(tmp_path / "link.key")
         (tmp_path / "db").mkdir()
         self.disk = SmallDisk(tmp_path / "db", 2 * MiB)
-        self.bridge = _PtyBridge()
+        self.bridge = PtyCable()
         self.db = tmp_path / "db" / "host.sqlite"
         fd = os.open(self.bridge.paths[0], os.O_RDWR | os.O_NOCTTY)
         self.robot = LinkPump(Link(ROBOT_NODE, HOST_NODE, LINK_ID, load_key(self.key),

@@ -10,6 +10,7 @@ from radio import packet as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import write_key
 from radio.link import Link
+from tests.ptys import PtyCable
 from tests.test_receiver import models_body
 from tools.cli import main
 
@@ -59,7 +60,8 @@ def test_decode_without_the_key_shows_headers_and_a_wrong_key_rejects_every_fram
 @pytest.mark.parametrize("argv, needle", [
     (["decode", "missing.bin", "--no-auth"], "no such file"),
     (["listen", "--port", "loop://", "--db", "x.db", "--key", "nokey"], "no key file"),
-    (["cmd", "--port", "loop://", "--key", "nokey", "status"], "no key file"),
+    (["cmd", "--port", "loop://", "--key", "nokey", "--db", "x.db", "status"], "no key file"),
+    (["cmd", "--port", "loop://", "--key", "nokey", "status"], "needs --db"),
 ])
 def test_bad_input_is_one_line_and_status_2(argv, needle, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
@@ -92,7 +94,7 @@ def test_cmd_without_an_answer_times_out_with_one_line(key, tmp_path, capsys):
     tty.setraw(master)
     try:
         assert main(["cmd", "--port", os.ttyname(slave), "--key", str(key), "--timeout", "0.3",
-                     "goto", "--elevation", "45"]) == 2
+                     "--db", str(tmp_path / "host.db"), "goto", "--elevation", "45"]) == 2
     finally:
         os.close(master)
         os.close(slave)
@@ -127,41 +129,6 @@ def test_cmd_sweep_refuses_mixed_or_partial_ranges(extra):
         command_of(args)
 
 
-class _PtyBridge:
-    """Two pty pairs joined master to master: each slave path is one end of a serial cable."""
-
-    def __init__(self):
-        import threading
-
-        self.ends = [os.openpty() for _ in range(2)]
-        for m, s in self.ends:
-            tty.setraw(m)
-            tty.setraw(s)
-        self.paths = [os.ttyname(s) for _, s in self.ends]
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._pump, daemon=True)
-        self._thread.start()
-
-    def _pump(self):
-        import select
-
-        a, b = self.ends[0][0], self.ends[1][0]
-        peer = {a: b, b: a}
-        while not self._stop.is_set():
-            for fd in select.select([a, b], [], [], 0.05)[0]:
-                try:
-                    os.write(peer[fd], os.read(fd, 4096))
-                except OSError:
-                    pass
-
-    def close(self):
-        self._stop.set()
-        self._thread.join()
-        for m, s in self.ends:
-            os.close(m)
-            os.close(s)
-
-
 @pytest.fixture(scope="module")
 def robot_port(tmp_path_factory):
     """A running `btf-robot run --hal fake` on one end of a serial cable; yields (other end, key)."""
@@ -175,7 +142,7 @@ def robot_port(tmp_path_factory):
         'robot_id = 4\nstate_dir = "state"\n[hal]\nbody = "fake"\nscene = "mixed"\nsize = [48, 64]\n'
         '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
         '[sweep]\nautostart = false\n[segment]\nmethod = "scene"\n')
-    bridge = _PtyBridge()
+    bridge = PtyCable()
     with open(work / "stderr", "wb") as err:
         robot = subprocess.Popen(
             [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())", "run",
@@ -191,7 +158,9 @@ def robot_port(tmp_path_factory):
 
 
 def _cmd(port, key, capsys, *argv):
-    code = main(["cmd", "--port", port, "--key", str(key), "--timeout", "20", "--json", *argv])
+    # no station runs: cmd holds the port for the command, storing what arrives beside the key
+    code = main(["cmd", "--port", port, "--key", str(key), "--db", str(key.parent / "host.db"),
+                 "--timeout", "20", "--json", *argv])
     out = capsys.readouterr().out.strip().splitlines()
     return code, json.loads(out[-1]) if out else None
 

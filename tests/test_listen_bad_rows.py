@@ -14,7 +14,7 @@ from radio.keys import load_key, write_key
 from radio.link import Acked, Link, LinkUp
 from radio.ports import FdPort
 from radio.pump import LinkPump
-from tests.test_host_link_cli import _PtyBridge
+from tests.ptys import PtyCable
 from tests.test_receiver import models_body
 from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver, StoreFailed
 from tools.store import Store
@@ -49,7 +49,7 @@ def test_listen_ends_with_one_line_and_acknowledges_nothing_on_a_bad_row(tmp_pat
     db = tmp_path / "h.sqlite"
     _db_with_a_bad_model_row(db)
     key = write_key(tmp_path / "link.key")
-    bridge = _PtyBridge()
+    bridge = PtyCable()
     robot = LinkPump(Link(ROBOT_NODE, HOST_NODE, LINK_ID, load_key(key), MemoryCounterStore(wall=time.time),
                           heartbeat=0.2), FdPort(os.open(bridge.paths[0], os.O_RDWR | os.O_NOCTTY), timeout=0.005))
     listen = subprocess.Popen(

@@ -71,14 +71,14 @@ def test_mask_is_sent_when_the_label_map_changes_and_on_request(fake_robot):
     rt.boot()
     C = pk.CommandName
     masks = lambda: [p for p in decoded(tr) if isinstance(p, pk.MaskPacket)]
-    assert command(rt, tr, 1, C.SEND_MASK, seq=0).extras["next_capture"] is True
+    assert command(rt, tr, 1, C.SEND_MASK, seq=1).extras["next_capture"] is True  # the next capture's
     command(rt, tr, 2, C.CAPTURE)
     command(rt, tr, 3, C.CAPTURE)  # same view, same map: not sent again
     assert len(masks()) == 1
     # the change check compares the very map the MASK packet carried
     np.testing.assert_array_equal(masks()[0].label_map(), rt.pipeline.segmenter.segmenter.small)
-    command(rt, tr, 4, C.SEND_MASK, seq=1)
-    assert len(masks()) == 2 and masks()[-1].seq == 1
+    command(rt, tr, 4, C.SEND_MASK, seq=2)
+    assert len(masks()) == 2 and masks()[-1].seq == 2
     command(rt, tr, 5, C.GOTO, elevation=30.0, azimuth=40.0)
     command(rt, tr, 6, C.CAPTURE)  # another view of the mixed plate: another map
     assert len(masks()) == 3

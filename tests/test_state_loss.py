@@ -11,7 +11,7 @@ from pathlib import Path
 
 from radio.auth import MemoryCounterStore
 from radio.link import Delivered, Link
-from tests.test_host_link_cli import _PtyBridge
+from tests.ptys import PtyCable
 from tests.test_receiver import models_body
 from tools.cli import main as host_main
 from tools.receiver import Receiver
@@ -27,7 +27,7 @@ CONFIG = ('robot_id = 5\nstate_dir = "state"\n[hal]\nbody = "fake"\nscene = "mix
 def _sweep_into(tmp_path: Path, db: Path) -> list[dict]:
     """One robot run (the config's sweep, to the end) into `db` through `btf-host listen`; what
     listen printed."""
-    bridge = _PtyBridge()
+    bridge = PtyCable()
     try:
         robot = subprocess.Popen(
             [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())", "run",

@@ -30,9 +30,11 @@ COMMANDS: tuple[str, ...] = (
     "keygen",
     "linktest",
     "demo",
+    "station",
     "listen",
-    "decode",
     "cmd",
+    "watch",
+    "decode",
     "report",
 )
 

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 
 from radio.commands import COMMANDS, Command, CommandName
 from tools.cli import CliError
@@ -24,9 +23,15 @@ def _cli_type(parse):
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("cmd", help="send the robot a command and print its answer")
-    p.add_argument("--port", required=True, help="pyserial URL of the link (btfsim://?port=URL&loss=0.2: lossy)")
-    p.add_argument("--key", required=True, help="link key file")
+    p = sub.add_parser("cmd", help="send the robot a command through the station and print its answer",
+                       description="Talks to the station serving DB over its control socket (DB.sock); with no "
+                                   "station running and --port given, opens the port itself for this one command "
+                                   "and stores what arrives in DB as the station would.")
+    p.add_argument("--db", help="the station's database (its control socket is DB.sock)")
+    p.add_argument("--socket", help="the station's control socket, if not DB.sock")
+    p.add_argument("--port", help="with no station running: the pyserial URL to open for this command "
+                   "(btfsim://?port=URL&loss=0.2: lossy)")
+    p.add_argument("--key", help="with no station running: the link key file")
     p.add_argument("--baud", type=int, default=115200)
     p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the answer")
     p.add_argument("--json", action="store_true", help="print the answer as one JSON object")
@@ -74,31 +79,38 @@ def _order(cmd: Command):
 
 
 def run(args: argparse.Namespace) -> int:
+    import secrets
+
     from radio import packet as pk
-    from tools.cmd_listen import open_session
+    from tools.command_route import ask
 
     name, cargs = command_of(args)
     try:
         pk.encode(pk.CommandPacket(0, name, cargs))
     except ValueError as exc:
         raise CliError(f"{args.what}: {exc}") from None
-    session, _ = open_session(args.port, args.key, None, args.baud)
-    try:
-        cid = session.command(name, cargs)
-        t0 = time.monotonic()
-        while cid not in session.answers:
-            if time.monotonic() - t0 > args.timeout:
-                raise CliError(f"no answer from the robot within {args.timeout:g} s")
-            session.step()
-        # One more turn so our acknowledgement of the answer goes out.
-        session.step()
-    finally:
-        session.close()
-    item = session.answers[cid]
-    ok = isinstance(item.packet, pk.AckPacket)
+    if not (args.timeout > 0):
+        raise CliError(f"--timeout {args.timeout}: must be positive")
+    if not args.db and not args.socket:
+        raise CliError("cmd needs --db DB: the database of the station to talk to (with no station running, "
+                       "where what arrives is stored)")
+    if args.port and not (args.key and args.db):
+        raise CliError("cmd --port (no station running) needs --key KEY and --db DB: what arrives is stored")
+    answer = ask(args, name, cargs, secrets.randbits(31))
+    ok = bool(answer["ok"])
     if args.json:
-        print(json.dumps({"command": args.what, "ok": ok, **item.to_json()["packet"]}))
+        print(json.dumps({"command": args.what, **answer}))
     else:
-        extras = ", ".join(f"{k}={v}" for k, v in item.packet.extras.items())
-        print(f"{item.text}" + (f" ({extras})" if extras else ""))
+        verdict = "ACK" if ok else f"NACK {answer.get('reason')}"
+        extras = ", ".join(f"{k}={_shown(k, v)}" for k, v in (answer.get("extras") or {}).items())
+        print(f"{verdict}: {answer.get('text', '')}" + (f" ({extras})" if extras else ""))
     return 0 if ok else 1
+
+
+def _shown(key: str, value):
+    """An answer's value for a person: short floats, clock times in ISO 8601."""
+    if key == "time" and isinstance(value, (int, float)):
+        from tools.station_snapshot import iso
+
+        return iso(value)
+    return f"{value:.6g}" if isinstance(value, float) else value

@@ -1,0 +1,43 @@
+"""A serial cable made of two real pseudo-terminal pairs, for tests that run the robot and the
+host as separate processes: each end is a pty path a process opens like a serial device."""
+from __future__ import annotations
+
+import os
+import select
+import threading
+import tty
+
+
+class PtyCable:
+    """Two pty pairs joined master to master by a thread: `paths[0]` and `paths[1]` are the two
+    ends. What one end writes while nobody reads the other is dropped once the pty's buffer is
+    full, as a radio drops it (a reader that is down never stalls the cable)."""
+
+    def __init__(self) -> None:
+        self.ends = [os.openpty() for _ in range(2)]
+        for m, s in self.ends:
+            tty.setraw(m)
+            tty.setraw(s)
+            os.set_blocking(m, False)
+        self.paths = [os.ttyname(s) for _, s in self.ends]
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._pump, daemon=True)
+        self._thread.start()
+
+    def _pump(self) -> None:
+        a, b = self.ends[0][0], self.ends[1][0]
+        peer = {a: b, b: a}
+        while not self._stop.is_set():
+            for fd in select.select([a, b], [], [], 0.05)[0]:
+                try:
+                    data = os.read(fd, 4096)
+                    os.write(peer[fd], data)
+                except OSError:  # EAGAIN: the far end's buffer is full (nobody reads it); EIO
+                    pass
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        for m, s in self.ends:
+            os.close(m)
+            os.close(s)
