@@ -6,10 +6,19 @@ The measured view (from the tracker) is what a capture is filed under. Each devi
 step gets bounded retries; when they run out the pose is skipped with a reason
 (`PoseSkipped`) and the caller records it. The fitter is preallocated once and reset
 per capture, so memory does not grow with the mission.
+
+Given a `pump` (the runtime's link service), the pipeline keeps the link serviced while the
+arm works: between polls of a moving arm, and while a camera frame or its processing, which
+take longer the larger the frame, runs in a worker thread. So the failsafe holds the arm
+within `link.failsafe_s` of the base falling silent at any frame size. Only the calling thread
+touches the link, the arm and the runtime's state; the worker touches the camera and numbers
+(a step the worker runs calls the pump not at all, and runs its own frames inline).
 """
 from __future__ import annotations
 
+import concurrent.futures
 import dataclasses
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, TypeVar
@@ -28,6 +37,7 @@ from onboard.fit import FrameFitter
 
 T = TypeVar("T")
 MAX_POSES_REMEMBERED = 512  # previous models kept per pose for the UNCHANGED rule
+PUMP_S = 0.01  # how often the link is serviced while a step runs in the worker
 
 
 class PoseSkipped(Exception):
@@ -70,7 +80,7 @@ class Pipeline:
         cfg: Config,
         hal: Hal,
         segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple[np.ndarray, bool]],
-        pump: Callable[[], None] = lambda: None,
+        pump: Callable[[], None] | None = None,
         sleep: Callable[[float], None] = time.sleep,
         resend_mask: Callable[[], None] = lambda: None,
     ) -> None:
@@ -78,7 +88,10 @@ class Pipeline:
         self.hal = hal
         self.segmenter = segmenter
         self.resend_mask = resend_mask  # the next capture sends its label map (after a rollback)
-        self.pump = pump  # keeps the link serviced while the arm moves
+        self._service = pump  # keeps the link serviced while the arm works
+        self._worker = (None if pump is None else
+                        concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="pose-step"))
+        self._here = threading.local()  # `in_worker`: this thread is the worker
         self.sleep = sleep
         self.spec = feature_spec(cfg)
         self.pca: PcaBasis | None = None
@@ -89,6 +102,36 @@ class Pipeline:
         self.lock = CameraLock(hal.camera, cfg.camera) if hal is not None else None
 
     # -- device steps ------------------------------------------------------------------
+
+    def pump(self) -> None:
+        """Service the link, from the calling thread only (the worker leaves it alone)."""
+        if self._service is not None and not getattr(self._here, "in_worker", False):
+            self._service()
+
+    def pumping(self, step: Callable[[], T], undo: Callable[[T], None] | None = None) -> T:
+        """`step()` in the worker while this thread services the link every PUMP_S. When the
+        pump raises (an interrupt: the failsafe, ABORT), the step is waited for and its result
+        undone, then the interrupt goes on up. Without a pump, or in the worker, `step()` here."""
+        if self._worker is None or getattr(self._here, "in_worker", False):
+            return step()
+
+        def in_worker() -> T:
+            self._here.in_worker = True
+            try:
+                return step()
+            finally:
+                self._here.in_worker = False
+
+        future = self._worker.submit(in_worker)
+        try:
+            while not concurrent.futures.wait([future], timeout=PUMP_S)[0]:
+                self.pump()
+        except BaseException:
+            concurrent.futures.wait([future])
+            if undo is not None and future.exception() is None:
+                undo(future.result())
+            raise
+        return future.result()
 
     def retry(self, step: str, fn: Callable[[], T]) -> T:
         """`fn()`, tried `sweep.retries` more times on a device fault; PoseSkipped with the last one."""
@@ -138,7 +181,7 @@ class Pipeline:
                 raise ValueError(f"camera returned an unusable frame {getattr(frame, 'shape', None)}")
             return frame
 
-        return self.retry("camera", grab)
+        return self.retry("camera", lambda: self.pumping(grab))
 
     def lock_camera(self) -> CameraSettings:
         """Apply `[camera]` to the camera (at start, and when SET changes it); what it granted."""
@@ -196,7 +239,13 @@ class Pipeline:
 
     def process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles,
                 settings: CameraSettings | None = None) -> FittedView:
-        """Features, segmentation, skip rules and the fit for one frame (taken with `settings`)."""
+        """Features, segmentation, skip rules and the fit for one frame (taken with `settings`),
+        in the worker, the link serviced meanwhile."""
+        return self.pumping(lambda: self._process(frame, commanded, measured, settings), undo=self.rollback)
+
+    def _process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles,
+                 settings: CameraSettings | None) -> FittedView:
+        cfg = self.cfg  # a SET while this runs applies from the next frame
         try:
             if self.spec.space is FeatureSpace.PCA and self.pca is None:
                 self.pca = PcaBasis.fit(frame)  # once per scene; sent with the scene
@@ -205,26 +254,26 @@ class Pipeline:
         except ValueError as exc:  # e.g. a band the camera does not have: skip with the reason
             raise PoseSkipped(f"features: {exc}") from None
         labels, changed = self.segmenter(feats, frame, measured)
-        n_labels = self.cfg.segment.n_labels
+        n_labels = cfg.segment.n_labels
         counts = skip.label_counts(labels, n_labels)
-        keep = skip.kept_labels(counts, self.cfg.skip.min_pixels)
+        keep = skip.kept_labels(counts, cfg.skip.min_pixels)
         data = feats.data
-        stride = skip.subsample_stride(counts, keep, self.cfg.skip.percentile_precision, data.shape[1])
+        stride = skip.subsample_stride(counts, keep, cfg.skip.percentile_precision, data.shape[1])
         results = {k: r for k, r in self.fit_frame(data, labels, feats.levels, stride).items() if k[0] in keep}
         primary, camera = results, None  # `primary`: the models of this frame's own pixels
         if settings is not None and self.lock is not None:
             camera = self.settings_record(settings, data, labels, feats.levels)
-            if self.cfg.camera.bracket_limit and settings.locked:
+            if cfg.camera.bracket_limit and settings.locked:
                 results, camera = self.bracket(results, camera, labels, stride, feats.levels)
-        dropped = tuple(int(i) for i in np.flatnonzero((counts > 0) & (counts < self.cfg.skip.min_pixels)))
+        dropped = tuple(int(i) for i in np.flatnonzero((counts > 0) & (counts < cfg.skip.min_pixels)))
         key = skip.pose_key(commanded)
-        same = skip.unchanged(self._previous.get(key), results, self.cfg.skip.unchanged_tolerance)
+        same = skip.unchanged(self._previous.get(key), results, cfg.skip.unchanged_tolerance)
         if not same:  # compare with the last models sent, so slow drift is still caught
             remember(self._previous, key, results)
         pca = self.pca if self.pca_pending else None
         self.pca_pending = False
         dep = None
-        if self.cfg.features.dependence and results and not same:  # a bounded second pass
+        if cfg.features.dependence and results and not same:  # a bounded second pass
             dep = dependence.measure(data, labels, {k: r.model for k, r in primary.items()}, feats.levels)
         return FittedView(commanded, measured, feats.band_names, feats.levels, results, dropped,
                           labels, changed, same, stride, pca, dep, camera)

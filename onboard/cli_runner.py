@@ -2,7 +2,9 @@
 
 A CLI is a package of subcommand modules `<package>/cmd_<name>.py`, each exposing
 `add_parser(subparsers)` and `run(args) -> int`. A configuration or usage problem raises
-`CliError`: one line, exit status 2. Ctrl-C is status 130, and a reader that went away
+`CliError`: one line, exit status 2 (restarting cannot mend it); a broken environment (a full
+disk, a device not there yet) raises `RetryLater`: one line, exit status 1 (a supervisor
+restarts it). Ctrl-C is status 130, and a reader that went away
 (`... | head`) ends the command quietly with 141, as the shell's own tools do.
 """
 from __future__ import annotations
@@ -15,6 +17,10 @@ import sys
 
 class CliError(Exception):
     """A problem with the user's input or configuration: one line, exit status 2."""
+
+
+class RetryLater(Exception):
+    """The environment is broken (a full disk, a device not there yet): one line, exit status 1."""
 
 
 def build_parser(prog: str, package: str, commands: tuple[str, ...], description: str) -> argparse.ArgumentParser:
@@ -44,6 +50,9 @@ def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None) -> int:
     except CliError as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         return 2
+    except RetryLater as exc:
+        print(f"{parser.prog}: error: {exc}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:

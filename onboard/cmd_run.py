@@ -1,8 +1,13 @@
-"""`btf-robot run`: the robot's runtime, autonomous sweeps and remote control over the link."""
+"""`btf-robot run`: the robot's runtime, autonomous sweeps and remote control over the link.
+
+Exit status 2: the configuration is wrong (restarting cannot mend it); 1: the environment is
+(a full disk, a device or port not there yet: systemd restarts it, see examples/btf-robot.service).
+"""
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import errno
 import logging
 import os
 import signal
@@ -13,7 +18,7 @@ import time
 from pathlib import Path
 
 from onboard import config as config_mod
-from onboard.cli_runner import CliError
+from onboard.cli_runner import CliError, RetryLater
 from onboard.config import ConfigError
 
 
@@ -28,6 +33,9 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--new-sweep", action="store_true",
                    help="start a new sweep of the config's plan even if its last sweep finished "
                         "(by default an interrupted sweep resumes and a finished one is not repeated)")
+    p.add_argument("--new-key", action="store_true",
+                   help="link.key_file holds a key never used before (just made by `btf-host keygen`): "
+                        "start its link counters afresh; only needed with [link] clock = \"none\"")
     return p
 
 
@@ -68,27 +76,89 @@ def _calibrated_exposure(cfg):
     return dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, exposure=CameraValue(repr(stored))))
 
 
+# A state_dir refusing writes for these reasons needs a person (exit 2: a wrong path or mode, a
+# filesystem gone read-only); a full disk is the robot's to live with (it starts paused and says
+# so); any other failure is the environment's (exit 1, retried).
+_CONFIG_ERRNOS = (errno.EACCES, errno.EPERM, errno.ENOTDIR, errno.EEXIST, errno.ENOENT, errno.ENAMETOOLONG,
+                  errno.ELOOP, errno.EROFS)
+_NO_ROOM_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+
+
 def _check_state_dir(path: Path) -> None:
-    """The state directory exists (or is made) and takes a durable write: else one ConfigError."""
+    """The state directory exists (or is made) and takes a durable write: else one line, a
+    ConfigError when the setup is wrong, RetryLater when the disk or device is."""
     try:
         path.mkdir(parents=True, exist_ok=True)
     except FileExistsError:
         raise ConfigError(f"state_dir {path}: exists and is not a directory") from None
     except OSError as exc:
-        raise ConfigError(f"state_dir {path}: cannot create it: {exc.strerror or exc}") from None
+        _state_dir_failed(path, "cannot create it", exc)
     try:
         with tempfile.TemporaryFile(dir=path) as probe:
             probe.write(b"x")
             probe.flush()
             os.fsync(probe.fileno())
     except OSError as exc:
-        raise ConfigError(f"state_dir {path}: cannot write in it: {exc.strerror or exc}") from None
+        if exc.errno not in _NO_ROOM_ERRNOS:  # a full disk: the runtime releases its reserve
+            _state_dir_failed(path, "cannot write in it", exc)
+
+
+def _state_dir_failed(path: Path, what: str, exc: OSError) -> None:
+    text = f"state_dir {path}: {what}: {exc.strerror or exc}"
+    if exc.errno in _CONFIG_ERRNOS:
+        raise ConfigError(text) from None
+    raise RetryLater(text) from None
 
 
 def _open_port(url: str, baud: int):
     from radio.ports import open_url
 
     return open_url(url, baud, timeout=0.005)
+
+
+def _counters(cfg, new_key: bool):
+    """The robot's link counters (state_dir/counters.json); CliError when only a new key helps."""
+    from radio.auth import CounterFileLost, FileCounterStore, write_fresh
+
+    path = cfg.state_dir / "counters.json"
+    try:
+        if new_key:
+            write_fresh(path)
+        return FileCounterStore(path, clock=cfg.link.clock == "rtc")
+    except CounterFileLost as exc:
+        raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise RetryLater(f"state_dir {cfg.state_dir}: counters: {exc}") from None
+
+
+def _build(cfg, key: bytes, args: argparse.Namespace, hal, port):
+    """The runtime on its link; what opening its state had to say is in its notes."""
+    from onboard.outbox import OutboxError
+    from onboard.runtime import Runtime, open_state
+    from onboard.segmentation import Segmentation
+    from onboard.watchdog import Notifier
+    from radio.link import Link
+    from radio.pump import LinkPump
+
+    segment = Segmentation(cfg, hal)
+    counters = _counters(cfg, args.new_key)
+    try:
+        outbox, disk, note = open_state(cfg)
+    except (OutboxError, OSError) as exc:
+        raise RetryLater(f"state_dir {cfg.state_dir}: {exc}") from None
+    link = Link(cfg.link.node_id, cfg.link.peer_id, cfg.link.link_id, key, counters,
+                mtu=cfg.link.mtu, heartbeat=cfg.link.heartbeat_s, link_timeout=cfg.link.failsafe_s,
+                incarnation=bytes.fromhex(outbox.incarnation))
+    h, w = cfg.hal.size
+    hal.camera.open(w, h)
+    rt = Runtime(cfg, hal, LinkPump(link, port), segment, outbox=outbox, disk=disk, notifier=Notifier(),
+                 new_sweep=args.new_sweep)
+    # A missing counters file beside a new outbox is a first start (or a whole state lost, which
+    # the new incarnation tells the host): said only when the rest of the state is there.
+    for line in (note, "" if outbox.new else counters.note):
+        if line:
+            rt.note(line)
+    return rt
 
 
 def console_log() -> None:
@@ -111,40 +181,36 @@ def run(args: argparse.Namespace) -> int:
     from hal.factory import build_hal
     from hal.interfaces import HalError
     from onboard.outbox import OutboxError
-    from onboard.runtime import Runtime
-    from onboard.segmentation import Segmentation
-    from onboard.watchdog import Notifier
-    from radio.auth import FileCounterStore
-    from radio.link import Link
-    from radio.pump import LinkPump
 
     cfg = _calibrated_exposure(cfg)
     try:
         hal = build_hal(cfg.hal, state_dir=cfg.state_dir)  # with the arm calibration stored there
     except HalError as exc:
-        raise CliError(f"hal: {exc}") from None
+        raise RetryLater(f"hal: {exc}") from None
     try:
         port = _open_port(cfg.link.url, cfg.link.baud)
     except Exception as exc:
         hal.close()
-        raise CliError(f"link.url {cfg.link.url}: cannot open: {exc}") from None
+        raise RetryLater(f"link.url {cfg.link.url}: cannot open: {exc}") from None
     try:
-        segment = Segmentation(cfg, hal)
-        link = Link(cfg.link.node_id, cfg.link.peer_id, cfg.link.link_id, key,
-                    FileCounterStore(cfg.state_dir / "counters.json"), mtu=cfg.link.mtu,
-                    heartbeat=cfg.link.heartbeat_s, link_timeout=cfg.link.failsafe_s)
-        h, w = cfg.hal.size
-        hal.camera.open(w, h)
-        rt = Runtime(cfg, hal, LinkPump(link, port), segment, notifier=Notifier(),
-                     new_sweep=args.new_sweep)
-    except (ConfigError, ValueError, HalError, OutboxError) as exc:
+        rt = _build(cfg, key, args, hal, port)
+    except (CliError, RetryLater):
         hal.close()
+        port.close()
+        raise
+    except (ConfigError, ValueError) as exc:
+        hal.close()
+        port.close()
         raise CliError(str(exc)) from None
+    except HalError as exc:
+        hal.close()
+        port.close()
+        raise RetryLater(f"hal: {exc}") from None
     stopping = []
     signal.signal(signal.SIGTERM, lambda *_: stopping.append(1))
     t0 = time.monotonic()
 
-    def stop(r: Runtime) -> bool:
+    def stop(r) -> bool:
         if stopping or (args.max_seconds and time.monotonic() - t0 > args.max_seconds):
             return True
         return bool(args.exit_when_idle and r.idle())

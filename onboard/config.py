@@ -54,6 +54,10 @@ class LinkConfig:
     heartbeat_s: float = 1.0
     failsafe_s: float = 5.0  # silence from the base after which the arm stops and holds
     window: int = 8  # packets in flight from the outbox
+    # rtc: the wall clock is right from boot (a real-time clock, or NTP before the robot starts),
+    # so a lost counters file restarts the link counters from it; none: it is not, and a lost
+    # counters file stops the robot until the key is rotated (radio.auth)
+    clock: str = "rtc"
 
 
 @dataclass(frozen=True, slots=True)
@@ -120,6 +124,8 @@ class Config:
     robot_id: int = 1
     state_dir: Path = Path("state")
     outbox_quota_bytes: int = 64 * 1024 * 1024
+    disk_min_free_bytes: int = 16 * 1024 * 1024  # fewer free under state_dir: acquisition pauses
+    disk_reserve_bytes: int = 1024 * 1024  # held in state_dir, released for acks and replies on a full disk
     hal: HalConfig = field(default_factory=HalConfig)
     link: LinkConfig = field(default_factory=LinkConfig)
     sweep: SweepConfig = field(default_factory=SweepConfig)
@@ -165,6 +171,7 @@ CHOICES = {
     "hal.scene": ("black", "white", "mixed", "field"),
     "features.space": ("rgb", "hsv", "gray", "pca", "raw"),
     "segment.method": ("isodata", "mask", "scene"),
+    "link.clock": ("rtc", "none"),
 }
 
 
@@ -290,6 +297,8 @@ def check(cfg: Config) -> None:
         raise ConfigError("segment.method = 'scene' needs hal.body = 'fake' (ground truth)")
     if cfg.outbox_quota_bytes < 4096:
         raise ConfigError("outbox_quota_bytes must be at least 4096")
+    if cfg.disk_min_free_bytes < 0 or cfg.disk_reserve_bytes < 0:
+        raise ConfigError("disk_min_free_bytes and disk_reserve_bytes must not be negative")
     check_camera(cfg)
 
 

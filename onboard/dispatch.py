@@ -141,7 +141,7 @@ class Dispatcher:
             answer = wire.reply_body(cmd.command_id, True, cmd.name.name, result)
             # a query's answer is the robot's state, which STATUS carries: the line stays short
             log.info("%s: ACK%s", said, "" if COMMANDS[cmd.name].query else _args_text(result))
-        stands = self._answer(cmd.command_id, answer, effect)
+        stands = self._answer(cmd.command_id, answer, effect, COMMANDS[cmd.name].query)
         if stands and not isinstance(result, Refusal) and COMMANDS[cmd.name].interrupts:
             rt.state.interrupt_work(cmd.name.name)  # the pose being measured ends at the next service
 
@@ -160,7 +160,7 @@ class Dispatcher:
         except Exception as exc:  # a command that fails is answered, never fatal
             return refusal(exc)
 
-    def _answer(self, command_id: int, answer: tuple[int, bytes], effect: Effect) -> bool:
+    def _answer(self, command_id: int, answer: tuple[int, bytes], effect: Effect, query: bool = False) -> bool:
         """Commit a reply with its command's effect, remembered by id; whether the effect stands."""
         rt = self.rt
         try:
@@ -169,7 +169,10 @@ class Dispatcher:
         except OutboxFull as exc:
             effect.undo()
             if not (effect.packets or effect.state):
-                rt.state.paused_reason = str(exc)  # not even the reply fits: a retry finds room later
+                if query:  # a query is harmless to answer again: straight on the link
+                    rt.link.send_direct(*answer)
+                else:
+                    rt.state.paused_reason = str(exc)  # not even the reply fits: a retry finds room later
                 return False
             # What the command produced does not fit: refuse it instead, and say why.
             nack = wire.reply_body(command_id, False, str(exc), reason=pk.Reason.OUTBOX_FULL)
@@ -228,8 +231,11 @@ class Dispatcher:
         return {"aborted": True}
 
     def set(self, args: dict, effect: Effect) -> Result:
+        camera = str(args["key"]).startswith("camera.") and self.rt.pipeline.lock is not None
+        if camera and self.rt.state.busy:  # the pose's frames are being taken, in the worker
+            return Refusal(pk.Reason.BUSY, "busy: the camera is taking a pose's frames; send it again")
         self.set_keys({args["key"]: args["value"]})
-        if str(args["key"]).startswith("camera.") and self.rt.pipeline.lock is not None:
+        if camera:
             from hal.controls import describe
 
             granted = self.rt.pipeline.lock_camera()  # now, so the answer says what the camera took

@@ -2,11 +2,11 @@
 
 One thread turns `step()`: service the link (`LinkService`: acknowledgements clear the
 outbox, the outbox feeds the link), answer commands (`Dispatcher`), follow the link's
-state (`Failsafe`), and measure the next pose of an active sweep (`SweepControl`, filing
-each capture with `Captures`); `Status` says what the robot is doing. What they share is
-one `RuntimeState`. Every packet goes through the outbox first and leaves it only when the
-base acknowledged it; faults become retries, then a skipped pose with its reason; no
-exception ends the loop.
+state (`Failsafe`), watch the disk (`Disk`), and measure the next pose of an active sweep
+(`SweepControl`, filing each capture with `Captures`); `Status` says what the robot is doing.
+What they share is one `RuntimeState`. Every packet goes through the outbox first and leaves
+it only when the base acknowledged it; faults become retries, then a skipped pose with its
+reason; no exception ends the loop. `open_state` opens the outbox a runtime works from.
 """
 from __future__ import annotations
 
@@ -19,10 +19,11 @@ from hal.interfaces import Hal
 from onboard.capture import Pipeline, PoseSkipped
 from onboard.captures import PCA_KEY, Captures, read_pca
 from onboard.config import Config
+from onboard.disk import Disk, Pressure
 from onboard.dispatch import Dispatcher
 from onboard.failsafe import Failsafe
 from onboard.link_service import LinkService
-from onboard.outbox import Outbox
+from onboard.outbox import NO_ROOM, Outbox, OutboxError, free_bytes, open_outbox
 from onboard.runtime_state import Mode, RuntimeState
 from onboard.segmentation import Segmentation
 from onboard.status import Status
@@ -30,10 +31,27 @@ from onboard.sweep import SweepProgress
 from onboard.sweep_control import SweepControl
 from onboard.transport import Transport
 from onboard.watchdog import Notifier
-from radio.link import Delivered, LinkDown, LinkUp
+from radio.link import Delivered, LinkDown, LinkUp, PeerStale
 
-__all__ = ["Mode", "Runtime"]
+__all__ = ["Mode", "Runtime", "open_state"]
 log = logging.getLogger("btf.robot")  # one short line per pose, command and link change
+
+
+def open_state(cfg: Config) -> tuple[Outbox, Disk, str]:
+    """The outbox under `state_dir`, the disk it lives on, and what opening it took ("" when
+    nothing): a damaged outbox is moved aside and a new one, a new incarnation, started. A disk
+    too full to open it even without the reserve raises OutboxError (the environment: retry)."""
+    cfg.state_dir.mkdir(parents=True, exist_ok=True)
+    disk = Disk(cfg.state_dir, cfg.disk_min_free_bytes, cfg.disk_reserve_bytes)
+    path = cfg.state_dir / "outbox.sqlite"
+    try:
+        outbox, note = open_outbox(path, cfg.outbox_quota_bytes)
+    except OutboxError as exc:
+        if "full" not in str(exc).lower() and free_bytes(cfg.state_dir) >= NO_ROOM:
+            raise
+        disk.write_failed(str(exc))  # the reserve is for this: room to open the outbox and drain it
+        outbox, note = open_outbox(path, cfg.outbox_quota_bytes)
+    return outbox, disk, note
 
 
 class Runtime:
@@ -49,14 +67,23 @@ class Runtime:
         sleep: Callable[[float], None] = time.sleep,
         notifier: Notifier | None = None,
         new_sweep: bool = False,
+        disk: Disk | None = None,
+        log: Callable[[str], None] = log.warning,
     ) -> None:
         self.hal, self.transport, self.segmenter = hal, transport, segmenter
-        self.clock, self.wall, self.sleep = clock, wall, sleep
+        self.clock, self.wall, self.sleep, self.log = clock, wall, sleep, log
         cfg.state_dir.mkdir(parents=True, exist_ok=True)
         self.state = RuntimeState(cfg)
         # `is None`, not `or`: an empty outbox is falsy (it has a length).
-        self.outbox = outbox if outbox is not None else Outbox(cfg.state_dir / "outbox.sqlite",
-                                                               cfg.outbox_quota_bytes)
+        if outbox is None:
+            outbox, disk, note = open_state(cfg)
+            if note:
+                self.note(note)
+        self.outbox = outbox
+        self.disk = disk if disk is not None else Disk(cfg.state_dir, cfg.disk_min_free_bytes,
+                                                       cfg.disk_reserve_bytes)
+        self.outbox.on_full = lambda: self.disk.write_failed("a write found the disk full")
+        self._unheld_said = False
         self.notifier = notifier if notifier is not None else Notifier(address="")
         self.pipeline = Pipeline(cfg, hal, segmenter, pump=self._pump, sleep=sleep,
                                  resend_mask=segmenter.force_send)
@@ -95,6 +122,30 @@ class Runtime:
     def _room_freed(self) -> None:
         self.sweep.full_until_ack = False
 
+    def note(self, line: str) -> None:
+        """Something a person should know: one log line, and the errors STATUS carries."""
+        self.state.errors.append(line)
+        self.log(line)
+
+    def watch_disk(self) -> None:
+        """Follow the room under state_dir; a change of pressure is said in a STATUS."""
+        s, disk = self.state, self.disk
+        pressure, s.disk_free = disk.pressure(), disk.free()
+        if disk.unheld and not self._unheld_said:
+            self._unheld_said = True
+            self.note(f"disk: {disk.unheld}; a full disk may then stop acknowledged rows being deleted")
+        if pressure.value == s.disk:
+            return
+        s.disk = pressure.value
+        if pressure is Pressure.OK:
+            text = f"disk has room again ({s.disk_free} bytes free): acquisition resumes"
+        else:
+            need = disk.min_free + (disk.reserve if pressure is Pressure.FULL else 0)
+            text = (f"disk {pressure.value}: {s.disk_free} bytes free under {self.cfg.state_dir}; "
+                    f"acquisition paused until {need} are free")
+        self.note(text)
+        self.status.send(text, {"disk": s.disk, "disk_free": s.disk_free})
+
     def service(self) -> None:
         """Read link events, answer commands, feed the link from the outbox."""
         now = self.clock()
@@ -103,6 +154,8 @@ class Runtime:
                 self._link_changed(isinstance(event, LinkUp))
             elif isinstance(event, Delivered):
                 self.dispatch.on_body(event.payload)
+            elif isinstance(event, PeerStale):
+                self.note(f"link: {event.text}")
         self.link.write(now)
         self.notifier.kick()
 
@@ -131,6 +184,7 @@ class Runtime:
         except PoseSkipped as exc:
             self.state.torque = False  # GOTO and SWEEP say to send torque-on
             self.state.errors.append(exc.reason)
+        self.watch_disk()
         camera = self.lock_camera()
         extras = {"mode": self.mode.value, "camera": camera}
         if self.cfg.sweep.autostart or self.sweep.new_sweep:
@@ -161,6 +215,7 @@ class Runtime:
         """One turn of the loop; what the sweep did ("" when nothing). Never raises."""
         try:
             self.service()
+            self.watch_disk()
             if self.mode is Mode.SWEEPING:
                 result = self.sweep.step()
                 self.service()

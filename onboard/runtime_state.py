@@ -30,6 +30,8 @@ class RuntimeState:
     progress: SweepProgress | None = None
     pose: ViewAngles | None = None  # the last measured view
     paused_reason: str = ""  # why acquisition waits (the outbox is full), "" when it does not
+    disk: str = "ok"  # room under state_dir: ok | low | full (onboard.disk.Pressure)
+    disk_free: int | None = None  # bytes free there, when known
     errors: deque[str] = field(default_factory=lambda: deque(maxlen=16))
     torque: bool = True  # the servos hold; False after TORQUE_OFF or a power-on that failed at boot
     # Commands are answered while the arm works (the pipeline services the link), so an

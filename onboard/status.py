@@ -1,7 +1,8 @@
 """What the robot says about itself: the STATUS packet (boot, skipped poses, sweep done, the
-failsafe, answers to the STATUS command) and the systemd status line. The answer to STATUS
-carries the sweep's plan (as JSON, `onboard.sweep.SweepPlan.to_record`) and the robot's
-`failsafe_s`, so the station can draw the sweep's grid and knows when the arm is held."""
+failsafe, the disk, answers to the STATUS command) and the systemd status line. The answer
+to STATUS carries the sweep's plan (as JSON, `onboard.sweep.SweepPlan.to_record`) and the
+robot's `failsafe_s`, so the station can draw the sweep's grid and knows when the arm is held.
+A STATUS the outbox cannot take (a full disk) goes straight to the link."""
 from __future__ import annotations
 
 import json
@@ -40,6 +41,9 @@ class Status:
             },
             "outbox": len(self.outbox),
             "paused": s.paused_reason,
+            "disk": s.disk,
+            "disk_free": s.disk_free,
+            "rejected": dict(getattr(self.link.stats(), "rejected", {})),
             "failsafe": self.failsafe.events[-4:],
             "failsafe_s": s.cfg.link.failsafe_s,
             "torque": s.torque,
@@ -48,27 +52,33 @@ class Status:
         }
 
     def robot_state(self) -> pk.RobotState:
-        if self.state.mode is Mode.FAILSAFE or self.state.paused_reason:
+        if self.state.mode is Mode.FAILSAFE or self.state.paused_reason or self.state.disk != "ok":
             return pk.RobotState.PAUSED
         return pk.RobotState.SWEEPING if self.state.mode is Mode.SWEEPING else pk.RobotState.IDLE
 
     def packet(self, text: str, extras: dict | None = None,
                state: pk.RobotState | None = None) -> tuple[int, bytes]:
         """A STATUS packet (outbox kind, body), for the caller to queue or commit."""
+        if self.state.disk != "ok":  # every STATUS says when the disk is short of room
+            extras = {**(extras or {}), "disk": self.state.disk, "disk_free": self.state.disk_free}
         return wire.status_body(self.state.cfg.robot_id, self.wall(), state or self.robot_state(),
                                 self.state.pose, len(self.outbox), self.outbox.bytes_used,
                                 self.captures.last_seq, text, extras)
 
     def send(self, text: str, extras: dict | None = None) -> None:
-        """Queue a STATUS now, and show its text as the service status."""
-        self.link.queue(*self.packet(text, extras))
+        """Queue a STATUS now (straight on the link if the outbox cannot take it), and show its
+        text as the service status."""
+        kind, body = self.packet(text, extras)
+        if self.link.queue(kind, body) is None:
+            self.link.send_direct(kind, body)
         self.notifier.status(text)
 
 
 def flat(st: dict) -> dict:
     """A status record as packet extras: scalars and short lists only."""
     sweep = st.get("sweep") or {}
-    out = {"mode": st["mode"], "outbox": st["outbox"], "paused": st["paused"]}
+    out = {"mode": st["mode"], "outbox": st["outbox"], "paused": st["paused"], "disk": st["disk"],
+           "disk_free": st["disk_free"], "rejected": [f"{k}:{n}" for k, n in sorted(st["rejected"].items())]}
     if sweep:
         out.update(sweep_id=sweep["id"], next=sweep["next"], poses=sweep["poses"])
         plan = json.dumps(sweep["plan"], separators=(",", ":")) if "plan" in sweep else ""

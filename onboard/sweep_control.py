@@ -2,8 +2,9 @@
 
 Exactly once: a pose's packets, the sweep progress that marks it done and the next capture
 sequence are one outbox transaction (`Outbox.commit`), so a kill at any instant leaves the
-pose queued and done, or neither; the host drops re-sent rows by (robot, seq). Faults become
-retries, then a skipped pose with its reason; the sweep goes on.
+pose queued and done, or neither; the host drops re-sent rows by (robot, incarnation, seq).
+Faults become retries, then a skipped pose with its reason; the sweep goes on. A full outbox
+or a disk short of room pauses it; the pose is measured again when there is room.
 """
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ import logging
 
 from onboard.capture import FittedView, Pipeline, PoseSkipped
 from onboard.captures import Captures
-from onboard.outbox import Outbox, OutboxFull
+from onboard.outbox import DiskFull, Outbox, OutboxFull
 from onboard.runtime_state import Interrupted, Mode, RuntimeState
 from onboard.status import Status
 from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore
@@ -74,6 +75,10 @@ class SweepControl:
         if self.outbox.full_for(self.reserve) or self.full_until_ack:
             self.state.paused_reason = "outbox full: acquisition paused until the host acknowledges"
             return "paused"
+        if self.state.disk != "ok":  # the disk is short of room: nothing more is measured until it is not
+            self.state.paused_reason = (f"disk {self.state.disk}: {self.state.disk_free} bytes free under "
+                                        f"{self.state.cfg.state_dir}; acquisition paused until there is room")
+            return "paused"
         nxt = copy.deepcopy(p)
         try:
             with self.state.arm_work():
@@ -122,7 +127,8 @@ class SweepControl:
         except OutboxFull as exc:
             if cap is not None:
                 self.pipeline.rollback(cap)
-            self.state.paused_reason, self.full_until_ack = str(exc), True
+            # A full disk (the outbox told the runtime's disk watch) resumes when there is room.
+            self.state.paused_reason, self.full_until_ack = str(exc), not isinstance(exc, DiskFull)
             return "paused"
         self.state.paused_reason = ""
         self.state.progress = nxt

@@ -8,7 +8,8 @@ from __future__ import annotations
 from collections import deque
 from typing import Protocol
 
-from radio.link import Acked, Delivered, Event
+from radio.fragment import AUTO_BASE
+from radio.link import Acked, Delivered, Event, LinkStats
 
 
 class Transport(Protocol):
@@ -32,10 +33,11 @@ class MemoryTransport:
         self.auto_ack = auto_ack
         self._events: deque[Event] = deque()
         self._received = 0
+        self.rejected: dict[str, int] = {}  # what the link would have counted, for STATUS tests
 
     def send(self, payload: bytes, reliable: bool = True, msg_id: int | None = None,
              now: float | None = None) -> int:
-        msg_id = len(self.sent) + 1 if msg_id is None else msg_id
+        msg_id = AUTO_BASE + len(self.sent) if msg_id is None else msg_id  # as the link's automatic ids
         self.sent.append((msg_id, bytes(payload)))
         if self.auto_ack:
             self._events.append(Acked(msg_id))
@@ -56,3 +58,6 @@ class MemoryTransport:
 
     def write(self, now: float | None = None) -> None:
         pass  # `sent` already holds what the robot sent
+
+    def stats(self) -> LinkStats:
+        return LinkStats(0, 0, 0, 0, 0, 0, 0, 0, dict(self.rejected))

@@ -9,6 +9,7 @@ class Delivered:
     sender: int
     msg_id: int
     payload: bytes
+    incarnation: bytes = b""  # the sender's state, named in its session's SYN (`Link(incarnation=)`)
 
 
 @dataclass(frozen=True, slots=True)
@@ -26,7 +27,17 @@ class LinkDown:
     pass
 
 
-Event = Delivered | Acked | LinkUp | LinkDown
+@dataclass(frozen=True, slots=True)
+class PeerStale:
+    """Every authenticated frame from the peer is refused as stale or replayed: its counters
+    are behind this end's. Raised once per run of refusals; `text` is the line to show."""
+
+    sender: int
+    refused: int
+    text: str
+
+
+Event = Delivered | Acked | LinkUp | LinkDown | PeerStale
 
 
 class QueueFull(RuntimeError):

@@ -65,7 +65,8 @@ class StreamPacker:
             rest = len(payload) - self._off
             if len(out) + len(head) + rest <= room:
                 seg = bytes([head[0] | LAST | MORE]) + head[1:] + varint(rest) + payload[self._off:]
-                if queue and len(out) + len(seg) + 4 < room:
+                # MORE promises a segment after it: room for the next one's head and a byte
+                if queue and len(out) + len(seg) + 2 + len(varint(id_fields(queue[0][0])[1])) <= room:
                     out += seg
                     ends.append(mid)
                     self._cur = None

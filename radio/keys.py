@@ -55,6 +55,13 @@ def write_key(path: str | os.PathLike[str], force: bool = False) -> Path:
     return p
 
 
+def counters_beside(key_path: str | os.PathLike[str]) -> Path:
+    """Where the host keeps the link counters of the key at `key_path` (`listen` and `cmd`
+    speak as one host, so they share them): `<key>.counters.json`."""
+    p = Path(key_path)
+    return p.with_name(p.name + ".counters.json")
+
+
 def git_work_tree(path: str | os.PathLike[str]) -> Path | None:
     """The git work tree that contains `path`, if any (a key there risks being committed)."""
     p = Path(path).resolve().parent

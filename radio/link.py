@@ -10,6 +10,8 @@ has delivered (or already had) the message. A receiver holding no session for a
 sender (it restarted) answers NEED_SYN and the sender re-sends, in a new session,
 everything not yet acknowledged; the (sender, msg_id) dedup window turns those
 repeats into re-acks rather than re-deliveries.
+A SYN names the sender's incarnation (a robot's outbox: when it is new, message ids and
+capture numbers start again): deliveries carry it, and a new one empties the dedup window.
 """
 from __future__ import annotations
 
@@ -17,8 +19,8 @@ from collections import Counter, OrderedDict, deque
 from dataclasses import dataclass
 
 from radio import FrameError
-from radio.auth import CounterStore, ReplayWindow
-from radio.events import Acked, Delivered, Event, LinkDown, LinkStats, LinkUp, QueueFull
+from radio.auth import CounterStore, ReplayWindow, StaleRun
+from radio.events import Acked, Delivered, Event, LinkDown, LinkStats, LinkUp, PeerStale, QueueFull
 from radio.fragment import AUTO_BASE, Reassembler, StreamAssembler, StreamPacker, split_datagram
 from radio.frame import (
     DEFAULT_MTU,
@@ -33,7 +35,8 @@ from radio.frame import (
     reject,
 )
 
-__all__ = ["Link", "Acked", "Delivered", "Event", "LinkDown", "LinkStats", "LinkUp", "QueueFull"]
+__all__ = ["Link", "Acked", "Delivered", "Event", "LinkDown", "LinkStats", "LinkUp", "PeerStale",
+           "QueueFull"]
 
 
 @dataclass
@@ -53,6 +56,7 @@ BACKOFF = 2.0  # RTO growth after a timeout, until a fresh RTT sample
 GRACE_TIMEOUTS = 2  # timeouts in a row before the RTO starts to grow
 ACK_REPEATS = 2  # copies of the ACK that ends a burst of data
 TAIL_COPIES, TAIL_FRAMES = 2, 4  # copies of each frame when at most TAIL_FRAMES time out
+MAX_INCARNATION = 16  # bytes of a SYN's incarnation id
 
 
 def _c6(counter: int) -> bytes:
@@ -65,7 +69,7 @@ class Link:
                  rto: float = 0.3, min_rto: float = 0.05, max_rto: float = 1.0,
                  heartbeat: float = 1.0, link_timeout: float = 3.0, dedup: int = 4096,
                  max_message: int = 64 * 1024, max_queue_bytes: int = 1 << 20,
-                 reassembly_timeout: float = 5.0) -> None:
+                 reassembly_timeout: float = 5.0, incarnation: bytes = b"") -> None:
         for name, v in (("node_id", node_id), ("peer_id", peer_id), ("link_id", link_id)):
             if not 0 <= v <= 255:
                 raise ValueError(f"{name} {v} outside 0..255")
@@ -77,6 +81,9 @@ class Link:
             raise ValueError(f"window {window} outside 1..64")
         if not 40 <= mtu <= 4096:
             raise ValueError(f"mtu {mtu} outside 40..4096")
+        if len(incarnation) > MAX_INCARNATION:
+            raise ValueError(f"incarnation of {len(incarnation)} bytes, at most {MAX_INCARNATION}")
+        self.incarnation = bytes(incarnation)
         self.node_id, self.peer_id, self.link_id = node_id, peer_id, link_id
         self._key, self._store = bytes(key), counter_store
         self.mtu, self.window, self.heartbeat, self.link_timeout = mtu, window, heartbeat, link_timeout
@@ -110,6 +117,8 @@ class Link:
         floor = counter_store.rx_floor(peer_id, link_id)
         self._replay = ReplayWindow(64, floor)
         self._rx_session: int | None = None
+        self.peer_incarnation: bytes | None = None  # named by the peer's last SYN
+        self._stale = StaleRun(peer_id)
         self._rx_max_data = 0
         self._rx_next = 0
         self._rx_buf: dict[int, bytes] = {}
@@ -189,14 +198,14 @@ class Link:
                 self._n["repaired"] += fixed
             except FrameError as exc:
                 self._rejected[reason_of(exc).value] += 1
+                if said := self._stale.refused(reason_of(exc)):  # the peer's counters are behind
+                    self._events.append(said)
         if self._deframer.oversize > before:
             self._rejected[Reason.OVERSIZE.value] += self._deframer.oversize - before
 
     def poll(self, now: float, max_bytes: int | None = None) -> bytes:
-        """Bytes to write now: control frames, retransmissions, new data, heartbeats.
-
-        `max_bytes` lets a paced transport take only what it can carry; the rest waits.
-        """
+        """Bytes to write now: control frames, retransmissions, new data, heartbeats; at most
+        `max_bytes` (what a paced transport can carry), the rest waits."""
         if self.up and self._heard is not None and now - self._heard > self.link_timeout:
             self.up = False
             self._events.append(LinkDown())
@@ -208,6 +217,8 @@ class Link:
             if budget[0] < self.mtu:
                 return False
             c = self._store.next_tx(self.node_id, self.link_id)
+            if kind is FrameKind.SYN:
+                payload = self.incarnation
             wire = encode(Frame(kind, self.node_id, self.link_id, seq, c, payload), self._key)
             out.extend(wire)
             budget[0] -= len(wire)
@@ -360,6 +371,7 @@ class Link:
             raise reject(why, f"counter {f.counter}")
         self._replay.accept(f.counter)
         self._n["accepted"] += 1
+        self._stale.accepted()
         if f.kind is FrameKind.SYN:
             self._on_syn(f)
         elif f.kind is FrameKind.SYNACK:
@@ -395,10 +407,13 @@ class Link:
                 self._deliver(*done)
 
     def _on_syn(self, f: Frame) -> None:
-        if f.payload:
-            raise reject(Reason.PAYLOAD, "SYN with a payload")
+        if len(f.payload) > MAX_INCARNATION:
+            raise reject(Reason.PAYLOAD, f"SYN with {len(f.payload)} bytes of incarnation")
         if f.counter <= max(self._rx_session or 0, self._rx_max_data):
             raise reject(Reason.STALE_SESSION, "SYN older than the current session")
+        if self.peer_incarnation is not None and f.payload != self.peer_incarnation:
+            self._dedup.clear()  # the ids it holds were the old incarnation's
+        self.peer_incarnation = bytes(f.payload)
         # Persist first: after a restart no frame of an older session may be accepted.
         self._store.set_rx_floor(self.peer_id, self.link_id, f.counter)
         self._rx_session = f.counter
@@ -441,4 +456,4 @@ class Link:
         while len(self._dedup) > self._dedup_size:
             self._dedup.popitem(last=False)
         self._n["delivered"] += 1
-        self._events.append(Delivered(self.peer_id, msg_id, payload))
+        self._events.append(Delivered(self.peer_id, msg_id, payload, self.peer_incarnation or b""))

@@ -17,7 +17,7 @@ from btf.johnson import Family, Johnson
 
 EXPECTED = {"bracketing", "core", "dependence", "hostmem", "ingest", "onboard", "page", "peers", "runtime", "sampling", "scene", "stability",
             "startup",
-            "subsample", "synth", "wire", "link"}
+            "subsample", "synth", "wire", "link", "failsafe"}
 
 
 def test_every_expected_benchmark_is_discovered():

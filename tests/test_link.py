@@ -4,7 +4,7 @@ import tty
 
 import pytest
 
-from radio.auth import FileCounterStore, MemoryCounterStore
+from radio.auth import FileCounterStore, MemoryCounterStore, write_fresh
 from radio.link import Acked, Delivered, Link, LinkDown, LinkUp, QueueFull
 from radio.ports import FdPort, open_url
 from radio.pump import LinkPump
@@ -63,6 +63,7 @@ def test_commands_flow_the_other_way_with_automatic_ids():
 
 
 def test_sender_restart_resends_unacked_and_receiver_reacks_without_redelivery(tmp_path):
+    write_fresh(tmp_path / "c.json")  # a new key's counters (keygen): nothing used yet
     store = FileCounterStore(tmp_path / "c.json")
     host = Link(0, 1, 5, KEY, MemoryCounterStore())
     robot = Link(1, 0, 5, KEY, store)
@@ -111,6 +112,7 @@ def test_replayed_frames_are_rejected_and_counted():
 
 
 def test_replay_after_receiver_restart_is_not_accepted(tmp_path):
+    write_fresh(tmp_path / "host.json")
     store = FileCounterStore(tmp_path / "host.json")
     robot = Link(1, 0, 5, KEY, MemoryCounterStore())
     host = Link(0, 1, 5, KEY, store)
@@ -237,3 +239,17 @@ def test_single_bit_errors_are_repaired_and_counted():
         t += 0.01
     assert flipped and got == [(1, b"q" * 60)]
     assert host.stats().repaired == 1 and robot.stats().retransmissions == 0
+
+
+def test_small_messages_with_clock_sized_automatic_ids_share_frames_and_all_arrive():
+    """Automatic ids follow the counters, which follow the wall clock: 7-byte varints. A
+    segment marked MORE must leave room for the next one's head, or the frame is refused."""
+    from collections import deque
+
+    from radio.fragment import AUTO_BASE, StreamAssembler, StreamPacker
+
+    queue = deque((AUTO_BASE + 37_992_960_000_000 + i, b"CAPTURE %d" % i) for i in range(20))
+    packer, assembler, got = StreamPacker(), StreamAssembler(4096), []
+    while (nxt := packer.next_payload(queue, 78)) is not None:
+        got += [msg for _, msg in assembler.add(nxt[0])]
+    assert got == [b"CAPTURE %d" % i for i in range(20)]

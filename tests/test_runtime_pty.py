@@ -39,7 +39,8 @@ def receive_sweep(tmp_path, scene, rate=0.0, limit_s=120.0, radio=""):
          "--port", f"btfsim://?port={os.ttyname(slave)}&{radio}" if radio else os.ttyname(slave),
          "--exit-when-idle", "--max-seconds", str(limit_s)],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    host = LinkPump(Link(2, 1, 1, load_key(key_path), MemoryCounterStore(), heartbeat=0.2, link_timeout=30),
+    host = LinkPump(Link(2, 1, 1, load_key(key_path), MemoryCounterStore(wall=time.time), heartbeat=0.2,
+                         link_timeout=30),
                     FdPort(master, timeout=0.01))
     got: dict[int, object] = {}
     t0 = time.monotonic()

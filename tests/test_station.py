@@ -162,7 +162,7 @@ def test_cmd_without_a_station_stores_what_arrives_and_acknowledges_nothing_it_d
     seqs = Counter(c.sequence for c in rig.captures())
     last = max(int(line.split("seq ")[1].split(",")[0]) for line in robot_log(rig.where) if ": seq " in line)
     # every capture the robot made (sweep and commands) is stored, once: none was ACKed and dropped
-    assert sorted(seqs) == list(range(1, max(last, *acked) + 1)) and set(seqs.values()) == {1}
+    assert sorted(seqs) == list(range(1, max([last, *acked]) + 1)) and set(seqs.values()) == {1}
     assert set(acked) <= set(seqs)
 
 

@@ -39,12 +39,12 @@ class CaptureViews:
 def capture_mask(store: Store, cap: StoredCapture) -> np.ndarray | None:
     """A capture's label map: the robot's MASK for it, the one `fit --mask` or `ingest --mask`
     stored with it, an ingested dataset's common mask, or the robot's latest MASK before it."""
-    for key in (mask_key(cap.sequence), f"{cap.robot}/{cap.sequence}", cap.robot):
+    for key in (mask_key(cap.sequence, cap.incarnation), f"{cap.robot}/{cap.sequence}", cap.robot):
         m = store.mask(key, cap.robot)
         if m is not None:
             return m
     for seq in range(cap.sequence - 1, -1, -1):
-        m = store.mask(mask_key(seq), cap.robot)
+        m = store.mask(mask_key(seq, cap.incarnation), cap.robot)
         if m is not None:
             return m
     return None

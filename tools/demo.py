@@ -159,8 +159,8 @@ class RobotRun:
         self.resends = {"robot": Resends(key), "host": Resends(key)}
         self.radio = ChannelPort.over(FdPort(self.master), cfg.channel, cfg.seed * 101 + robot_id,
                                       tap=lambda way, data: self.resends["robot" if way == "in" else "host"].feed(data))
-        link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, key, MemoryCounterStore(), heartbeat=0.2,
-                    link_timeout=30)
+        link = Link(HOST_NODE, ROBOT_NODE, LINK_ID, key, MemoryCounterStore(wall=time.time),
+                    heartbeat=0.2, link_timeout=30)
         self.session = HostSession(LinkPump(link, self.radio), Receiver(store, scene=scene))
         self.cid = self.session.command(pk.CommandName.SWEEP,
                                         {"elevations": [float(e) for e in elevations], "azimuths": [0.0]})

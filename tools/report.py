@@ -19,6 +19,7 @@ from tools.look import CSS, MODEL_HEAD, capture_section, model_rows, note, table
 from tools.radiometry import describe as describe_camera
 from tools.store import Store
 
+
 def _demo_sections(demo: Any) -> list[str]:
     out = ["<h2>Mixed plate reproduction</h2><p>Correlation between the synthetic mixed plate "
            "(black and white models, mixed mask) and its capture, beside the ceiling: two captures "

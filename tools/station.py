@@ -56,9 +56,9 @@ from typing import Any, Callable
 
 from radio import packet as pk
 from radio.commands import CommandName, check_args
-from radio.link import Delivered, LinkDown, LinkUp
+from radio.link import Delivered, LinkDown, LinkUp, PeerStale
 from radio.pump import LinkPump
-from tools.receiver import Item, ItemKind, Receiver, packet_json
+from tools.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json
 from tools.station_bus import EventBus
 from tools.station_log import StationLog, event, likely_cause
 from tools.station_snapshot import StationSnapshot
@@ -151,6 +151,9 @@ class Station:
                     out = self._turn(data, room)
                 except StationFailure:
                     raise
+                except StoreFailed as exc:  # no room (1: run it again), or a damaged row (2)
+                    raise StationFailure(f"{exc}; nothing unstored was acknowledged (the robot keeps it)",
+                                         status=2 if exc.damaged else 1) from None
                 except Exception as exc:  # the store: nothing of this turn is acknowledged
                     raise StationFailure(f"database {self.snapshot.db}: {type(exc).__name__}: {exc}") from None
             if out and self.failure is None:  # the acknowledgements of the last turn
@@ -173,13 +176,17 @@ class Station:
             if isinstance(ev, Delivered):
                 self.last_delivery = now
                 self.snapshot.note_delivered(len(ev.payload), wall)
-                self._delivered(self.receiver.handle(ev.payload), wall)
+                self._delivered(self.receiver.handle(ev.payload, ev.incarnation.hex()), wall)
             elif isinstance(ev, (LinkUp, LinkDown)):
                 up = isinstance(ev, LinkUp)
                 self.snapshot.note_link(up, wall)
                 self.emit(event("link", "up: the robot is heard" if up else
                                 f"down: nothing heard from the robot for {self.pump.link.link_timeout:g} s",
                                 wall, up=up))
+            elif isinstance(ev, PeerStale):  # the robot's counters are behind: said once, with the remedy
+                self.emit(event("link", ev.text, wall, up=self.pump.up))
+                if self.on_item is not None:
+                    self.on_item(Item(ItemKind.LINK, ev.sender, None, False, ev.text))
         self._watch_link(wall)
         self._ask_status(now)
         return self.pump.due(room, now)

@@ -8,15 +8,16 @@ import fcntl
 import os
 import signal
 import sys
+import time
 from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, TextIO
 
-from onboard.cli_runner import CliError
+from onboard.cli_runner import CliError, RetryLater
 from tools.station import Station
 from tools.station_control import ControlServer, check_path, socket_path
-from tools.station_log import StationLog
+from tools.station_log import StationLog, event
 
 
 class StationBusy(CliError):
@@ -48,7 +49,10 @@ def lock_path(db: str | os.PathLike) -> Path:
 def take_lock(db: str | os.PathLike) -> int:
     """An exclusive lock on the database's station (released when the process ends, however)."""
     path = lock_path(db)
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
+    except OSError as exc:  # a full disk or a read-only one: the environment (exit 1)
+        raise RetryLater(f"database {db}: cannot create its station lock {path}: {exc.strerror or exc}") from None
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
@@ -56,8 +60,11 @@ def take_lock(db: str | os.PathLike) -> int:
         os.close(fd)
         raise StationBusy(f"a station already runs on {db} (pid {held or '?'}); "
                           f"`btf-host cmd --db {db} ...` talks to it") from None
-    os.ftruncate(fd, 0)
-    os.write(fd, f"{os.getpid()}\n".encode())
+    try:  # the pid only tells a second station who holds the lock: a full disk may refuse it
+        os.ftruncate(fd, 0)
+        os.write(fd, f"{os.getpid()}\n".encode())
+    except OSError:
+        pass
     return fd
 
 
@@ -67,19 +74,19 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
     """Everything a station needs, checked; CliError (one line) for any problem, StationBusy
     when another station holds the database or the port."""
     from radio.auth import FileCounterStore
-    from radio.keys import KeyFileError, load_key
+    from radio.keys import KeyFileError, counters_beside, load_key
     from radio.link import Link
     from radio.ports import PortBusy, open_url
     from radio.pump import LinkPump
     from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver
-    from tools.store import CorruptDatabase, Store
+    from tools.store import CorruptDatabase, Store, StoreUnavailable
 
     try:
         key = load_key(key_file)
-        where = Path(key_file)
         # Counters survive restarts (replays stay refused, a running robot accepts the next
-        # session); they live beside the key, shared by every station and cmd speaking as this base.
-        counters = FileCounterStore(where.with_name(where.name + ".counters.json"))
+        # session) and, by the clock, a lost file; they live beside the key, shared by every
+        # station and cmd speaking as this base.
+        counters = FileCounterStore(counters_beside(key_file))
     except (KeyFileError, ValueError) as exc:
         raise CliError(str(exc)) from None
     path = Path(sock) if sock else socket_path(db)
@@ -100,6 +107,8 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
         undo.append(port.close)
         try:
             store = Store.open(db)
+        except StoreUnavailable as exc:  # a full disk, an I/O error: not the file's fault (exit 1)
+            raise RetryLater(str(exc)) from None
         except CorruptDatabase as exc:
             raise CliError(str(exc)) from None
         undo.append(store.close)
@@ -107,6 +116,8 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
         station = Station(LinkPump(link, port), Receiver(store, scene),
                           StationLog(Path(log) if log else Path(str(db) + ".log"), echo),
                           port=port_url, db=str(db), status_every=status_every, on_item=on_item)
+        if counters.note:  # the counters file was lost (or this base's first run with a key not from keygen)
+            station.emit(event("station", counters.note, time.time()))
     except BaseException:
         for step in reversed(undo):
             step()

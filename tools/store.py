@@ -1,7 +1,8 @@
 """The base station's SQLite database of captures, fitted models and masks.
 
-One capture is one view of one robot: (robot, sequence) is unique, so a packet
-received twice is stored once. Every write runs in a transaction; `with store.batch():`
+One capture is one view of one robot: (robot, incarnation, sequence) is unique, so a packet
+received twice is stored once, and a robot whose state was wiped (a new incarnation, numbering
+from 1 again) has its new captures kept. Every write runs in a transaction; `with store.batch():`
 groups many writes in one. A file that is not a btfscout database (or is damaged)
 raises `CorruptDatabase` and is never rewritten (`tools.store_schema` opens and upgrades
 the file; `tools.store_rows` checks every row read back).
@@ -23,9 +24,9 @@ from btf.record import FittedModel
 from onboard.features import PcaBasis
 from tools.images import decode_png, encode_png
 from tools.store_rows import CAMERA_COLUMNS, StoredCapture, capture_from_row, mask_png, model_from_row
-from tools.store_schema import SCHEMA_VERSION, CorruptDatabase, connect
+from tools.store_schema import SCHEMA_VERSION, CorruptDatabase, StoreUnavailable, connect
 
-__all__ = ["Store", "CorruptDatabase", "StoredCapture", "SCHEMA_VERSION"]
+__all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "SCHEMA_VERSION"]
 
 class _Undo(Exception):
     """Drops the current write (e.g. a capture that was already stored)."""
@@ -126,8 +127,10 @@ class Store:
         pca: PcaBasis | None = None,
         levels: int = 256,
         camera: CaptureSettings | None = None,
+        incarnation: str = "",
     ) -> bool:
-        """Stores one capture with its models; False if (robot, sequence) was already there.
+        """Stores one capture with its models; False if (robot, incarnation, sequence) was already
+        there (`incarnation`: the robot state's id its link session named, "" for none).
         `illumination` is the light's (elevation, azimuth) when known; `source` the image file;
         `pca` the basis the capture arrived with (later captures of the robot inherit it);
         `levels` the sensor's levels (256 for 8-bit pixels, 65536 for 16-bit); `camera` what it
@@ -154,11 +157,11 @@ class Store:
         with self._write():
             cur = self._conn.execute(
                 "INSERT OR IGNORE INTO captures (robot, sequence, time, cmd_elevation, cmd_azimuth,"
-                " elevation, azimuth, space, bands, scene, light_elevation, light_azimuth, source, levels)"
-                " VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
+                " elevation, azimuth, space, bands, scene, light_elevation, light_azimuth, source, levels,"
+                " incarnation) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
                 (str(robot_id), int(sequence), float(time), cmd[0], cmd[1], meas[0], meas[1],
                  str(space), json.dumps(list(band_names)), str(scene), light[0], light[1],
-                 None if source is None else str(source), levels),
+                 None if source is None else str(source), levels, str(incarnation)),
             )
             if cur.rowcount == 0:
                 raise _Undo
@@ -243,7 +246,7 @@ class Store:
         camera = ", ".join(f"k.{c}" for c in CAMERA_COLUMNS)
         rows = self._conn.execute(
             "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
-            " space, bands, scene, light_elevation, light_azimuth, source, levels, " + camera
+            " space, bands, scene, light_elevation, light_azimuth, source, levels, incarnation, " + camera
             + " FROM captures LEFT JOIN capture_camera k ON k.capture = captures.id"
             + where + " ORDER BY elevation, id", args
         ).fetchall()
@@ -256,19 +259,20 @@ class Store:
         except ValueError as exc:  # ImageError too
             raise CorruptDatabase(f"database {self.path}: {what}: {exc}; left untouched") from None
 
-    def capture_by_seq(self, robot: str, sequence: int) -> StoredCapture | None:
-        """The capture (robot, sequence), or None when it is not stored."""
+    def capture_by_seq(self, robot: str, sequence: int, incarnation: str = "") -> StoredCapture | None:
+        """The capture (robot, incarnation, sequence), or None when it is not stored."""
         sql, args = self._capture_filter(robot, None, None)
-        found = self._select_captures(sql + " AND sequence = ?", [*args, int(sequence)])
+        found = self._select_captures(sql + " AND incarnation = ? AND sequence = ?",
+                                      [*args, str(incarnation), int(sequence)])
         return found[0] if found else None
 
     def pca_basis(self, capture: int) -> PcaBasis | None:
         """The PCA basis in effect for a capture: the one it arrived with, else the newest one
-        its robot sent with an earlier sequence; None when there is none."""
+        its robot (in the same incarnation) sent with an earlier sequence; None when there is none."""
         row = self._conn.execute(
             "SELECT b.record FROM pca_bases b JOIN captures c ON c.id = b.capture"
-            " JOIN captures me ON me.id = ? WHERE c.robot = me.robot AND c.sequence <= me.sequence"
-            " ORDER BY c.sequence DESC LIMIT 1", (capture,)).fetchone()
+            " JOIN captures me ON me.id = ? WHERE c.robot = me.robot AND c.incarnation = me.incarnation"
+            " AND c.sequence <= me.sequence ORDER BY c.sequence DESC LIMIT 1", (capture,)).fetchone()
         if row is None:
             return None
         try:

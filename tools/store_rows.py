@@ -38,6 +38,7 @@ class StoredCapture:
     source: str | None = None
     levels: int = 256  # the sensor's levels: 256 for 8-bit pixels, 65536 for 16-bit
     camera: CaptureSettings | None = None  # what it was taken with (None: not recorded)
+    incarnation: str = ""  # the robot state that numbered it ("" for none): tools.receiver
 
     @property
     def elevation(self) -> float:
@@ -46,8 +47,8 @@ class StoredCapture:
 
 def capture_from_row(r: tuple) -> StoredCapture:
     """(id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space,
-    bands, scene, light_elevation, light_azimuth, source, levels[, the capture_camera
-    columns]) -> StoredCapture."""
+    bands, scene, light_elevation, light_azimuth, source, levels[, incarnation[, the capture_camera
+    columns]]) -> StoredCapture."""
     n = [number(v, name, nullable) for v, name, nullable in (
         (r[3], "time", False), (r[4], "commanded elevation", True), (r[5], "commanded azimuth", True),
         (r[6], "elevation", False), (r[7], "azimuth", False),
@@ -55,7 +56,8 @@ def capture_from_row(r: tuple) -> StoredCapture:
     return StoredCapture(integer(r[0], "id"), text(r[1], "robot"), integer(r[2], "sequence"), n[0],
                    (n[1], n[2]), (n[3], n[4]), text(r[8], "space"), band_names(r[9]),
                    text(r[10], "scene"), (n[5], n[6]), None if r[13] is None else text(r[13], "source"),
-                   integer(r[14], "levels", 2, 65536), camera_from_row(r[15:]) if len(r) > 15 else None)
+                   integer(r[14], "levels", 2, 65536), camera_from_row(r[16:]) if len(r) > 16 else None,
+                   text(r[15], "incarnation") if len(r) > 15 else "")
 
 
 CAMERA_COLUMNS = ("exposure_us", "gain", "wb_kelvin", "wb_red", "wb_blue", "sensor_c", "unlocked", "reference",

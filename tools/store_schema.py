@@ -9,7 +9,7 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-SCHEMA_VERSION = 7
+SCHEMA_VERSION = 8
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -42,8 +42,10 @@ CREATE TABLE IF NOT EXISTS capture_camera (
     brackets TEXT NOT NULL DEFAULT '[]', bracketed TEXT NOT NULL DEFAULT '{}'
 );
 """
-_SCHEMA = """
-CREATE TABLE captures (
+# A capture is one robot state's (incarnation's) numbered view: a robot whose state was wiped
+# numbers its captures from 1 again under a new incarnation ('' for robots older than them).
+_CAPTURES = """
+CREATE TABLE {name} (
     id INTEGER PRIMARY KEY,
     robot TEXT NOT NULL,
     sequence INTEGER NOT NULL,
@@ -56,8 +58,13 @@ CREATE TABLE captures (
     light_elevation REAL, light_azimuth REAL,
     source TEXT,
     levels INTEGER NOT NULL DEFAULT 256,
-    UNIQUE (robot, sequence)
+    incarnation TEXT NOT NULL DEFAULT '',
+    UNIQUE (robot, incarnation, sequence)
 );
+"""
+_BEFORE_INCARNATIONS = ("id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space, bands,"
+                        " scene, light_elevation, light_azimuth, source, levels")
+_SCHEMA = _CAPTURES.format(name="captures") + """
 CREATE INDEX captures_by_source ON captures (robot, source);
 CREATE TABLE models (
     capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
@@ -103,11 +110,29 @@ _MIGRATIONS: dict[int, str] = {
     5: "ALTER TABLE captures ADD COLUMN levels INTEGER NOT NULL DEFAULT 256;",
     # the camera settings, reference level and brackets of a capture
     6: _CAMERA,
+    # the robot's incarnation: unique by (robot, incarnation, sequence). A table constraint
+    # changes only by a new table; foreign keys are off meanwhile (`connect`), so the
+    # models, masks, dependence and camera rows keep pointing at the same ids.
+    7: _CAPTURES.format(name="captures_new")
+       + f"INSERT INTO captures_new ({_BEFORE_INCARNATIONS}) SELECT {_BEFORE_INCARNATIONS} FROM captures;"
+       "DROP TABLE captures; ALTER TABLE captures_new RENAME TO captures;"
+       "CREATE INDEX captures_by_source ON captures (robot, source);",
 }
 
 
 class CorruptDatabase(Exception):
     """The file is damaged or is not a btfscout database; it has not been touched."""
+
+
+class StoreUnavailable(CorruptDatabase):
+    """The file could not be opened for a reason outside it (a full disk, an I/O error)."""
+
+
+def _failure(p: Path, exc: sqlite3.DatabaseError, doing: str) -> CorruptDatabase:
+    name = getattr(exc, "sqlite_errorname", "") or ""
+    if isinstance(exc, sqlite3.OperationalError) and not name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB")):
+        return StoreUnavailable(f"database {p}: cannot {doing} ({exc})")
+    return CorruptDatabase(f"database {p}: damaged ({exc}); left untouched")
 
 
 def connect(p: Path, create: bool = True) -> sqlite3.Connection:
@@ -144,7 +169,9 @@ def connect(p: Path, create: bool = True) -> sqlite3.Connection:
             raise CorruptDatabase(f"database {p}: not a btfscout database; left untouched")
         elif version < SCHEMA_VERSION and all(v in _MIGRATIONS for v in range(version, SCHEMA_VERSION)):
             script = "".join(_MIGRATIONS[v] for v in range(version, SCHEMA_VERSION))
+            conn.execute("PRAGMA foreign_keys = OFF")  # a rebuilt table must not cascade its deletes
             conn.executescript(f"BEGIN;{script}PRAGMA user_version = {SCHEMA_VERSION}; COMMIT;")
+            conn.execute("PRAGMA foreign_keys = ON")
         elif version != SCHEMA_VERSION:
             raise CorruptDatabase(
                 f"database {p}: schema version {version}, this tool reads {SCHEMA_VERSION}; left untouched"
@@ -155,7 +182,7 @@ def connect(p: Path, create: bool = True) -> sqlite3.Connection:
                 raise CorruptDatabase(f"database {p}: damaged ({check}); left untouched")
     except sqlite3.DatabaseError as exc:
         conn.close()
-        raise CorruptDatabase(f"database {p}: damaged ({exc}); left untouched") from None
+        raise _failure(p, exc, "open") from None
     except CorruptDatabase:
         conn.close()
         raise
@@ -168,5 +195,5 @@ def connect(p: Path, create: bool = True) -> sqlite3.Connection:
         conn.execute("PRAGMA synchronous = NORMAL")
     except sqlite3.DatabaseError as exc:
         conn.close()
-        raise CorruptDatabase(f"database {p}: cannot open for writing ({exc}); left untouched") from None
+        raise _failure(p, exc, "open for writing") from None
     return conn
