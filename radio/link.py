@@ -16,7 +16,6 @@ capture numbers start again): deliveries carry it, and a new one empties the ded
 from __future__ import annotations
 
 from collections import Counter, OrderedDict, deque
-from dataclasses import dataclass
 
 from radio import FrameError
 from radio.auth import CounterStore, ReplayWindow, StaleRun
@@ -34,33 +33,35 @@ from radio.frame import (
     reason_of,
     reject,
 )
+from radio.retransmit import DUPTHRESH, GRACE_TIMEOUTS, TAIL_COPIES, TAIL_FRAMES, InFlight, RetransmitTimer
 
 __all__ = ["Link", "Acked", "Delivered", "Event", "LinkDown", "LinkStats", "LinkUp", "PeerStale",
            "QueueFull"]
 
 
-@dataclass
-class _Out:
-    data: bytes
-    ends: list[int]  # messages this frame completes
-    sent_at: float = -1.0
-    tries: int = 0
-    xmit: int = 0  # transmission index: orders (re)transmissions for loss detection
-    copies: int = 1  # back-to-back copies at the next retransmission
-    sacked: bool = False
-    lost: bool = False
-
-
-DUPTHRESH = 3  # later frames that must arrive before a missing one counts as lost
-BACKOFF = 2.0  # RTO growth after a timeout, until a fresh RTT sample
-GRACE_TIMEOUTS = 2  # timeouts in a row before the RTO starts to grow
 ACK_REPEATS = 2  # copies of the ACK that ends a burst of data
-TAIL_COPIES, TAIL_FRAMES = 2, 4  # copies of each frame when at most TAIL_FRAMES time out
 MAX_INCARNATION = 16  # bytes of a SYN's incarnation id
 
 
 def _c6(counter: int) -> bytes:
     return counter.to_bytes(6, "big")
+
+
+def _check_args(node_id: int, peer_id: int, link_id: int, key: bytes, window: int, mtu: int,
+                incarnation: bytes) -> None:
+    for name, v in (("node_id", node_id), ("peer_id", peer_id), ("link_id", link_id)):
+        if not 0 <= v <= 255:
+            raise ValueError(f"{name} {v} outside 0..255")
+    if node_id == peer_id:
+        raise ValueError("node_id and peer_id must differ")
+    if len(key) != 32:
+        raise ValueError(f"key of {len(key)} bytes, expected 32")
+    if not 1 <= window <= 64:
+        raise ValueError(f"window {window} outside 1..64")
+    if not 40 <= mtu <= 4096:
+        raise ValueError(f"mtu {mtu} outside 40..4096")
+    if len(incarnation) > MAX_INCARNATION:
+        raise ValueError(f"incarnation of {len(incarnation)} bytes, at most {MAX_INCARNATION}")
 
 
 class Link:
@@ -70,26 +71,13 @@ class Link:
                  heartbeat: float = 1.0, link_timeout: float = 3.0, dedup: int = 4096,
                  max_message: int = 64 * 1024, max_queue_bytes: int = 1 << 20,
                  reassembly_timeout: float = 5.0, incarnation: bytes = b"") -> None:
-        for name, v in (("node_id", node_id), ("peer_id", peer_id), ("link_id", link_id)):
-            if not 0 <= v <= 255:
-                raise ValueError(f"{name} {v} outside 0..255")
-        if node_id == peer_id:
-            raise ValueError("node_id and peer_id must differ")
-        if len(key) != 32:
-            raise ValueError(f"key of {len(key)} bytes, expected 32")
-        if not 1 <= window <= 64:
-            raise ValueError(f"window {window} outside 1..64")
-        if not 40 <= mtu <= 4096:
-            raise ValueError(f"mtu {mtu} outside 40..4096")
-        if len(incarnation) > MAX_INCARNATION:
-            raise ValueError(f"incarnation of {len(incarnation)} bytes, at most {MAX_INCARNATION}")
+        _check_args(node_id, peer_id, link_id, key, window, mtu, incarnation)
         self.incarnation = bytes(incarnation)
         self.node_id, self.peer_id, self.link_id = node_id, peer_id, link_id
         self._key, self._store = bytes(key), counter_store
         self.mtu, self.window, self.heartbeat, self.link_timeout = mtu, window, heartbeat, link_timeout
         self._room = max_payload(mtu)
-        self._min_rto, self._max_rto = min_rto, max_rto
-        self._rto, self._srtt, self._rttvar = rto, None, 0.0
+        self._timer = RetransmitTimer(rto, min_rto, max_rto)
         self._bitmap_len = (window + 7) // 8
         self.max_message, self.max_queue_bytes = max_message, max_queue_bytes
         self._deframer = Deframer(max_body=mtu)
@@ -104,7 +92,7 @@ class Link:
         self._msgs: OrderedDict[int, bytes] = OrderedDict()  # reliable, not yet acked
         self._unsent: deque[tuple[int, bytes]] = deque()
         self._packer = StreamPacker()
-        self._inflight: dict[int, _Out] = {}
+        self._inflight: dict[int, InFlight] = {}
         self._tx_base = self._tx_next = 0
         self._xmit = 0
         self._news = 0.0  # last ACK that acknowledged something new
@@ -230,22 +218,22 @@ class Link:
             return True
 
         while self._synacks and emit(FrameKind.SYNACK, _c6(self._synacks[0])):
-            self._synack_again = (self._synacks.pop(0), ACK_REPEATS, now + self._min_rto / 2)
+            self._synack_again = (self._synacks.pop(0), ACK_REPEATS, now + self._timer.min_rto / 2)
         if self._synack_again and self._synack_again[1] and now >= self._synack_again[2]:
             c, left, _ = self._synack_again  # a lost SYNACK would cost the peer a whole RTO
             if emit(FrameKind.SYNACK, _c6(c)):
-                self._synack_again = (c, left - 1, now + self._min_rto / 2)
+                self._synack_again = (c, left - 1, now + self._timer.min_rto / 2)
         if self._need_syn is not None and emit(FrameKind.NEED_SYN, _c6(self._need_syn)):
             self._need_syn = None
         if self._ack_pending and emit(FrameKind.ACK, self._ack_payload()):
             self._ack_pending = False
-            self._ack_repeats, self._ack_again = ACK_REPEATS, now + self._min_rto / 2
+            self._ack_repeats, self._ack_again = ACK_REPEATS, now + self._timer.min_rto / 2
         elif self._ack_repeats and now >= self._ack_again and emit(FrameKind.ACK, self._ack_payload()):
             # The last ACK of a burst has no successor to cover its loss: say it again.
             self._ack_repeats -= 1
-            self._ack_again = now + self._min_rto / 2
+            self._ack_again = now + self._timer.min_rto / 2
         if not self._tx_open:
-            if (self._syn_sent_at is None or now - self._syn_sent_at >= self._rto) and emit(FrameKind.SYN):
+            if (self._syn_sent_at is None or now - self._syn_sent_at >= self._timer.rto) and emit(FrameKind.SYN):
                 self._syn_sent_at = now
         while self._dgrams and emit(FrameKind.DATAGRAM, self._dgrams[0]):
             self._dgram_bytes -= len(self._dgrams.popleft())
@@ -257,7 +245,7 @@ class Link:
 
     # ------------------------------------------------------------- sending side
     def _send_data(self, now: float, emit, budget) -> None:
-        if self._inflight and now - max(self._news, self._oldest_unsacked()) >= self._rto:
+        if self._inflight and now - max(self._news, self._oldest_unsacked()) >= self._timer.rto:
             # No news for a whole RTO: everything unacknowledged is presumed lost; back off.
             missing = [o for o in self._inflight.values() if not o.sacked]
             for o in missing:
@@ -267,7 +255,7 @@ class Link:
             self._news = now
             self._timeouts += 1
             if self._timeouts > GRACE_TIMEOUTS:  # a dead link is not flooded, a burst not waited out
-                self._rto = min(self._max_rto, BACKOFF * self._rto)
+                self._timer.back_off()
         for s in range(self._tx_base, self._tx_next):
             o = self._inflight[s]
             if o.lost and not o.sacked:
@@ -285,7 +273,7 @@ class Link:
             emit(FrameKind.DATA, nxt[0], self._tx_next & 0xFF)
             if not self._inflight:
                 self._news = now  # the timer runs from the first frame of a flight
-            self._inflight[self._tx_next] = _Out(nxt[0], nxt[1], now, 1, self._xmit)
+            self._inflight[self._tx_next] = InFlight(nxt[0], nxt[1], now, 1, self._xmit)
             self._xmit += 1
             self._tx_next += 1
 
@@ -336,7 +324,7 @@ class Link:
         # Karn: only frames sent once, timed when first acknowledged (a SACKed frame
         # cumulatively acked later would count the hole's repair time as RTT).
         if newest is not None:
-            self._rtt_sample(now - newest)
+            self._timer.sample(now - newest)
         # A frame is lost once DUPTHRESH frames transmitted after it have arrived.
         arrived += [o.xmit for o in self._inflight.values() if o.sacked]
         if len(arrived) >= DUPTHRESH:
@@ -344,14 +332,6 @@ class Link:
             for o in self._inflight.values():
                 if not o.sacked and o.xmit < limit:
                     o.lost = True
-
-    def _rtt_sample(self, r: float) -> None:
-        if self._srtt is None:
-            self._srtt, self._rttvar = r, r / 2
-        else:
-            self._rttvar = 0.75 * self._rttvar + 0.25 * abs(self._srtt - r)
-            self._srtt = 0.875 * self._srtt + 0.125 * r
-        self._rto = min(self._max_rto, max(self._min_rto, self._srtt + 4 * self._rttvar))
 
     # ----------------------------------------------------------- receiving side
     def _ack_payload(self) -> bytes:

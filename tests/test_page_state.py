@@ -17,7 +17,8 @@ from tools.sweep_grid import grid_json, plan_of_command
 
 def report(plan, next_index=0, skipped=(), mode="sweeping"):
     """The robot's STATUS report (onboard.status.Status.report), as its answer carries it."""
-    return {"mode": mode, "outbox": 2, "paused": "", "failsafe": [], "failsafe_s": 1.5, "torque": True,
+    return {"mode": mode, "outbox": 2, "paused": "", "disk": "ok", "disk_free": 10**9, "rejected": {},
+            "failsafe": [], "failsafe_s": 1.5, "torque": True,
             "faults": ["servo 2: overload (retried)"], "errors": [],
             "sweep": {"id": 4, "next": next_index, "poses": plan.count, "active": True, "plan": plan.to_record(),
                       "skipped": [list(s) for s in skipped]}}
