@@ -12,9 +12,7 @@ the tracker (`ArmFit`, stored in the state dir); `ArmCalibration.with_fit` appli
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from hal.interfaces import DeviceTimeout, HalError, LimitError, ServoBus, ViewAngles
+from hal.state_file import read_state, write_state
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,24 +102,17 @@ ARM_FIT_FILE = "arm_calibration.json"
 
 def save_arm_fit(state_dir: str | Path, fit: ArmFit) -> Path:
     """Write `fit` to `state_dir/arm_calibration.json` (whole or not at all)."""
-    path = Path(state_dir) / ARM_FIT_FILE
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps({"version": 1, "yaw": dataclasses.asdict(fit.yaw), "tilt": dataclasses.asdict(fit.tilt)},
-                              indent=2) + "\n")
-    os.replace(tmp, path)
-    return path
+    return write_state(Path(state_dir) / ARM_FIT_FILE, {"version": 1, "yaw": dataclasses.asdict(fit.yaw),
+                                                        "tilt": dataclasses.asdict(fit.tilt)})
 
 
 def load_arm_fit(state_dir: str | Path) -> ArmFit | None:
     """The stored fit, None when the arm was never calibrated; HalError naming the file when it is damaged."""
     path = Path(state_dir) / ARM_FIT_FILE
-    if not path.is_file():
-        return None
     try:
-        raw = json.loads(path.read_text())
-        if raw.get("version") != 1:
-            raise ValueError(f"unknown version {raw.get('version')!r}")
+        raw = read_state(path)
+        if raw is None:
+            return None
         return ArmFit(**{name: JointFit(**{k: (int if k == "poses" else float)(raw[name][k])
                                             for k in ("offset_deg", "sign", "residual_deg", "poses")})
                          for name in ("yaw", "tilt")})

@@ -12,9 +12,7 @@ exposure, so nothing else needs measuring. The result is kept in the state dir
 """
 from __future__ import annotations
 
-import json
 import math
-import os
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -23,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from hal.interfaces import ViewAngles
+from hal.state_file import read_state, write_state
 from onboard.sweep import SweepPlan
 
 SATURATED_OK = 0.001  # share of pixels at the top that still lets the top be read
@@ -111,25 +110,19 @@ def calibrate_exposure(views: list[ViewAngles], move: Callable[[ViewAngles], Non
 def save_exposure(state_dir: str | Path, report: ExposureReport, granted_us: float) -> Path:
     """Write the chosen exposure (as the camera granted it) to `state_dir/camera_exposure.json`."""
     path = Path(state_dir) / EXPOSURE_FILE
-    path.parent.mkdir(parents=True, exist_ok=True)
     doc = {"version": 1, "exposure_us": granted_us, "chosen_us": report.exposure_us, "margin": report.margin,
            "time": time.time(), "brightest": None if report.brightest is None else asdict(report.brightest),
            "readings": [asdict(r) for r in report.readings]}
-    tmp = path.with_suffix(".tmp")
-    tmp.write_text(json.dumps(doc, indent=2) + "\n")
-    os.replace(tmp, path)
-    return path
+    return write_state(path, doc)
 
 
 def load_exposure(state_dir: str | Path) -> float | None:
     """The stored exposure in µs, None when never calibrated; ValueError naming the file when damaged."""
     path = Path(state_dir) / EXPOSURE_FILE
-    if not path.is_file():
-        return None
     try:
-        raw = json.loads(path.read_text())
-        if raw.get("version") != 1:
-            raise ValueError(f"unknown version {raw.get('version')!r}")
+        raw = read_state(path)
+        if raw is None:
+            return None
         value = float(raw["exposure_us"])
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
         raise ValueError(f"{path}: not a stored exposure ({exc}); run `btf-robot calibrate exposure` again") from None

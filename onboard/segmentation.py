@@ -9,13 +9,12 @@ from __future__ import annotations
 
 import enum
 import json
-import os
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from hal.interfaces import Hal, ViewAngles
+from hal.state_file import write_state
 from onboard.capture import PoseSkipped
 from onboard.config import Config, ConfigError, SegmentConfig
 from onboard.features import FeatureFrame
@@ -150,15 +149,6 @@ class Segmenter:
         self.small = small
 
 
-def _write_json(path: Path, record: dict) -> None:
-    tmp = path.with_suffix(".tmp")
-    with open(tmp, "w", encoding="utf-8") as f:
-        f.write(json.dumps(record))
-        f.flush()
-        os.fsync(f.fileno())  # a power cut must not leave a torn palette behind the rename
-    os.replace(tmp, path)
-
-
 class Segmentation:
     """Labels per frame for `segment.method`, through a `Segmenter`.
 
@@ -206,7 +196,7 @@ class Segmentation:
         rec = self._record()
         if rec is None or rec == self._saved:
             return
-        _write_json(self.palette_path, rec)
+        write_state(self.palette_path, rec)
         self._saved = rec
 
     def force_send(self) -> None:
