@@ -65,9 +65,7 @@ def page_options(args: argparse.Namespace, default: str | None = None):
 
 
 def run(args: argparse.Namespace) -> int:
-    import asyncio
-
-    from tools.station_run import open_station, serve
+    from tools.station_run import open_station, serve_to_exit
 
     if args.status_every < 0:
         raise CliError(f"--status-every {args.status_every}: must not be negative")
@@ -83,13 +81,4 @@ def run(args: argparse.Namespace) -> int:
     page = page_options(args)
     parts = open_station(args.port, args.key, args.db, baud=args.baud, scene=args.scene, sock=args.socket,
                          log=args.log, status_every=args.status_every)
-    try:
-        asyncio.run(serve(parts, page=page))
-    finally:
-        parts.close()
-    failure = parts.station.failure
-    if failure is not None:
-        if failure.status == 2:
-            raise CliError(str(failure))
-        return failure.status
-    return 0
+    return serve_to_exit(parts, page)

@@ -77,11 +77,9 @@ def stop_robot(robot: subprocess.Popen) -> None:
 
 def run_demo(where: Path, page, status_every: float) -> int:
     """The fake robot and the station with its page, until Ctrl-C or SIGTERM."""
-    import asyncio
-
     from tools.capture_views import Frames
     from tools.pty_cable import PtyCable
-    from tools.station_run import open_station, serve
+    from tools.station_run import open_station, serve_to_exit
 
     key, config, db = prepare(where)
     page.fake = Frames.from_robot_config(config).fake
@@ -91,16 +89,7 @@ def run_demo(where: Path, page, status_every: float) -> int:
         print(f"demo: a fake robot on {cable.paths[0]} (its log: {where / 'robot.log'}), the station on "
               f"{cable.paths[1]}, database {db}", file=sys.stderr, flush=True)
         parts = open_station(cable.paths[1], str(key), str(db), status_every=status_every)
-        try:
-            asyncio.run(serve(parts, page=page))
-        finally:
-            parts.close()
+        return serve_to_exit(parts, page)
     finally:
         stop_robot(robot)
         cable.close()
-    failure = parts.station.failure
-    if failure is not None:
-        if failure.status == 2:
-            raise CliError(str(failure))
-        return failure.status
-    return 0

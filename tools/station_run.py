@@ -180,3 +180,16 @@ async def _start_page(parts: StationParts, options, echo: TextIO | None):
     if echo is not None:  # the token goes to the operator's terminal only, never to the log file
         print(f"page: {url}?token={options.token}", file=echo, flush=True)
     return web
+
+
+def serve_to_exit(parts: StationParts, page=None) -> int:
+    """Serve until stopped, close, and turn how the station ended into the CLI's exit status
+    (a failure that needs the setup fixed is a CliError: one line, exit 2)."""
+    try:
+        asyncio.run(serve(parts, page=page))
+    finally:
+        parts.close()
+    failure = parts.station.failure
+    if failure is not None and failure.status == 2:
+        raise CliError(str(failure))
+    return 0 if failure is None else failure.status
