@@ -1,9 +1,11 @@
 """Hypothesis profiles: "default" sized for CI, "stress" for `make stress` (--hypothesis-profile=stress);
-the `fake_robot` fixture every runtime test builds its robot with."""
+the `fake_robot` fixture every runtime test builds its robot with; `host` runs `btf-host` in-process."""
 from __future__ import annotations
 
 import pytest
 from hypothesis import HealthCheck, settings
+
+from tools import cli
 
 settings.register_profile("default", max_examples=100, deadline=None)
 settings.register_profile("stress", max_examples=5000, deadline=None,
@@ -40,3 +42,13 @@ def fake_robot(tmp_path):
         return Runtime(cfg, hal, tr, Segmentation(cfg, hal), **runtime_kw), tr
 
     return make
+
+
+@pytest.fixture
+def host(capsys):
+    """`host(*argv)` runs `btf-host` in this process: (exit status, stdout, stderr)."""
+    def run(*argv):
+        code = cli.main([str(a) for a in argv])
+        out, err = capsys.readouterr()
+        return code, out, err
+    return run

@@ -15,18 +15,8 @@ import pytest
 
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from tools import cli
 from tools.images import read_image, write_image, write_mask
 from tools.store import Store
-
-
-@pytest.fixture
-def host(capsys):
-    def run(*argv):
-        code = cli.main([str(a) for a in argv])
-        out, err = capsys.readouterr()
-        return code, out, err
-    return run
 
 
 def thermal_camera(scene: str = "mixed", size=(480, 640), seed: int = 1) -> tuple[np.ndarray, np.ndarray]:

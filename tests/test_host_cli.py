@@ -11,15 +11,10 @@ MINE = ("fit", "mask", "synth", "compare", "pdfs", "resolve")
 
 
 @pytest.fixture
-def host(monkeypatch, capsys):
+def host(host, monkeypatch):
     # Only these subcommands: others may not exist in every checkout.
     monkeypatch.setattr(cli, "COMMANDS", MINE)
-
-    def run(*argv):
-        code = cli.main([str(a) for a in argv])
-        out, err = capsys.readouterr()
-        return code, out, err
-    return run
+    return host
 
 
 def plate(seed, h=60, w=80):

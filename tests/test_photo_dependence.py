@@ -13,21 +13,11 @@ import numpy as np
 import pytest
 from skimage import data
 
-from tools import cli
 from tools.field import empirical_autocorrelation
 from tools.images import read_image, write_image, write_mask
 from tools.store import Store
 
 PHOTOS = ("grass", "gravel", "brick", "coffee")
-
-
-@pytest.fixture
-def host(capsys):
-    def run(*argv):
-        code = cli.main([str(a) for a in argv])
-        out, err = capsys.readouterr()
-        return code, out, err
-    return run
 
 
 def _photo(tmp_path, name: str):

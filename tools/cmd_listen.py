@@ -8,20 +8,15 @@ import sys
 import time
 
 from tools.cli import CliError
+from tools.cmd_station import add_station_options
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
     p = sub.add_parser("listen", help="receive captures over a serial link into a database")
-    p.add_argument("--port", required=True, help="pyserial URL: /dev/ttyUSB0, a pty path, socket://host:port, "
-                   "btfsim://?port=URL&loss=0.2 (a simulated lossy radio)")
-    p.add_argument("--db", required=True, help="SQLite database (created if missing)")
-    p.add_argument("--key", required=True, help="link key file (btf-host keygen)")
-    p.add_argument("--baud", type=int, default=115200)
-    p.add_argument("--scene", default="", help="scene name to file the captures under")
+    add_station_options(p, log=False)
     p.add_argument("--until-idle", type=float, default=0.0, metavar="S",
                    help="exit after S seconds without a delivered packet (0: run until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="one JSON object per received packet on stdout")
-    p.add_argument("--socket", help="control socket for cmd clients (default: DB.sock)")
     return p
 
 

@@ -33,7 +33,8 @@ def add_parser(sub) -> argparse.ArgumentParser:
     return p
 
 
-def add_station_options(p: argparse.ArgumentParser, required: bool = True) -> None:
+def add_station_options(p: argparse.ArgumentParser, required: bool = True, log: bool = True) -> None:
+    """The options of whatever holds the port as the station: `station`, `listen` (no --log)."""
     p.add_argument("--port", required=required, help="pyserial URL: /dev/ttyUSB0, a pty path, socket://host:port, "
                    "btfsim://?port=URL&loss=0.2 (a simulated lossy radio)")
     p.add_argument("--db", required=required, help="SQLite database (created if missing)")
@@ -41,7 +42,8 @@ def add_station_options(p: argparse.ArgumentParser, required: bool = True) -> No
     p.add_argument("--baud", type=int, default=115200)
     p.add_argument("--scene", default="", help="scene name to file the captures under")
     p.add_argument("--socket", help="control socket path (default: DB.sock)")
-    p.add_argument("--log", help="JSON-lines log (default: DB.log)")
+    if log:
+        p.add_argument("--log", help="JSON-lines log (default: DB.log)")
 
 
 def page_options(args: argparse.Namespace, default: str | None = None):
