@@ -11,7 +11,7 @@ from scipy import stats
 
 from benchmarks.common import Context, Section, best_time, paired_times, verdict
 from btf.johnson import Family, Johnson
-from onboard.fit import FrameFitter, fit_values
+from btf.fit.fitter import FrameFitter, fit_values
 
 
 def _frame(rng: np.random.Generator, side: int = 1000) -> tuple[np.ndarray, np.ndarray]:

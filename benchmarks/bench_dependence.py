@@ -11,12 +11,12 @@ from btf.dependence import Dependence
 from btf.johnson import Family, Johnson
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from onboard.dependence import measure
-from onboard.features import FeatureSpace, FeatureSpec, compute
-from onboard.fit import FrameFitter
-from radio.packet import encode_models
-from tools.field import empirical_autocorrelation
-from tools.synth import synthesize
+from btf.fit.dependence import measure
+from btf.fit.features import FeatureSpace, FeatureSpec, compute
+from btf.fit.fitter import FrameFitter
+from radio.packets import encode_models
+from tools.analysis.fields import empirical_autocorrelation
+from tools.analysis.synth import synthesize
 
 
 def _models(n_labels: int) -> dict:

@@ -12,8 +12,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from tools.datasets import Angles, write_rendered
-from tools.ingest import Job, fit_job, ingest
+from tools.data.datasets import Angles, write_rendered
+from tools.data.ingest import Job, fit_job, ingest
 
 
 def _views(n: int) -> list[Angles]:

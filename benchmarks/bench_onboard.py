@@ -14,9 +14,9 @@ from itertools import permutations
 import numpy as np
 
 from benchmarks.common import Context, Section
-from onboard.features import FeatureSpace, FeatureSpec, PcaBasis, compute
-from onboard.isodata import IsodataParams, isodata
-from radio.packet_mask import downsample_labels
+from btf.fit.features import FeatureSpace, FeatureSpec, PcaBasis, compute
+from btf.fit.isodata import IsodataParams, isodata
+from radio.packets.mask import downsample_labels
 
 SIDE = 1000
 REPEATS = 5

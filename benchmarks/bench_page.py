@@ -44,9 +44,9 @@ def fill(db: Path, captures: int) -> None:
     models of a fake render, the label map with the first."""
     from hal.interfaces import ViewAngles
     from hal.scene import render
-    from onboard.fit import FrameFitter
-    from tools.receiver import mask_key
-    from tools.store import Store
+    from btf.fit.fitter import FrameFitter
+    from tools.station.receiver import mask_key
+    from tools.store.database import Store
 
     view = render("mixed", ViewAngles(60.0, 0.0), (60, 80), seed=0)
     fitter = FrameFitter(4, 3)
@@ -66,7 +66,7 @@ class Station:
 
     def __init__(self, where: Path, db: Path, *argv: str) -> None:
         from radio.keys import write_key
-        from tools.pty_cable import PtyCable
+        from tools.demo.pty_cable import PtyCable
 
         self.where, self.cable = where, PtyCable()
         self.key = write_key(where / "robot.key") if not (where / "robot.key").exists() else where / "robot.key"

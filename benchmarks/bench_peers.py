@@ -5,7 +5,7 @@ Error: L1 between the data's normalized 256-level histogram and the model's leve
 probabilities (0..2), and the worst quantile error max |Q_model(u) - Q_data(u)| over
 u in [0.01, 0.99], both clipped to the sensor's 0..255, in gray levels. MLE fits see the
 integers spread uniformly over their level (seeded) and at most 20000 of them, as
-tools.pdfs does; ours reads the histogram of every value.
+tools.analysis.pdfs does; ours reads the histogram of every value.
 """
 from __future__ import annotations
 
@@ -20,8 +20,8 @@ from benchmarks import as99_moment_fit
 from benchmarks.common import Context, Section, figure, save
 from benchmarks.scenes import field
 from btf.johnson import Family, Johnson
-from onboard.fit import fit_values
-from tools.pdfs import binned
+from btf.fit.fitter import fit_values
+from tools.analysis.pdfs import binned
 
 METHODS = ("percentile", "johnsonsu MLE", "johnsonsb MLE", "moments (AS 99)", "gaussian", "weibull")
 U = np.linspace(0.01, 0.99, 99)

@@ -20,8 +20,8 @@ from scipy import stats
 from benchmarks import photo_cases, rpeer
 from benchmarks.common import Context, Section, figure, save, verdict
 from btf.johnson import Family, Johnson
-from onboard.fit import fit_histogram, fit_values, plain_fit
-from tools.pdfs import binned, peer_probabilities
+from btf.fit.fitter import fit_histogram, fit_values, plain_fit
+from tools.analysis.pdfs import binned, peer_probabilities
 
 LEVELS = 256
 SEEDS = (0, 1, 2)

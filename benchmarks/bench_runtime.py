@@ -16,10 +16,10 @@ from benchmarks.common import Context, Saving, Section, paired_rounds, paired_ti
 from hal.interfaces import ViewAngles
 from hal.scene import render
 from onboard import config
-from onboard.capture import Pipeline
-from onboard.isodata import IsodataParams, isodata
-from onboard.packet_bodies import models_body
-from onboard.segmentation import Segmenter, SegmentMethod
+from onboard.capture.pipeline import Pipeline
+from btf.fit.isodata import IsodataParams, isodata
+from onboard.link.bodies import models_body
+from onboard.capture.segmentation import Segmenter, SegmentMethod
 
 
 def _cfg(**skip) -> config.Config:

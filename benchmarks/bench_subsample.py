@@ -12,7 +12,7 @@ import numpy as np
 
 from benchmarks.common import Context, Section, figure, paired_times, save
 from benchmarks.scenes import field, voronoi_labels
-from onboard.fit import FrameFitter
+from btf.fit.fitter import FrameFitter
 
 STRIDES = (1, 2, 4, 8, 16)
 # Default: the largest stride whose worst quantile error stays under half a gray level.
@@ -74,7 +74,7 @@ def run(ctx: Context) -> list[Section]:
               "step), i.e. below what the 8-bit sensor itself resolves. Larger strides buy little more time "
               "(the fit's fixed cost per model starts to dominate) and their error grows with the number of "
               "labels, because each region keeps only 1/k^2 of its pixels. The runtime's precision rule "
-              "(onboard.skip.subsample_stride) sizes the stride per frame from the smallest region, which "
+              "(onboard.capture.skip.subsample_stride) sizes the stride per frame from the smallest region, which "
               "is the same trade made adaptively. Read by region size, the table says: every row whose "
               f"smallest region keeps at least {need} pixels is within {TOLERANCE} gray level, so a stride "
               f"may grow while the smallest kept region keeps {need} pixels (skip.pixels_for_precision(p) "

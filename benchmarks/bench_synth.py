@@ -1,13 +1,13 @@
 """Synthesis of a 1000x1000 RGB image from an 8-label mask, directly and interpolated between
-two view angles (tools.synth); the paper's goal: under a couple of seconds."""
+two view angles (tools.analysis.synth); the paper's goal: under a couple of seconds."""
 from __future__ import annotations
 
 import numpy as np
 
 from benchmarks.common import Context, Section, best_time
 from benchmarks.scenes import field, voronoi_labels
-from onboard.fit import FrameFitter
-from tools.synth import interpolate, synthesize
+from btf.fit.fitter import FrameFitter
+from tools.analysis.synth import interpolate, synthesize
 
 
 def _models(frame: np.ndarray, labels: np.ndarray, n: int):

@@ -14,8 +14,8 @@ import numpy as np
 from benchmarks.common import Context, Section
 from btf.codec import PercentileCodec
 from btf.percentile import model_from_percentiles
-from onboard.fit import fit_histogram
-from radio.packet import decode, encode_models
+from btf.fit.fitter import fit_histogram
+from radio.packets import decode, encode_models
 
 BANDS = ("R", "G", "B")
 LABEL_COUNTS = (1, 2, 4, 8, 16)

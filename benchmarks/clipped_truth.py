@@ -16,9 +16,9 @@ from hal.factory import build_hal
 from hal.interfaces import ViewAngles
 from hal.scene import scene_radiance
 from onboard import config
-from onboard.capture import FittedView, Pipeline
-from onboard.segmentation import Segmentation
-from tools.radiometry import adjusted
+from onboard.capture.pipeline import FittedView, Pipeline
+from onboard.capture.segmentation import Segmentation
+from tools.analysis.radiometry import adjusted
 
 TOP_PROBABILITY = 0.995  # hidden quantiles up to here (beyond, a few hundred pixels decide)
 SATURATION = 254.5  # a level rounds to 255 above this

@@ -71,7 +71,7 @@ def run_trials(size: tuple[int, int], trials: int, failsafe_s: float = 1.0, seed
     from hal.factory import build_hal
     from onboard import config
     from onboard.runtime import Mode, Runtime
-    from onboard.segmentation import Segmentation
+    from onboard.capture.segmentation import Segmentation
 
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory(prefix="btf-failsafe-") as tmp:

@@ -11,12 +11,12 @@ import math
 import numpy as np
 
 # Wire scales: censored fractions travel as 1/65535 fixed point, read shifts as int8 multiples
-# of 1/32 (onboard.censor places them).
+# of 1/32 (btf.fit.censor places them).
 CENSOR_SCALE = 65535
 SHIFT_SCALE = 32
 MAX_SHIFT_CODE = 127
 # z values; the packet sends the index of the one used. z_for_count tries the first ten from
-# the top; 0.7, after them, is a wider read the fitter may choose (onboard.reads).
+# the top; 0.7, after them, is a wider read the fitter may choose (btf.fit.reads).
 Z_LADDER: tuple[float, ...] = (0.524, 0.5, 0.45, 0.4, 0.35, 0.3, 0.25, 0.2, 0.15, 0.1, 0.7)
 COUNT_LADDER = Z_LADDER[:10]
 # The tail percentile x(3z) should rest on at least this many pixels.

@@ -3,8 +3,8 @@
 corr  the correlation matrix of the bands' pixel values, upper triangle (row-major);
 dx    the autocorrelation of the pixels at horizontal lags LAGS (band average);
 dy    the same at vertical lags.
-The robot measures it (onboard.dependence), the packet carries it in int8 steps
-(radio.packet_dependence), the host synthesizes with it (tools.field).
+The robot measures it (btf.fit.dependence), the packet carries it in int8 steps
+(radio.packets.dependence), the host synthesizes with it (tools.analysis.fields).
 """
 from __future__ import annotations
 

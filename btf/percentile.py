@@ -34,7 +34,7 @@ def model_from_percentiles(percentiles, z: float, count: int, *, shift: float = 
     `shift` s moves the four points along the normal scale (censored data: keep them out of
     the pile-up); the symmetric forms still apply with gamma lowered by s. `normal_probs`
     (pa, pe) instead asks for the normal with P(X < a) = pa and P(X < e) = pe (the censored
-    fallback, see onboard.censor). The family follows ln d = ln(mn / p^2), with a band around
+    fallback, see btf.fit.censor). The family follows ln d = ln(mn / p^2), with a band around
     0 (`sl_band`) read as lognormal or normal; `exact_family` drops the band (the family from
     the sign of ln d alone, the plain Slifker-Shapiro rule). Deterministic: the host calls it
     on the transmitted values to recompute the robot's model bit for bit. All four equal

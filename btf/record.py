@@ -27,7 +27,7 @@ class FittedModel:
     # Fractions of the pixels censored at the lowest and highest level (1/65535 fixed point).
     censored_low: float = 0.0
     censored_high: float = 0.0
-    fallback: bool = False  # the normal through the censor limits (onboard.censor)
+    fallback: bool = False  # the normal through the censor limits (btf.fit.censor)
     exact_family: bool = False  # the family from the sign of ln d alone (btf.percentile)
 
     @classmethod

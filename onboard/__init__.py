@@ -1,4 +1,7 @@
-"""The lean robot runtime: Johnson math, the fixed-memory fitter, features, segmentation, the sweep.
+"""The lean robot runtime: the main loop, its configuration, commands and failsafe.
 
-Imports numpy, msgpack and the standard library only.
+`onboard.capture` measures one pose, `onboard.sweep` plans and runs sweeps, `onboard.link` is
+the robot's side of the radio (outbox, packet bodies, STATUS), and `onboard.cli` is `btf-robot`.
+The fitter itself is shared with the host (`btf.fit`). Imports numpy, msgpack and the standard
+library only.
 """

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Mapping
 
-from onboard.sweep import SweepPlan
+from onboard.sweep.plan import SweepPlan
 
 # A camera control: a number, "auto" (the camera's automatic) or "hold" (locked at what the
 # camera stands at when the robot starts). TOML gives it as a number or a string.
@@ -77,7 +77,7 @@ class FeatureConfig:
     space: str = "rgb"  # rgb | hsv | gray | pca | raw
     bands: tuple[str, ...] = ()  # empty: every band of the space
     bins_16bit: int = 4096  # histogram bins over 0..65535 for 16-bit sensors (memory: labels x bands x bins)
-    # also send grain and band correlation per region (onboard.dependence): on, its cost is 35 ms
+    # also send grain and band correlation per region (btf.fit.dependence): on, its cost is 35 ms
     # and 44 bytes a capture at most (RESULTS.md "dependence"), without it the host cannot
     # reproduce grain or colour
     dependence: bool = True
@@ -304,7 +304,7 @@ def check(cfg: Config) -> None:
 
 def check_camera(cfg: Config) -> None:
     from btf.capture_settings import LINEAR_SPACES, MAX_BRACKETS
-    from onboard.camera_lock import requested
+    from onboard.capture.camera_lock import requested
 
     c = cfg.camera
     try:

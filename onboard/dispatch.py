@@ -1,6 +1,6 @@
 """Command dispatch: each COMMAND from the base runs its handler once and gets one answer.
 
-The command table (`radio.commands`) says which commands move the arm (refused while a pose
+The command table (`radio.packets.commands`) says which commands move the arm (refused while a pose
 is being measured), which interrupt the pose, and which are queries (answered even in
 failsafe). A handler returns the ACK's extras, or a `Refusal` with its NACK reason; what it
 produces (a capture's packets, a new sweep) goes into an `Effect`, committed with the reply
@@ -17,16 +17,16 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from hal.interfaces import ViewAngles
 from onboard import config as config_mod
-from onboard import packet_bodies as wire
-from onboard.capture import PoseSkipped
+from onboard.link import bodies as wire
+from onboard.capture.pipeline import PoseSkipped
 from onboard.config import ConfigError
-from onboard.outbox import OutboxFull, Reply
-from onboard.runtime_state import Interrupted
-from onboard.status import flat
-from onboard.sweep import SweepPlan
+from onboard.link.outbox import OutboxFull, Reply
+from onboard.state import Interrupted
+from onboard.link.status import flat
+from onboard.sweep.plan import SweepPlan
 from radio import FrameError
-from radio import packet as pk
-from radio.commands import COMMANDS, CommandName
+from radio import packets as pk
+from radio.packets.commands import COMMANDS, CommandName
 
 if TYPE_CHECKING:
     from onboard.runtime import Runtime

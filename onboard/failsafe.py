@@ -7,8 +7,8 @@ from __future__ import annotations
 from typing import Callable
 
 from hal.arm import Arm
-from onboard.packet_bodies import iso_time
-from onboard.runtime_state import Mode, RuntimeState
+from onboard.link.bodies import iso_time
+from onboard.state import Mode, RuntimeState
 
 EVENTS_KEPT = 8
 

@@ -16,20 +16,20 @@ from collections import deque
 from typing import Callable
 
 from hal.interfaces import Hal
-from onboard.capture import Pipeline, PoseSkipped
-from onboard.captures import PCA_KEY, Captures, read_pca
+from onboard.capture.pipeline import Pipeline, PoseSkipped
+from onboard.capture.filing import PCA_KEY, Captures, read_pca
 from onboard.config import Config
 from onboard.disk import Disk, Pressure
 from onboard.dispatch import Dispatcher
 from onboard.failsafe import Failsafe
-from onboard.link_service import LinkService
-from onboard.outbox import NO_ROOM, Outbox, OutboxError, free_bytes, open_outbox
-from onboard.runtime_state import Mode, RuntimeState
-from onboard.segmentation import Segmentation
-from onboard.status import Status
-from onboard.sweep import SweepProgress
-from onboard.sweep_control import SweepControl
-from onboard.transport import Transport
+from onboard.link.service import LinkService
+from onboard.link.outbox import NO_ROOM, Outbox, OutboxError, free_bytes, open_outbox
+from onboard.state import Mode, RuntimeState
+from onboard.capture.segmentation import Segmentation
+from onboard.link.status import Status
+from onboard.sweep.plan import SweepProgress
+from onboard.sweep.control import SweepControl
+from onboard.link.transport import Transport
 from onboard.watchdog import Notifier
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale
 

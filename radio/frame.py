@@ -31,7 +31,7 @@ DEFAULT_MTU = 100
 
 
 class FrameKind(enum.IntEnum):
-    """What a frame does on the link. Not a packet kind (`radio.packet.Kind`): a frame ACK
+    """What a frame does on the link. Not a packet kind (`radio.packets.Kind`): a frame ACK
     acknowledges frames by sequence number, a packet ACK answers a command."""
 
     DATA = 1  # reliable, sequenced

@@ -11,7 +11,8 @@ import sys
 import atheris
 
 with atheris.instrument_imports():
-    from radio import FrameError, packet
+    from radio import FrameError
+    from radio import packets as packet
     from radio.auth import MemoryCounterStore
     from radio.frame import decode as decode_frame
     from radio.link import Delivered, Link
@@ -49,7 +50,7 @@ def write_seeds(directory: str) -> None:
 
     import numpy as np
 
-    from onboard.fit import FrameFitter
+    from btf.fit.fitter import FrameFitter
 
     rng = np.random.default_rng(0)
     fitter = FrameFitter(3, 3)

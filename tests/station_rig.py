@@ -12,9 +12,9 @@ from collections import Counter
 from pathlib import Path
 
 from radio.keys import write_key
-from tools.pty_cable import PtyCable
-from tools.station_control import StationClient, socket_path
-from tools.store import Store
+from tools.demo.pty_cable import PtyCable
+from tools.station.control import StationClient, socket_path
+from tools.store.database import Store
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOT = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n'

@@ -13,15 +13,15 @@ from hal.factory import build_hal
 from onboard import config
 from onboard.config import ConfigError
 from radio import FrameError
-from radio import packet as pk
+from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import load_key, write_key
 from radio.link import Link
-from radio.packet_camera import decode_camera, encode_camera
+from radio.packets.camera import decode_camera, encode_camera
 from tools.cli import main as host
-from tools.radiometry import settings_json
-from tools.receiver import Receiver
-from tools.store import CorruptDatabase, Store
+from tools.analysis.radiometry import settings_json
+from tools.station.receiver import Receiver
+from tools.store.database import CorruptDatabase, Store
 
 ROBOT = ('[hal]\nbody = "fake"\nscene = "field"\nsize = [60, 80]\nreference = true\n[segment]\nmethod = "scene"\n'
          '[skip]\nmin_pixels = 20\n[sweep]\nstart = 90\nstop = 80\nstep = 10\n{camera}')
@@ -218,7 +218,7 @@ def test_an_older_database_gains_the_camera_table_and_a_bad_row_is_one_line(tmp_
 
 def test_nonsense_a_device_reports_is_recorded_as_not_reported():
     from hal.interfaces import CameraSettings
-    from onboard.camera_lock import CameraLock
+    from onboard.capture.camera_lock import CameraLock
 
     lock = CameraLock(camera=None, cfg=config.CameraConfig())
     s = lock.record(CameraSettings(1e13, 1e9, 5500.0, sensor_temperature_c=-500.0))

@@ -10,9 +10,9 @@ from benchmarks.model_histograms import expected_histogram, histogram_l1, satura
 from btf.codec import CENSOR_SCALE, Z_LADDER, fallback_probs
 from btf.johnson import Family, Johnson
 from btf.record import rebuild
-from onboard.censor import censored_counts, place
-from onboard.fit import FrameFitter, fit_histogram, plain_fit
-from radio.packet import decode, encode_models
+from btf.fit.censor import censored_counts, place
+from btf.fit.fitter import FrameFitter, fit_histogram, plain_fit
+from radio.packets import decode, encode_models
 
 
 def _scaled(family: Family, gamma: float, delta: float) -> Johnson:

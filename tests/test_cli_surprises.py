@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from onboard.fit import FrameFitter
+from btf.fit.fitter import FrameFitter
 from tests.test_host_cli import plate
 from tools.cli import main
-from tools.images import read_image, read_mask, write_image, write_mask
-from tools.store import Store
+from tools.data.images import read_image, read_mask, write_image, write_mask
+from tools.store.database import Store
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -172,7 +172,7 @@ def test_decode_into_a_pipe_closed_early_exits_quietly(tmp_path):
 
 # --- ingest --keep-going ---------------------------------------------------------------------
 def test_ingest_keep_going_skips_damaged_images_and_names_them_at_the_end(run, tmp_path):
-    from tools.datasets import Angles, write_rendered
+    from tools.data.datasets import Angles, write_rendered
 
     views = [Angles(el, 0.0, 50.0, 0.0) for el in (30.0, 45.0, 60.0, 75.0, 90.0)]
     write_rendered(tmp_path / "d", "utia", views, size=(24, 24))
@@ -276,7 +276,7 @@ def test_report_synthesizes_captures_whose_mask_fit_stored(run, files):
 
 
 def test_the_parsers_feature_spaces_are_the_images_module_s():
-    from tools.cli import FEATURE_SPACES
-    from tools.images import SPACES
+    from tools.cli.options import FEATURE_SPACES
+    from tools.data.images import SPACES
 
     assert FEATURE_SPACES == SPACES

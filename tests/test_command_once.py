@@ -4,8 +4,8 @@ The base retries a command with the same id until it hears the answer; after a r
 restart the link's dedup window is gone, so the runtime itself must recognise the id."""
 import pytest
 
-from onboard.outbox import REMEMBERED_REPLIES, Outbox, Reply
-from radio import packet as pk
+from onboard.link.outbox import REMEMBERED_REPLIES, Outbox, Reply
+from radio import packets as pk
 
 CONFIG = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n[segment]\nmethod = "scene"\n'
           '[skip]\nmin_pixels = 20\n[sweep]\nautostart = false\n')
@@ -144,7 +144,7 @@ def test_the_robot_remembers_only_the_last_replies(tmp_path):
 
 
 def test_a_forgotten_command_id_runs_again(fake_robot, tmp_path, monkeypatch):
-    monkeypatch.setattr("onboard.outbox.REMEMBERED_REPLIES", 2)
+    monkeypatch.setattr("onboard.link.outbox.REMEMBERED_REPLIES", 2)
     rt, tr = robot(fake_robot, tmp_path)
     send(rt, tr, 1, C.SET, key="skip.min_pixels", value=5)
     send(rt, tr, 2, C.SET, key="skip.min_pixels", value=9)

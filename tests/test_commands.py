@@ -1,16 +1,16 @@
-"""The command table: declared once in radio.commands, read by the packet schema, the robot's
+"""The command table: declared once in radio.packets.commands, read by the packet schema, the robot's
 dispatch and `btf-host cmd`."""
 import pytest
 
-from onboard.capture import PoseSkipped
+from onboard.capture.pipeline import PoseSkipped
 from onboard.config import ConfigError
 from onboard.dispatch import Refusal, refusal
-from onboard.outbox import OutboxFull
-from onboard.runtime_state import Interrupted
-from radio import packet as pk
-from radio.commands import COMMANDS, CommandName
+from onboard.link.outbox import OutboxFull
+from onboard.state import Interrupted
+from radio import packets as pk
+from radio.packets.commands import COMMANDS, CommandName
 from tools.cli import build_parser
-from tools.cmd_cmd import command_of
+from tools.cli.cmd import command_of
 
 C = CommandName
 # Each subcommand as a user types it, and the arguments the robot then receives.

@@ -12,11 +12,11 @@ from skimage import data
 
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from onboard.dependence import measure
-from onboard.fit import FrameFitter
-from radio.packet_dependence import decode_dependence, encode_dependence
-from tools.field import empirical_autocorrelation
-from tools.synth import interpolate, synthesize, synthesize_at
+from btf.fit.dependence import measure
+from btf.fit.fitter import FrameFitter
+from radio.packets.dependence import decode_dependence, encode_dependence
+from tools.analysis.fields import empirical_autocorrelation
+from tools.analysis.synth import interpolate, synthesize, synthesize_at
 
 MIN_REGION = 8000  # smaller regions: too few pixel pairs for a 0.1 bar at lag 8
 
@@ -115,8 +115,8 @@ def test_interpolation_blends_dependence_and_the_flag_turns_it_off():
 
 def test_store_keeps_dependence_and_synth_cli_uses_it_unless_independent(tmp_path):
     from tools import cli
-    from tools.images import decode_png, encode_png
-    from tools.store import Store
+    from tools.data.images import decode_png, encode_png
+    from tools.store.database import Store
 
     img, labels = _case("white")
     f = FrameFitter(int(labels.max()) + 1, 3, bins=256)

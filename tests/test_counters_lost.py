@@ -14,7 +14,7 @@ from radio.auth import SKEW_S, CounterFileLost, FileCounterStore, MemoryCounterS
 from radio.link import Delivered, Link, PeerStale
 from radio.ports import FdPort
 from radio.pump import LinkPump
-from tools.receiver import HostSession, ItemKind, Receiver
+from tools.station.receiver import HostSession, ItemKind, Receiver
 
 ROOT = Path(__file__).resolve().parents[1]
 KEY = bytes(range(32))
@@ -183,7 +183,7 @@ def test_a_peer_refused_as_stale_is_said_once_in_one_line_with_the_remedy(tmp_pa
 
 
 def test_the_robot_logs_a_stale_peer_once_and_reports_it_in_status(fake_robot):
-    from onboard.transport import MemoryTransport
+    from onboard.link.transport import MemoryTransport
 
     lines: list[str] = []
     tr = MemoryTransport()
@@ -197,7 +197,7 @@ def test_the_robot_logs_a_stale_peer_once_and_reports_it_in_status(fake_robot):
 
 
 def test_status_carries_the_link_s_rejections_by_reason(fake_robot):
-    from onboard.transport import MemoryTransport
+    from onboard.link.transport import MemoryTransport
 
     tr = MemoryTransport()
     rt, _ = fake_robot('[hal]\nbody = "fake"\nsize = [24, 32]\n[segment]\nmethod = "scene"\n'

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from tools.datasets import Angles, DatasetError, Layout, parse_utia_name, read_curet_table, scan, write_rendered
+from tools.data.datasets import Angles, DatasetError, Layout, parse_utia_name, read_curet_table, scan, write_rendered
 
 VIEWS = [Angles(30.0, 0.0, 40.0, 0.0), Angles(60.0, 90.0, 70.0, 180.0), Angles(90.0, 0.0, 55.0, 45.0)]
 
@@ -108,7 +108,7 @@ def test_missing_directory_empty_directory_and_unknown_layout(tmp_path):
 def test_rendered_views_are_lit_from_their_illumination_direction(tmp_path):
     from hal.interfaces import ViewAngles
     from hal.scene import LightAngles, render
-    from tools.images import read_image
+    from tools.data.images import read_image
 
     views = [Angles(60.0, 0.0, 80.0, 0.0), Angles(60.0, 0.0, 20.0, 0.0), Angles(60.0, 0.0, 20.0, 180.0),
              Angles(60.0, 0.0)]

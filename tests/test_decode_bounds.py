@@ -8,8 +8,8 @@ import msgpack
 import pytest
 
 from radio import FrameError
-from radio import packet as pk
-from radio.packet_base import (
+from radio import packets as pk
+from radio.packets.base import (
     MAX_BANDS,
     MAX_FRAME_PIXELS,
     MAX_FRAME_SIDE,
@@ -17,7 +17,7 @@ from radio.packet_base import (
     SCHEMA_VERSION,
     Kind,
 )
-from radio.packet_models import LabelModels, ModelsPacket
+from radio.packets.models import LabelModels, ModelsPacket
 
 # Issue 18's MASK body, a 1 x 1 label map of a 65535 x 65535 frame, was schema 2; the same
 # 20 bytes at the current schema version are what an authentic robot could send now.
@@ -99,9 +99,9 @@ _SURVIVE = textwrap.dedent("""
     limit = 1 << 30  # 1 GiB of address space: the old decoder asked for 4 GiB here
     resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
     import numpy as np
-    from radio import packet as pk
-    from tools.receiver import Receiver, mask_key
-    from tools.store import Store
+    from radio import packets as pk
+    from tools.station.receiver import Receiver, mask_key
+    from tools.store.database import Store
     with Store.open(sys.argv[1]) as store:
         rx = Receiver(store)
         bad = rx.handle(bytes.fromhex(sys.argv[2]))

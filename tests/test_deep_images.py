@@ -15,8 +15,8 @@ import pytest
 
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from tools.images import read_image, write_image, write_mask
-from tools.store import Store
+from tools.data.images import read_image, write_image, write_mask
+from tools.store.database import Store
 
 
 def thermal_camera(scene: str = "mixed", size=(480, 640), seed: int = 1) -> tuple[np.ndarray, np.ndarray]:

@@ -4,7 +4,7 @@ from pathlib import Path
 import pytest
 
 from radio.link import Link
-from tools.demo import DemoConfig, run_demo
+from tools.demo.end_to_end import DemoConfig, run_demo
 
 
 @pytest.fixture(scope="module")
@@ -59,9 +59,9 @@ def test_a_second_run_in_the_same_directory_starts_from_fresh_robot_state(result
 
 
 def test_a_robot_that_dies_is_reported_with_the_last_lines_of_its_stderr(tmp_path, monkeypatch):
-    import tools.demo as demo
+    import tools.demo.end_to_end as demo
     from radio.keys import write_key
-    from tools.store import Store
+    from tools.store.database import Store
 
     def broken(work, scene, robot_id, size):
         path = work / f"robot-{scene}.toml"
@@ -76,7 +76,7 @@ def test_a_robot_that_dies_is_reported_with_the_last_lines_of_its_stderr(tmp_pat
 
 
 def test_report_and_console_state_the_same_run_time(first_run):
-    from tools.cmd_demo import _summary
+    from tools.cli.demo import _summary
 
     result, page = first_run
     console = "\n".join(_summary(result))
@@ -94,7 +94,7 @@ def test_resends_read_off_the_byte_stream_match_the_links_own_count():
     end's bytes agrees with that end's own retransmission count."""
     from radio.auth import MemoryCounterStore
     from radio.frame import Deframer
-    from tools.demo import Resends
+    from tools.demo.end_to_end import Resends
 
     key = bytes(range(32))
     robot = Link(1, 2, 1, key, MemoryCounterStore(), heartbeat=0.2)

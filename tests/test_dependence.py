@@ -12,11 +12,11 @@ from hypothesis import strategies as st
 from btf.codec import z_for_count
 from btf.dependence import LAGS, Dependence
 from btf.johnson import Johnson
-from onboard.dependence import measure
-from onboard.fit import FrameFitter
+from btf.fit.dependence import measure
+from btf.fit.fitter import FrameFitter
 from radio import FrameError
-from radio import packet as pk
-from radio.packet_dependence import decode_dependence, encode_dependence, record_size
+from radio import packets as pk
+from radio.packets.dependence import decode_dependence, encode_dependence, record_size
 
 HEADER = dict(robot_id=1, seq=5, time=10.0, commanded=(60.0, 0.0), measured=(60.0, 0.0),
               feature_space="rgb")
@@ -193,7 +193,7 @@ def test_dependence_is_not_carried_in_the_extras_map():
 
 def _pipeline(tmp_path, on: bool):
     from onboard import config
-    from onboard.capture import Pipeline
+    from onboard.capture.pipeline import Pipeline
 
     path = tmp_path / "robot.toml"
     path.write_text(f'[hal]\nbody = "fake"\n[segment]\nmethod = "scene"\n[features]\ndependence = {str(on).lower()}\n')
@@ -204,7 +204,7 @@ def _pipeline(tmp_path, on: bool):
 @pytest.mark.parametrize("on", [True, False])
 def test_capture_sends_dependence_only_when_configured(tmp_path, on):
     from hal.interfaces import ViewAngles
-    from onboard.packet_bodies import models_body
+    from onboard.link.bodies import models_body
 
     img = _ar_image(96, 128, phi=0.8, mix=0.6, seed=8)
     labels = np.zeros(img.shape[:2], dtype=np.uint8)

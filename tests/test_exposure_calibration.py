@@ -8,9 +8,9 @@ from hal.interfaces import ViewAngles
 from hal.scene import render
 from onboard import config
 from onboard.cli import main as robot
-from onboard.cmd_run import _calibrated_exposure
-from onboard.exposure_calibration import EXPOSURE_FILE, calibrate_exposure, load_exposure, plan_extremes
-from onboard.sweep import SweepPlan
+from onboard.cli.run import _calibrated_exposure
+from onboard.capture.exposure import EXPOSURE_FILE, calibrate_exposure, load_exposure, plan_extremes
+from onboard.sweep.plan import SweepPlan
 
 FIELD = ('state_dir = "state"\n[hal]\nbody = "fake"\nscene = "field"\nsize = [120, 160]\n'
          '[sweep]\nstart = 90\nstop = 30\nstep = 10\nazimuths = [0, 90, 180, 270]\n')

@@ -147,7 +147,7 @@ def test_real_camera_is_picamera2_when_importable_and_opencv_otherwise(monkeypat
 
 
 def test_selftest_servo_nudge_stays_inside_the_joint_limits():
-    from onboard.cmd_selftest import _servo_bus
+    from onboard.cli.selftest import _servo_bus
 
     # A tilt servo mounted reversed and parked at its lower limit: a blind +5 degree nudge
     # of the servo would drive the joint to -5 degrees, into the stop.
@@ -166,7 +166,7 @@ def test_selftest_servo_nudge_stays_inside_the_joint_limits():
 
 
 def test_selftest_tracker_check_compares_with_where_the_servos_are():
-    from onboard.cmd_selftest import _tracker
+    from onboard.cli.selftest import _tracker
 
     hal = build_hal({"body": "fake", "size": (16, 16)}, env={})
     try:

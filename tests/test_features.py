@@ -4,8 +4,8 @@ import msgpack
 import numpy as np
 import pytest
 
-from onboard import features as F
-from onboard.features import FeatureSpace, FeatureSpec, PcaBasis, compute
+from btf.fit import features as F
+from btf.fit.features import FeatureSpace, FeatureSpec, PcaBasis, compute
 
 
 def _random_image(seed: int, h: int = 97, w: int = 131) -> np.ndarray:

@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 
 from btf.dependence import LAGS, Dependence
 from btf.johnson import Family, Johnson
-from tools.field import (
+from tools.analysis.fields import (
     blend,
     empirical_autocorrelation,
     gaussian_fields,

@@ -3,7 +3,7 @@ import tracemalloc
 
 import numpy as np
 
-from onboard.fit import FrameFitter
+from btf.fit.fitter import FrameFitter
 
 
 def peak_extra(side: int) -> int:

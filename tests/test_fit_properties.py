@@ -8,7 +8,7 @@ from hypothesis import strategies as st
 from btf.codec import PercentileCodec
 from btf.johnson import Family, Johnson, normal_ppf
 from btf.record import rebuild
-from onboard.fit import fit_histogram
+from btf.fit.fitter import fit_histogram
 
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

@@ -17,8 +17,8 @@ from radio.link import Link
 from radio.ports import FdPort
 from radio.pump import LinkPump
 from tests.small_disk import SmallDisk, python, robot_argv
-from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
-from tools.store import Store
+from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
+from tools.store.database import Store
 
 ROOT = Path(__file__).resolve().parents[1]
 MiB = 1024 * 1024
@@ -157,7 +157,7 @@ class Listener:
     """`btf-host listen` on a small disk (its database there), and a robot link here."""
 
     def __init__(self, tmp_path: Path) -> None:
-        from tools.pty_cable import PtyCable
+        from tools.demo.pty_cable import PtyCable
 
         self.key = write_key(tmp_path / "link.key")
         (tmp_path / "db").mkdir()

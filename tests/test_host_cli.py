@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from tools import cli
-from tools.images import read_image, read_mask, write_image, write_mask
+from tools.data.images import read_image, read_mask, write_image, write_mask
 
 MINE = ("fit", "mask", "synth", "compare", "pdfs", "resolve")
 

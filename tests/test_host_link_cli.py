@@ -5,14 +5,14 @@ import tty
 
 import pytest
 
-from onboard.cli_runner import CliError
-from radio import packet as pk
+from onboard.cli.runner import CliError
+from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import write_key
 from radio.link import Link
 from tests.test_receiver import models_body
 from tools.cli import main
-from tools.pty_cable import PtyCable
+from tools.demo.pty_cable import PtyCable
 
 
 @pytest.fixture
@@ -103,7 +103,7 @@ def test_cmd_without_an_answer_times_out_with_one_line(key, tmp_path, capsys):
 
 def test_cmd_arguments_become_the_commands_the_robot_checks():
     from tools.cli import build_parser
-    from tools.cmd_cmd import command_of
+    from tools.cli.cmd import command_of
 
     p = build_parser()
     name, args = command_of(p.parse_args(["cmd", "--port", "x", "--key", "k", "sweep",
@@ -122,7 +122,7 @@ def test_cmd_arguments_become_the_commands_the_robot_checks():
 @pytest.mark.parametrize("extra", [["--start", "90", "--elevations", "90,80"], ["--start", "90", "--stop", "30"]])
 def test_cmd_sweep_refuses_mixed_or_partial_ranges(extra):
     from tools.cli import build_parser
-    from tools.cmd_cmd import command_of
+    from tools.cli.cmd import command_of
 
     args = build_parser().parse_args(["cmd", "--port", "x", "--key", "k", "sweep", *extra])
     with pytest.raises(CliError, match="sweep"):

@@ -43,9 +43,10 @@ _LIBRARY = textwrap.dedent("""
 
     what, side = sys.argv[1], int(sys.argv[2])
     from benchmarks.scenes import field
-    from onboard.dependence import Dependence
+    from btf.fit.dependence import Dependence
     from btf.johnson import Johnson
-    from tools import masks, synth
+    from tools.data import masks
+    from tools.analysis import synth
 
     models = {(lab, b): Johnson.normal(90.0 + 20 * b + 40 * lab, 12.0) for lab in (0, 1) for b in range(3)}
     dep = Dependence((0.5, 0.3, 0.6), (0.8, 0.6, 0.4, 0.2), (0.7, 0.5, 0.3, 0.1))

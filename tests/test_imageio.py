@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from onboard.imageio import decode_png, encode_png, read_png, write_png
+from btf.fit.png import decode_png, encode_png, read_png, write_png
 
 
 def _smooth_rgb(h=40, w=57, seed=0):

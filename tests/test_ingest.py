@@ -6,12 +6,12 @@ import sqlite3
 import numpy as np
 import pytest
 
-from onboard.fit import FrameFitter
+from btf.fit.fitter import FrameFitter
 from tools.cli import main
-from tools.datasets import Angles, write_rendered
-from tools.images import read_image, read_mask
-from tools.ingest import IngestError, dataset_robot, ingest
-from tools.store import Store
+from tools.data.datasets import Angles, write_rendered
+from tools.data.images import read_image, read_mask
+from tools.data.ingest import IngestError, dataset_robot, ingest
+from tools.store.database import Store
 
 VIEWS = [Angles(el, az, lel, 0.0) for el in (30.0, 60.0, 90.0) for az in (0.0, 90.0) for lel in (40.0, 70.0)]
 
@@ -118,7 +118,7 @@ def test_bad_masks_and_spaces_are_named(utia, tmp_path):
     with pytest.raises(IngestError, match="masks folder has none"):
         ingest(utia, "utia", tmp_path / "x.db", mask=tmp_path / "masks", workers=0)
     small = tmp_path / "small.png"
-    from tools.images import write_mask
+    from tools.data.images import write_mask
     write_mask(small, np.zeros((5, 5), np.uint8))
     with pytest.raises(IngestError, match="differs from the image"):
         ingest(utia, "utia", tmp_path / "x.db", mask=small, workers=0)
@@ -144,7 +144,7 @@ CREATE TABLE masks (id INTEGER PRIMARY KEY, robot TEXT NOT NULL DEFAULT '', key 
 
 
 def test_schema_1_database_is_upgraded_in_place(utia, tmp_path):
-    from tools.store_schema import APPLICATION_ID
+    from tools.store.schema import APPLICATION_ID
 
     db = tmp_path / "old.db"
     con = sqlite3.connect(db)
@@ -185,7 +185,7 @@ def test_cli_ingest_and_its_errors(utia, tmp_path, capsys):
 
 
 def test_results_are_written_in_batches_and_a_failure_keeps_the_batch_before_it():
-    from tools.ingest import _batches
+    from tools.data.ingest import _batches
 
     assert [len(c) for c in _batches(iter(range(10)), 4, 1e9)] == [4, 4, 2]
     assert [len(c) for c in _batches(iter(range(3)), 64, 0.0)] == [1, 1, 1]  # no wait past the deadline

@@ -10,10 +10,10 @@ from hypothesis import strategies as st
 
 from btf.johnson import Johnson
 from tools.cli import main
-from tools.datasets import Angles, write_rendered
-from tools.images import read_image, read_mask
-from tools.ingest import ingest
-from tools.interp import (
+from tools.data.datasets import Angles, write_rendered
+from tools.data.images import read_image, read_mask
+from tools.data.ingest import ingest
+from tools.analysis.interpolation import (
     Direction,
     DirectionInterpolator,
     _plane,
@@ -22,8 +22,8 @@ from tools.interp import (
     synthesize_at_direction,
     synthesize_blend,
 )
-from tools.store import Store
-from tools.synth import ExtrapolationWarning, MissingModels, neighbours
+from tools.store.database import Store
+from tools.analysis.synth import ExtrapolationWarning, MissingModels, neighbours
 
 GRID = [Direction(el, az) for el in (20.0, 50.0, 80.0) for az in range(0, 360, 45)] + [Direction(90.0, 0.0)]
 GRID4 = [Direction(el, az, lel, laz) for el in (30.0, 60.0, 90.0) for az in (0.0, 120.0, 240.0)
@@ -149,7 +149,7 @@ def test_cli_synth_with_several_angles(tmp_path, capsys):
     db = str(tmp_path / "x.db")
     ingest(tmp_path / "d", "utia", db, workers=0)
     mask = tmp_path / "m.png"
-    from tools.images import write_mask
+    from tools.data.images import write_mask
     write_mask(mask, np.zeros((24, 24), np.uint8))
     base = ["synth", "--db", db, "--mask", str(mask)]
     assert main(base + ["--angle", "60,45,50,0", "--out", str(tmp_path / "a.png")]) == 0

@@ -5,8 +5,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from onboard import isodata as I
-from onboard.isodata import IsodataParams, assign, isodata
+from btf.fit import isodata as I
+from btf.fit.isodata import IsodataParams, assign, isodata
 
 CENTRES = np.array([[40, 40, 40], [200, 60, 60], [60, 200, 60], [60, 60, 200]], float)
 

@@ -6,8 +6,9 @@ import os
 import pytest
 
 from radio.keys import load_key
-from tools import cmd_keygen, cmd_linktest
-from tools.cli import CliError
+from tools.cli import keygen as cmd_keygen
+from tools.cli import linktest as cmd_linktest
+from tools.cli.options import CliError
 
 
 def run(module, argv):

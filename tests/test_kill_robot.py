@@ -22,8 +22,8 @@ from radio.keys import load_key, write_key
 from radio.link import Link
 from radio.ports import FdPort
 from radio.pump import LinkPump
-from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
-from tools.store import Store
+from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
+from tools.store.database import Store
 
 ROOT = Path(__file__).resolve().parents[1]
 # 62 poses (31 elevations at two azimuths) at ~0.03-0.13 s each: the ten kills while

@@ -68,7 +68,7 @@ def test_onboard_imports_nothing_from_the_host_side():
 
 
 def test_the_radio_packets_load_no_fitter():
-    code = "import json, sys, radio.packet, radio.link\nprint(json.dumps(sorted(sys.modules)))\n"
+    code = "import json, sys, radio.packets, radio.link\nprint(json.dumps(sorted(sys.modules)))\n"
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
     loaded = json.loads(out.stdout.strip().splitlines()[-1])
     assert not [m for m in loaded if m.split(".")[0] in ("onboard", "hal", "tools")]

@@ -8,16 +8,16 @@ import sys
 import time
 from pathlib import Path
 
-from radio import packet as pk
+from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import load_key, write_key
 from radio.link import Acked, Link, LinkUp
 from radio.ports import FdPort
 from radio.pump import LinkPump
 from tests.test_receiver import models_body
-from tools.pty_cable import PtyCable
-from tools.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver, StoreFailed
-from tools.store import Store
+from tools.demo.pty_cable import PtyCable
+from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver, StoreFailed
+from tools.store.database import Store
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from tools import metrics
+from tools.analysis import metrics
 
 
 def h(*p):

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from radio import packet as pk
+from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.channel import ChannelConfig
 from radio.channel_port import Cable

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from onboard.outbox import ROW_OVERHEAD, Outbox, OutboxError, OutboxFull
+from onboard.link.outbox import ROW_OVERHEAD, Outbox, OutboxError, OutboxFull
 
 
 def test_put_pending_ack_in_order(tmp_path):
@@ -96,7 +96,7 @@ def test_bad_quota_and_corrupt_file_give_clear_errors(tmp_path):
 
 WRITER = r"""
 import sys
-from onboard.outbox import Outbox
+from onboard.link.outbox import Outbox
 box = Outbox(sys.argv[1])
 run = int(sys.argv[2])
 print("ready", flush=True)

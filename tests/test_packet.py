@@ -13,9 +13,9 @@ from hypothesis.extra.numpy import arrays
 
 from btf.codec import Z_LADDER, PercentileCodec
 from btf.dependence import Dependence
-from onboard.fit import FrameFitter, fit_histogram
+from btf.fit.fitter import FrameFitter, fit_histogram
 from radio import FrameError
-from radio.packet import (
+from radio.packets import (
     MAX_BODY,
     SCHEMA_VERSION,
     AckPacket,
@@ -39,8 +39,8 @@ from radio.packet import (
     encode_models,
     models_packet,
 )
-from radio.packet_base import MAX_FRAME_PIXELS
-from radio.packet_dependence import record_size
+from radio.packets.base import MAX_FRAME_PIXELS
+from radio.packets.dependence import record_size
 from radio.varint import get_varint
 
 HEADER = dict(robot_id=3, seq=41, time=1_700_000_000.25, commanded=(45.0, 30.0),
@@ -161,7 +161,7 @@ def test_each_model_costs_eight_bytes_of_codes():
 
 
 def _sections(body: bytes) -> dict[str, int]:
-    """Byte counts of the MODELS blob's parts (radio.packet_models doc)."""
+    """Byte counts of the MODELS blob's parts (radio.packets.models doc)."""
     items = msgpack.unpackb(body)
     blob, n_bands = items[7], len(items[6])
     nb = blob[10] & 0x3F

@@ -12,9 +12,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from btf.dependence import Dependence
-from onboard.fit import fit_histogram
+from btf.fit.fitter import fit_histogram
 from radio import FrameError
-from radio.packet import (
+from radio.packets import (
     AckPacket,
     CommandName,
     CommandPacket,

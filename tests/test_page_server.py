@@ -8,11 +8,11 @@ from urllib.parse import urlsplit
 
 import pytest
 
-from radio.commands import COMMANDS, CommandName
+from radio.packets.commands import COMMANDS, CommandName
 from tests.browser import page_address
 from tests.station_rig import ROOT, Rig, python
-from tools.page_forms import forms_html, parse_form
-from tools.page_server import parse_http
+from tools.page.forms import forms_html, parse_form
+from tools.page.server import parse_http
 
 
 @pytest.fixture

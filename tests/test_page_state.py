@@ -4,19 +4,19 @@ disk and rejections; goodput; the latest capture per pose."""
 import dataclasses
 import json
 
-from onboard.status import flat
-from onboard.sweep import SweepPlan
-from radio import packet as pk
+from onboard.link.status import flat
+from onboard.sweep.plan import SweepPlan
+from radio import packets as pk
 from tests.test_receiver import models_body
-from tools.page_data import CaptureIndex
-from tools.receiver import Item, ItemKind, Receiver
-from tools.station_snapshot import StationSnapshot
-from tools.store import Store
-from tools.sweep_grid import grid_json, plan_of_command
+from tools.page.data import CaptureIndex
+from tools.station.receiver import Item, ItemKind, Receiver
+from tools.station.snapshot import StationSnapshot
+from tools.store.database import Store
+from tools.station.sweep_grid import grid_json, plan_of_command
 
 
 def report(plan, next_index=0, skipped=(), mode="sweeping"):
-    """The robot's STATUS report (onboard.status.Status.report), as its answer carries it."""
+    """The robot's STATUS report (onboard.link.status.Status.report), as its answer carries it."""
     return {"mode": mode, "outbox": 2, "paused": "", "disk": "ok", "disk_free": 10**9, "rejected": {},
             "failsafe": [], "failsafe_s": 1.5, "torque": True,
             "faults": ["servo 2: overload (retried)"], "errors": [],

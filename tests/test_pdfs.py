@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from onboard.fit import fit_histogram
-from tools import pdfs
+from btf.fit.fitter import fit_histogram
+from tools.analysis import pdfs
 
 
 def johnson(values, levels):

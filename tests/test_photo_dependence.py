@@ -1,5 +1,5 @@
 """The researcher's path to correlated synthesis, with no robot: `fit` and `ingest` measure
-grain and band dependence (onboard.dependence) by default, store it and carry it in the models
+grain and band dependence (btf.fit.dependence) by default, store it and carry it in the models
 document, and `synth --model` / `synth --db` reproduce it.
 
 The photographs are public ones shipped inside scikit-image (grass, gravel, brick and the
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from skimage import data
 
-from tools.field import empirical_autocorrelation
-from tools.images import read_image, write_image, write_mask
-from tools.store import Store
+from tools.analysis.fields import empirical_autocorrelation
+from tools.data.images import read_image, write_image, write_mask
+from tools.store.database import Store
 
 PHOTOS = ("grass", "gravel", "brick", "coffee")
 

@@ -11,13 +11,13 @@ from btf.capture_settings import CaptureSettings, scaled
 from btf.johnson import Family, Johnson
 from hal.interfaces import ViewAngles
 from hal.scene import Label, render
-from onboard.packet_bodies import models_body
-from radio import packet as pk
+from onboard.link.bodies import models_body
+from radio import packets as pk
 from tools.cli import main as host
-from tools.images import read_image, write_image, write_mask
-from tools.radiometry import RadiometryWarning, adjusted
-from tools.receiver import Receiver
-from tools.store import Store
+from tools.data.images import read_image, write_image, write_mask
+from tools.analysis.radiometry import RadiometryWarning, adjusted
+from tools.station.receiver import Receiver
+from tools.store.database import Store
 
 SIZE = (240, 320)
 VIEW = ViewAngles(90.0)

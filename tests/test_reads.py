@@ -1,4 +1,4 @@
-"""The read choice (onboard.reads): a handful of percentile fits per region, the nearest kept,
+"""The read choice (btf.fit.reads): a handful of percentile fits per region, the nearest kept,
 and no rule ever fitting a region worse than the plain percentile fit."""
 import dataclasses
 
@@ -12,9 +12,9 @@ from btf.codec import Z_LADDER, default_codec, percentile_probs
 from btf.johnson import Family, Johnson
 from btf.percentile import model_from_percentiles
 from btf.record import rebuild
-from onboard.fit import FrameFitter, fit_histogram, histogram_percentiles, plain_fit
-from onboard.reads import GRID, TEMPLATE, min_count, phi, solve, template
-from radio.packet import decode, encode_models
+from btf.fit.fitter import FrameFitter, fit_histogram, histogram_percentiles, plain_fit
+from btf.fit.reads import GRID, TEMPLATE, min_count, phi, solve, template
+from radio.packets import decode, encode_models
 
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 HEADER = dict(robot_id=1, seq=2, time=3.0, commanded=(10.0, 0.0), measured=(10.0, 0.0), feature_space="rgb")

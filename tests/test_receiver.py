@@ -4,13 +4,13 @@ import pytest
 
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from onboard.fit import FrameFitter
-from radio import packet as pk
+from btf.fit.fitter import FrameFitter
+from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.link import Link
 from radio.pump import LinkPump
-from tools.receiver import HostSession, ItemKind, Receiver, mask_key
-from tools.store import Store
+from tools.station.receiver import HostSession, ItemKind, Receiver, mask_key
+from tools.store.database import Store
 
 KEY = bytes(range(32))
 
@@ -155,7 +155,7 @@ def test_over_the_link_captures_are_stored_before_acknowledgement_and_commands_a
 
 def _dependence(seq, elevation=60.0):
     """A MODELS body carrying the dependence measured on its own view, and that dependence."""
-    from onboard.dependence import measure
+    from btf.fit.dependence import measure
 
     view = render("mixed", ViewAngles(elevation, 0.0), (40, 48), seed=0)
     _, fits, _ = models_body(seq, elevation)
@@ -192,7 +192,7 @@ def test_malformed_dependence_makes_the_packet_bad_and_stores_nothing(store):
 
 
 def test_pca_basis_arrives_once_per_scene_and_applies_to_later_captures(store):
-    from onboard.features import PcaBasis
+    from btf.fit.features import PcaBasis
 
     view = render("mixed", ViewAngles(60.0, 0.0), (40, 48), seed=0)
     basis = PcaBasis.fit(view.image)
@@ -210,9 +210,9 @@ def test_pca_basis_arrives_once_per_scene_and_applies_to_later_captures(store):
 
 
 def test_synth_from_the_database_turns_received_pca_captures_back_into_rgb(tmp_path):
-    from onboard.features import PcaBasis
+    from btf.fit.features import PcaBasis
     from tools.cli import main
-    from tools.images import read_image, write_mask
+    from tools.data.images import read_image, write_mask
 
     view = render("mixed", ViewAngles(60.0, 0.0), (40, 48), seed=0)
     basis = PcaBasis.fit(view.image)

@@ -1,12 +1,12 @@
 """The HTML report: images, histograms and tables from a database; bad databases refused."""
 import numpy as np
 
-from radio import packet as pk
+from radio import packets as pk
 from tests.test_receiver import models_body
 from tools.cli import main
-from tools.receiver import Receiver
-from tools.report import write_report
-from tools.store import Store
+from tools.station.receiver import Receiver
+from tools.report.document import write_report
+from tools.store.database import Store
 
 
 def filled(path):
@@ -63,7 +63,7 @@ def test_captures_with_dependence_show_independent_and_correlated_synthesis_besi
     assert {"mixed_060.2_1_measured.png", "mixed_060.2_1_synthetic.png"} <= pngs
     first = html[html.index("seq 1)"):html.index("seq 2)")]
     assert first.index("measured") < first.index("independent pixels") < first.index("grain and band correlation")
-    from tools.images import read_image
+    from tools.data.images import read_image
 
     meas, ind, cor = (read_image(tmp_path / "rep" / f"mixed_060.2_1_{k}.png") for k in ("measured", "synthetic", "correlated"))
 
@@ -79,9 +79,9 @@ def test_a_dataset_capture_is_shown_beside_the_image_it_was_fitted_from(tmp_path
     """The report and the page find a dataset's frame where ingest found it (`Frames`)."""
     from hal.interfaces import ViewAngles
     from hal.scene import render
-    from onboard.fit import FrameFitter
-    from tools.capture_views import Frames
-    from tools.images import read_image, write_image
+    from btf.fit.fitter import FrameFitter
+    from tools.report.capture_views import Frames
+    from tools.data.images import read_image, write_image
 
     view = render("mixed", ViewAngles(50.0, 0.0), (40, 48), seed=0)
     write_image(tmp_path / "plate.png", view.image)

@@ -3,7 +3,7 @@ import math
 
 import pytest
 
-from tools.resolve import Verdict, bounds
+from tools.analysis.resolve import Verdict, bounds
 
 
 def test_bounds_for_sand_at_700nm():
@@ -105,7 +105,7 @@ def test_paper_inputs_are_the_default_worked_example(capsys):
 
 
 def test_paper_view_allows_facets_for_centimetre_pebbles_in_visible_light():
-    from tools.resolve import paper_bounds
+    from tools.analysis.resolve import paper_bounds
 
     p = paper_bounds(10.0, 500.0)  # 10 mm pebbles at 500 nm: dA = 1e14 nm^2
     assert p.verdict is Verdict.FACET
@@ -114,7 +114,7 @@ def test_paper_view_allows_facets_for_centimetre_pebbles_in_visible_light():
 
 
 def test_paper_bounds_follow_the_factors():
-    from tools.resolve import paper_bounds
+    from tools.analysis.resolve import paper_bounds
 
     base = {b.name: b.value for b in paper_bounds(0.02, 700.0).bounds}
     fewer = {b.name: b.value for b in paper_bounds(0.02, 700.0, rays_per_facet=1.0).bounds}
@@ -126,14 +126,14 @@ def test_paper_bounds_follow_the_factors():
 @pytest.mark.parametrize("kw", [dict(pixel_per_facet=0), dict(facet_per_wavelength2=float("inf")),
                                 dict(rays_per_facet=-1), dict(grain_mm=float("nan"))])
 def test_paper_factors_must_be_positive_numbers(kw):
-    from tools.resolve import paper_bounds
+    from tools.analysis.resolve import paper_bounds
 
     with pytest.raises(ValueError, match="positive"):
         paper_bounds(**(dict(grain_mm=0.02, wavelength_nm=700.0) | kw))
 
 
 def test_paper_bounds_beyond_floating_point_are_refused():
-    from tools.resolve import paper_bounds
+    from tools.analysis.resolve import paper_bounds
 
     with pytest.raises(ValueError, match="too far apart"):
         paper_bounds(1e300, 700.0, pixel_per_facet=1e300)

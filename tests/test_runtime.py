@@ -10,10 +10,10 @@ import pytest
 
 from hal.interfaces import ViewAngles
 from onboard import config
-from onboard.capture import Pipeline
+from onboard.capture.pipeline import Pipeline
 from onboard.runtime import Mode
-from onboard.transport import MemoryTransport
-from radio import packet as pk
+from onboard.link.transport import MemoryTransport
+from radio import packets as pk
 from radio.link import Acked, LinkDown, LinkUp
 
 BASE = '[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\nfault_rate = {rate}\nfault_seed = 3\n' \
@@ -217,8 +217,8 @@ def test_runtime_imports_nothing_from_the_host_and_stays_under_150_mb(tmp_path):
 import json, resource, sys
 from onboard import config
 from onboard.runtime import Runtime
-from onboard.segmentation import Segmentation
-from onboard.transport import MemoryTransport
+from onboard.capture.segmentation import Segmentation
+from onboard.link.transport import MemoryTransport
 from hal.factory import build_hal
 cfg = config.load({str(path)!r})
 hal = build_hal(cfg.hal)
@@ -373,7 +373,7 @@ def test_commands_are_still_answered_when_captures_have_filled_the_outbox(fake_r
 
 
 def test_per_pose_memory_is_bounded_over_a_long_mission(fake_robot):
-    from onboard.capture import MAX_POSES_REMEMBERED, remember
+    from onboard.capture.pipeline import MAX_POSES_REMEMBERED, remember
 
     table = {}
     for k in range(3 * MAX_POSES_REMEMBERED):

@@ -14,10 +14,10 @@ from hal.fakes.camera import FakeCamera
 from hal.interfaces import HalError
 from onboard import config
 from onboard.config import ConfigError
-from onboard.features import PcaBasis
-from onboard.segmentation import Segmentation
+from btf.fit.features import PcaBasis
+from onboard.capture.segmentation import Segmentation
 from radio import FrameError
-from radio import packet as pk
+from radio import packets as pk
 
 HAL = '[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\n'
 NO_AUTO = '[sweep]\nautostart = false\n'

@@ -3,7 +3,7 @@ while the arm moves, so these arrive mid-pose."""
 import pytest
 
 from onboard.runtime import Mode
-from radio import packet as pk
+from radio import packets as pk
 from radio.link import Delivered, LinkDown, LinkUp
 from tests.test_runtime import PLAN3, host_view, make, poses_by_seq, replies, sweep
 

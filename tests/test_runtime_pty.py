@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from radio import packet as pk
+from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import load_key, write_key
 from radio.link import Delivered, Link

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from onboard.features import FeatureSpace, FeatureSpec, compute
-from onboard.isodata import IsodataParams, Labeller, assign, fit_centres, spread
-from onboard.segmentation import Segmenter, SegmentMethod
+from btf.fit.features import FeatureSpace, FeatureSpec, compute
+from btf.fit.isodata import IsodataParams, Labeller, assign, fit_centres, spread
+from onboard.capture.segmentation import Segmenter, SegmentMethod
 
 CLUTTER = np.array([[194, 178, 128], [86, 125, 70], [112, 84, 62], [150, 150, 140]], float)
 

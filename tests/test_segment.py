@@ -10,13 +10,13 @@ from hypothesis.extra.numpy import arrays
 from PIL import Image
 
 from onboard.config import SegmentConfig
-from onboard.features import FeatureSpace, FeatureSpec, compute
-from onboard.isodata import IsodataParams
-from onboard.mask_file import load_mask
-from onboard.palette import Palette
-from onboard.segmentation import Segmenter, SegmentMethod
-from radio import packet as pk
-from radio.packet_mask import downsample_labels
+from btf.fit.features import FeatureSpace, FeatureSpec, compute
+from btf.fit.isodata import IsodataParams
+from onboard.capture.mask_file import load_mask
+from onboard.capture.palette import Palette
+from onboard.capture.segmentation import Segmenter, SegmentMethod
+from radio import packets as pk
+from radio.packets.mask import downsample_labels
 
 COLOURS = np.array([[40, 40, 40], [200, 60, 60], [60, 200, 60], [60, 60, 200]], np.uint8)
 
@@ -252,7 +252,7 @@ def test_the_segment_section_builds_its_segmenter(tmp_path):
 
 @pytest.mark.parametrize("shape", [(100, 130), (120, 160), (480, 640), (7, 300), (64, 64)])
 def test_a_mask_stretched_back_covers_each_cell_with_exactly_the_pixels_it_was_pooled_from(shape):
-    from radio.packet_mask import cell_of, mask_packet
+    from radio.packets.mask import cell_of, mask_packet
 
     full_h, full_w = shape
     probe = mask_packet(np.zeros(shape, np.uint8), robot_id=1, seq=1)

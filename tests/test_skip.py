@@ -4,7 +4,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from onboard import skip
+from onboard.capture import skip
 
 
 @dataclass(frozen=True)

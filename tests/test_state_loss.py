@@ -13,9 +13,9 @@ from radio.auth import MemoryCounterStore
 from radio.link import Delivered, Link
 from tests.test_receiver import models_body
 from tools.cli import main as host_main
-from tools.pty_cable import PtyCable
-from tools.receiver import Receiver
-from tools.store import Store
+from tools.demo.pty_cable import PtyCable
+from tools.station.receiver import Receiver
+from tools.store.database import Store
 
 ROOT = Path(__file__).resolve().parents[1]
 KEY = bytes(range(32))
@@ -102,7 +102,7 @@ def test_a_new_incarnation_s_messages_are_not_taken_for_the_old_one_s():
 
 def test_a_bit_rotted_outbox_is_moved_aside_and_the_robot_runs_on_a_new_one(tmp_path):
     """It used to exit 1 ("Could not decode to UTF-8") at every start: a restart loop."""
-    from onboard.outbox import Outbox
+    from onboard.link.outbox import Outbox
 
     (tmp_path / "robot.toml").write_text(CONFIG + '[sweep]\nautostart = false\n')
     (tmp_path / "robot.key").write_text(KEY.hex())
@@ -136,7 +136,7 @@ def test_a_schema_7_database_keeps_every_row_and_its_models_when_captures_gain_i
     """Schema 8 rebuilds the captures table (a UNIQUE constraint changes only so); with foreign
     keys on, dropping the old table would have cascaded to every model."""
     from tests.test_ingest import _SCHEMA_1
-    from tools.store_schema import _MIGRATIONS, APPLICATION_ID
+    from tools.store.schema import _MIGRATIONS, APPLICATION_ID
 
     db = tmp_path / "v7.sqlite"
     con = sqlite3.connect(db)

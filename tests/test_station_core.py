@@ -5,18 +5,18 @@ import time
 
 import pytest
 
-from radio import packet as pk
+from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.channel import ChannelConfig
 from radio.channel_port import Cable
 from radio.link import Acked, Link
 from radio.pump import LinkPump
 from tests.test_receiver import models_body
-from tools.receiver import Receiver
-from tools.station import Station
-from tools.station_bus import EventBus
-from tools.station_log import StationLog
-from tools.store import Store
+from tools.station.receiver import Receiver
+from tools.station.station import Station
+from tools.station.bus import EventBus
+from tools.station.log import StationLog
+from tools.store.database import Store
 
 KEY = bytes(range(32))
 
@@ -100,7 +100,7 @@ def test_a_store_that_fails_ends_the_station_and_nothing_is_acknowledged(tmp_pat
         def add_capture(self, *a, **k):
             raise OSError("disk full")
 
-    from tools.store_schema import connect
+    from tools.store.schema import connect
     broken = BrokenStore(connect(tmp_path / "host.db", True), tmp_path / "host.db")
     station, robot, _ = station_on_cable(tmp_path, store=broken)
     mid = robot.pump.send(models_body(7)[0], msg_id=41)

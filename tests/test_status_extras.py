@@ -1,7 +1,7 @@
 """STATUS carries the robot's state as packet extras, which hold at most MAX_EXTRAS keys: the
 fullest status the robot can say must fit, or its last fields would be dropped unsaid."""
-from onboard.status import flat
-from radio.packet_base import MAX_EXTRAS
+from onboard.link.status import flat
+from radio.packets.base import MAX_EXTRAS
 
 
 def test_the_fullest_status_fits_the_packet_extras():

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from btf.johnson import Family
-from onboard.fit import fit_histogram
-from tools.store import CorruptDatabase, Store
+from btf.fit.fitter import fit_histogram
+from tools.store.database import CorruptDatabase, Store
 
 
 def results(shift=0):
@@ -131,7 +131,7 @@ def test_capture_by_seq_finds_one_robot_capture(tmp_path):
 
 
 def test_pca_basis_is_stored_with_its_capture_and_inherited_by_later_ones(tmp_path):
-    from onboard.features import PcaBasis
+    from btf.fit.features import PcaBasis
 
     rng = np.random.default_rng(0)
     a = PcaBasis.fit(rng.integers(0, 255, (20, 30, 3), dtype=np.uint8))

@@ -6,8 +6,8 @@ import pytest
 
 from tests.test_report import filled
 from tools.cli import main
-from tools.receiver import mask_key
-from tools.store import CorruptDatabase, Store
+from tools.station.receiver import mask_key
+from tools.store.database import CorruptDatabase, Store
 
 BAD_ROWS = {
     "gamma is 'NaN', not a number": "UPDATE models SET gamma = 'NaN' WHERE label = 1 AND band = 0",

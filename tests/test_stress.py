@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from benchmarks.model_histograms import histogram_l1
 from btf.johnson import Family, Johnson
 from btf.percentile import model_from_percentiles
-from onboard.fit import fit_histogram, plain_fit
+from btf.fit.fitter import fit_histogram, plain_fit
 
 # Slow runs only under `make stress` (BTF_STRESS=1, the long hypothesis profile).
 stress = pytest.mark.skipif(not os.environ.get("BTF_STRESS"), reason="stress run only (make stress)")
@@ -120,7 +120,7 @@ def _check_fit(h: np.ndarray) -> None:
     assert list(r.percentiles) == sorted(r.percentiles)
     assert math.isfinite(r.beta1) and math.isfinite(r.beta2)
     _check_model_finite(r.model)
-    # No rule fits a histogram worse than the plain percentile fit (onboard.reads).
+    # No rule fits a histogram worse than the plain percentile fit (btf.fit.reads).
     assert histogram_l1(r.model, h) <= histogram_l1(plain_fit(h), h) + 1e-4
 
 

@@ -6,8 +6,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from hal.interfaces import ViewAngles
-from onboard.outbox import Outbox, OutboxFull
-from onboard.sweep import Boot, SweepPlan, SweepProgress, SweepStore, angular_distance
+from onboard.link.outbox import Outbox, OutboxFull
+from onboard.sweep.plan import Boot, SweepPlan, SweepProgress, SweepStore, angular_distance
 
 
 def test_plan_90_to_30_step_10_has_seven_poses_per_azimuth():

@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from btf.johnson import Family, Johnson
-from onboard.fit import fit_histogram
-from tools import metrics, synth
+from btf.fit.fitter import fit_histogram
+from tools.analysis import metrics
+from tools.analysis import synth
 
 
 def fit(values):

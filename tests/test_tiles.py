@@ -5,10 +5,14 @@ import pytest
 
 from benchmarks.scenes import field, voronoi_labels
 from btf.dependence import Dependence
-from onboard.fit import FrameFitter, fit_histogram
-from tools import masks, metrics, pdfs, synth, tiles
-from tools.field import gaussian_fields, latent
-from tools.interp import synthesize_blend
+from btf.fit.fitter import FrameFitter, fit_histogram
+from tools.data import masks
+from tools.analysis import metrics
+from tools.analysis import pdfs
+from tools.analysis import synth
+from tools.analysis import tiles
+from tools.analysis.fields import gaussian_fields, latent
+from tools.analysis.interpolation import synthesize_blend
 
 DEP = Dependence((0.5, 0.3, 0.6), (0.8, 0.6, 0.4, 0.2), (0.7, 0.5, 0.3, 0.1))
 
@@ -162,7 +166,7 @@ def test_relabel_maps_through_the_table_in_tiles(tiny_tiles):
 
 
 def test_the_cli_offers_the_methods_tools_masks_has():
-    from tools import cmd_mask
+    from tools.cli import mask as cmd_mask
 
     assert cmd_mask.METHODS == masks.METHODS
 

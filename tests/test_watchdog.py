@@ -110,6 +110,6 @@ def test_example_unit_matches_the_runtime():
     # ExecStart names a command line btf-robot accepts.
     exe, *argv = service["ExecStart"].split()
     assert exe.endswith("/btf-robot")
-    parser = cli.build_parser(cli.PROG, "onboard", cli.COMMANDS, "")
+    parser = cli.build_parser(cli.PROG, "onboard.cli", cli.COMMANDS, "")
     args = parser.parse_args(argv)
     assert args.command == "run" and args.config and not args.new_sweep

@@ -1,0 +1,76 @@
+"""Filing captures: each gets a sequence number that never repeats across restarts, and the
+packets that carry it (MASK when its label map changed, UNCHANGED when its models did not
+move since the last MODELS at that pose, else MODELS); the state they commit with is
+returned to the caller, who commits packets and state in one outbox transaction."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from onboard.link import bodies as wire
+from onboard.capture import skip
+from onboard.capture.pipeline import FittedView, remember
+from onboard.link.outbox import Outbox
+from onboard.state import RuntimeState
+
+PCA_KEY = "pca"  # the scene's basis, in the outbox state with the packet that carries it
+
+
+class Captures:
+    def __init__(self, state: RuntimeState, outbox: Outbox, wall: Callable[[], float]) -> None:
+        self.state, self.wall = state, wall
+        self.seq = wire.SeqCounter(outbox, legacy=state.cfg.state_dir / "seq")
+        self.last_labels: np.ndarray | None = None
+        self.last_models: dict[tuple[int, int], int] = {}  # pose -> seq of its last MODELS
+
+    @property
+    def last_seq(self) -> int | None:
+        return self.seq.last
+
+    def packets(self, cap: FittedView) -> tuple[int, list[tuple[int, bytes]], dict[str, str]]:
+        """(seq, the packets of one capture, the state entries to commit with them)."""
+        cfg = self.state.cfg
+        seq = self.seq.peek()
+        state = self.seq.entry(seq)
+        if cap.pca is not None:  # the scene's basis survives restarts with the packet carrying it
+            state[PCA_KEY] = json.dumps(cap.pca.to_record())
+        packets = []
+        if cap.mask_changed:
+            packets.append(wire.mask_body(cfg.robot_id, seq, cap.labels))
+        ref = self.last_models.get(skip.pose_key(cap.commanded))
+        if cap.unchanged and ref is not None:
+            packets.append(wire.unchanged_body(cfg.robot_id, seq, ref, self.wall(), cap))
+        else:
+            packets.append(wire.models_body(cfg.robot_id, seq, self.wall(), cfg.features.space, cap))
+        return seq, packets, state
+
+    def filed(self, cap: FittedView, seq: int) -> None:
+        """`cap` was committed under `seq`."""
+        self.seq.taken(seq)
+        self.state.pose = cap.measured
+        self.last_labels = cap.labels
+        key = skip.pose_key(cap.commanded)
+        if not (cap.unchanged and key in self.last_models):
+            remember(self.last_models, key, seq)
+
+    def mask_packet(self, seq: int | None) -> tuple[int, bytes] | None:
+        """The last label map as a MASK under `seq` (default: the last capture's); None before any."""
+        if self.last_labels is None:
+            return None
+        return wire.mask_body(self.state.cfg.robot_id, int((self.seq.last or 0) if seq is None else seq),
+                              self.last_labels)
+
+
+def read_pca(text: str | None, legacy: Path) -> Any:
+    """The scene's PCA basis saved before a restart (None if none or unreadable: refit)."""
+    from btf.fit.features import PcaBasis
+
+    try:
+        if text is None and legacy.exists():
+            text = legacy.read_text()  # where the basis lived before it moved into the outbox
+        return None if text is None else PcaBasis.from_record(json.loads(text))
+    except (OSError, ValueError, TypeError, AttributeError, KeyError):
+        return None

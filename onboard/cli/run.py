@@ -1,0 +1,228 @@
+"""`btf-robot run`: the robot's runtime, autonomous sweeps and remote control over the link.
+
+Exit status 2: the configuration is wrong (restarting cannot mend it); 1: the environment is
+(a full disk, a device or port not there yet: systemd restarts it, see examples/btf-robot.service).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import errno
+import logging
+import os
+import signal
+import sqlite3
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from onboard import config as config_mod
+from onboard.cli.runner import CliError, RetryLater
+from onboard.config import ConfigError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("run", help="run the robot: sweeps, commands, outbox, failsafe")
+    p.add_argument("--config", required=True, help="robot TOML config (see examples/robot.toml)")
+    p.add_argument("--hal", choices=("fake", "emulated", "real"), help="override hal.body")
+    p.add_argument("--port", help="override link.url (a device, pty path, loop://, socket://, btfsim://?port=...)")
+    p.add_argument("--exit-when-idle", action="store_true",
+                   help="exit 0 once no sweep is running and every packet is acknowledged")
+    p.add_argument("--max-seconds", type=float, default=0.0, help="stop after this long (0: never)")
+    p.add_argument("--new-sweep", action="store_true",
+                   help="start a new sweep of the config's plan even if its last sweep finished "
+                        "(by default an interrupted sweep resumes and a finished one is not repeated)")
+    p.add_argument("--new-key", action="store_true",
+                   help="link.key_file holds a key never used before (just made by `btf-host keygen`): "
+                        "start its link counters afresh; only needed with [link] clock = \"none\"")
+    return p
+
+
+def _setup(args: argparse.Namespace):
+    try:
+        cfg = config_mod.load(args.config)
+        if args.hal:
+            cfg = dataclasses.replace(cfg, hal=dataclasses.replace(cfg.hal, body=args.hal))
+        if args.port:
+            cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, url=args.port))
+        config_mod.check(cfg)
+        config_mod.check_key_file(cfg)
+        _check_state_dir(cfg.state_dir)
+        from radio.keys import KeyFileError, load_key
+
+        try:
+            key = load_key(cfg.link.key_file)
+        except KeyFileError as exc:
+            raise ConfigError(f"link.key_file: {exc}") from None
+    except ConfigError as exc:
+        raise CliError(str(exc)) from None
+    return cfg, key
+
+
+def _calibrated_exposure(cfg):
+    """`cfg` with the exposure `btf-robot calibrate exposure` stored, when there is one."""
+    from onboard.config import CameraValue
+    from onboard.capture.exposure import EXPOSURE_FILE, load_exposure
+
+    try:
+        stored = load_exposure(cfg.state_dir)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if stored is None:
+        return cfg
+    print(f"btf-robot: camera exposure {stored:g} us from {cfg.state_dir / EXPOSURE_FILE} "
+          "(btf-robot calibrate exposure)", file=sys.stderr)
+    return dataclasses.replace(cfg, camera=dataclasses.replace(cfg.camera, exposure=CameraValue(repr(stored))))
+
+
+# A state_dir refusing writes for these reasons needs a person (exit 2: a wrong path or mode, a
+# filesystem gone read-only); a full disk is the robot's to live with (it starts paused and says
+# so); any other failure is the environment's (exit 1, retried).
+_CONFIG_ERRNOS = (errno.EACCES, errno.EPERM, errno.ENOTDIR, errno.EEXIST, errno.ENOENT, errno.ENAMETOOLONG,
+                  errno.ELOOP, errno.EROFS)
+_NO_ROOM_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+
+
+def _check_state_dir(path: Path) -> None:
+    """The state directory exists (or is made) and takes a durable write: else one line, a
+    ConfigError when the setup is wrong, RetryLater when the disk or device is."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise ConfigError(f"state_dir {path}: exists and is not a directory") from None
+    except OSError as exc:
+        _state_dir_failed(path, "cannot create it", exc)
+    try:
+        with tempfile.TemporaryFile(dir=path) as probe:
+            probe.write(b"x")
+            probe.flush()
+            os.fsync(probe.fileno())
+    except OSError as exc:
+        if exc.errno not in _NO_ROOM_ERRNOS:  # a full disk: the runtime releases its reserve
+            _state_dir_failed(path, "cannot write in it", exc)
+
+
+def _state_dir_failed(path: Path, what: str, exc: OSError) -> None:
+    text = f"state_dir {path}: {what}: {exc.strerror or exc}"
+    if exc.errno in _CONFIG_ERRNOS:
+        raise ConfigError(text) from None
+    raise RetryLater(text) from None
+
+
+def _open_port(url: str, baud: int):
+    from radio.ports import open_url
+
+    return open_url(url, baud, timeout=0.005)
+
+
+def _counters(cfg, new_key: bool):
+    """The robot's link counters (state_dir/counters.json); CliError when only a new key helps."""
+    from radio.auth import CounterFileLost, FileCounterStore, write_fresh
+
+    path = cfg.state_dir / "counters.json"
+    try:
+        if new_key:
+            write_fresh(path)
+        return FileCounterStore(path, clock=cfg.link.clock == "rtc")
+    except CounterFileLost as exc:
+        raise CliError(str(exc)) from None
+    except OSError as exc:
+        raise RetryLater(f"state_dir {cfg.state_dir}: counters: {exc}") from None
+
+
+def _build(cfg, key: bytes, args: argparse.Namespace, hal, port):
+    """The runtime on its link; what opening its state had to say is in its notes."""
+    from onboard.link.outbox import OutboxError
+    from onboard.runtime import Runtime, open_state
+    from onboard.capture.segmentation import Segmentation
+    from onboard.watchdog import Notifier
+    from radio.link import Link
+    from radio.pump import LinkPump
+
+    segment = Segmentation(cfg, hal)
+    counters = _counters(cfg, args.new_key)
+    try:
+        outbox, disk, note = open_state(cfg)
+    except (OutboxError, OSError) as exc:
+        raise RetryLater(f"state_dir {cfg.state_dir}: {exc}") from None
+    link = Link(cfg.link.node_id, cfg.link.peer_id, cfg.link.link_id, key, counters,
+                mtu=cfg.link.mtu, heartbeat=cfg.link.heartbeat_s, link_timeout=cfg.link.failsafe_s,
+                incarnation=bytes.fromhex(outbox.incarnation))
+    h, w = cfg.hal.size
+    hal.camera.open(w, h)
+    rt = Runtime(cfg, hal, LinkPump(link, port), segment, outbox=outbox, disk=disk, notifier=Notifier(),
+                 new_sweep=args.new_sweep)
+    # A missing counters file beside a new outbox is a first start (or a whole state lost, which
+    # the new incarnation tells the host): said only when the rest of the state is there.
+    for line in (note, "" if outbox.new else counters.note):
+        if line:
+            rt.note(line)
+    return rt
+
+
+def console_log() -> None:
+    """One short line per pose, command and link change on stderr: plain text for journald,
+    which stamps each line; a terminal gets the time in front."""
+    log = logging.getLogger("btf.robot")
+    for old in list(log.handlers):
+        log.removeHandler(old)
+    handler = logging.StreamHandler(sys.stderr)
+    tty = hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
+    handler.setFormatter(logging.Formatter("%(asctime)s %(message)s" if tty else "%(message)s", "%H:%M:%S"))
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    log.propagate = False
+
+
+def run(args: argparse.Namespace) -> int:
+    cfg, key = _setup(args)
+    console_log()
+    from hal.factory import build_hal
+    from hal.interfaces import HalError
+    from onboard.link.outbox import OutboxError
+
+    cfg = _calibrated_exposure(cfg)
+    try:
+        hal = build_hal(cfg.hal, state_dir=cfg.state_dir)  # with the arm calibration stored there
+    except HalError as exc:
+        raise RetryLater(f"hal: {exc}") from None
+    try:
+        port = _open_port(cfg.link.url, cfg.link.baud)
+    except Exception as exc:
+        hal.close()
+        raise RetryLater(f"link.url {cfg.link.url}: cannot open: {exc}") from None
+    try:
+        rt = _build(cfg, key, args, hal, port)
+    except (CliError, RetryLater):
+        hal.close()
+        port.close()
+        raise
+    except (ConfigError, ValueError) as exc:
+        hal.close()
+        port.close()
+        raise CliError(str(exc)) from None
+    except HalError as exc:
+        hal.close()
+        port.close()
+        raise RetryLater(f"hal: {exc}") from None
+    stopping = []
+    signal.signal(signal.SIGTERM, lambda *_: stopping.append(1))
+    t0 = time.monotonic()
+
+    def stop(r) -> bool:
+        if stopping or (args.max_seconds and time.monotonic() - t0 > args.max_seconds):
+            return True
+        return bool(args.exit_when_idle and r.idle())
+
+    try:
+        return rt.run(stop)
+    except (OutboxError, OSError, sqlite3.Error) as exc:
+        # The disk under the outbox failed (boot writes, or beneath step()'s own guard): one
+        # line and status 1, which systemd restarts, unlike a configuration error's 2.
+        print(f"btf-robot: error: state_dir {cfg.state_dir}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        rt.outbox.close()
+        hal.close()
+        port.close()

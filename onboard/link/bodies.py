@@ -1,0 +1,110 @@
+"""Every packet body the robot sends, as (outbox kind, body), and the capture numbers they carry.
+
+MODELS, UNCHANGED and MASK for a capture (`onboard.capture.pipeline.FittedView`), STATUS, and the
+ACK or NACK answering a command. Sequence numbers come from `SeqCounter`, kept in the
+outbox database so a restart never reuses one.
+"""
+from __future__ import annotations
+
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from hal.interfaces import ViewAngles
+from onboard.capture.pipeline import FittedView
+from radio import packets as pk
+
+
+def iso_time(t: float) -> str:
+    """A wall-clock time as STATUS shows it to a person: ISO 8601 in UTC, to the second."""
+    return datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+class SeqCounter:
+    """Capture sequence numbers that never repeat across restarts.
+
+    The next number is a state entry of the outbox database, committed in the same
+    transaction as the packets that use it (`entry`), then `taken`: a kill before the
+    commit reuses the number for the same pose, a kill after it never reuses it.
+    """
+
+    KEY = "next_seq"
+
+    def __init__(self, db: Any, legacy: Path | None = None) -> None:
+        text = db.state(self.KEY)
+        try:
+            if text is None and legacy is not None and legacy.exists():
+                text = legacy.read_text()  # the file this counter used to live in
+            self._next = max(1, int(text.strip())) if text is not None else 1
+        except (OSError, ValueError):
+            self._next = int(time.time())  # unreadable: jump ahead rather than reuse
+        self.last: int | None = self._next - 1 if self._next > 1 else None
+
+    def peek(self) -> int:
+        """The number the next committed capture gets."""
+        return self._next
+
+    def entry(self, seq: int) -> dict[str, str]:
+        return {self.KEY: str(seq + 1)}
+
+    def taken(self, seq: int) -> None:
+        """`seq` was committed with its packets."""
+        self._next = max(self._next, seq + 1)
+        self.last = seq
+
+
+def _pose(v: ViewAngles) -> tuple[float, float]:
+    return (float(v.elevation), float(v.azimuth))
+
+
+def models_body(robot_id: int, seq: int, now: float, space: str, cap: FittedView) -> tuple[int, bytes]:
+    """MODELS for a capture, with its dependence when measured; the first capture of a PCA
+    scene carries the basis in its extras."""
+    extras = dict(cap.pca.to_extras()) if cap.pca is not None else {}
+    body = pk.encode_models(cap.results, robot_id=robot_id, seq=seq, time=now,
+                            commanded=_pose(cap.commanded), measured=_pose(cap.measured),
+                            feature_space=space, bands=cap.band_names, levels=cap.levels,
+                            extras=extras, dependence=cap.dependence, camera=cap.camera)
+    return int(pk.Kind.MODELS), body
+
+
+def unchanged_body(robot_id: int, seq: int, ref_seq: int, now: float, cap: FittedView) -> tuple[int, bytes]:
+    packet = pk.UnchangedPacket(robot_id, seq, now, _pose(cap.commanded), _pose(cap.measured), ref_seq)
+    return int(pk.Kind.UNCHANGED), pk.encode(packet)
+
+
+def mask_body(robot_id: int, seq: int, labels: np.ndarray) -> tuple[int, bytes]:
+    return int(pk.Kind.MASK), pk.encode_mask(labels, robot_id=robot_id, seq=seq)
+
+
+def status_body(robot_id: int, now: float, state: pk.RobotState, pose: ViewAngles | None,
+                pending: int, used: int, last_seq: int | None, text: str,
+                extras: dict | None = None) -> tuple[int, bytes]:
+    packet = pk.StatusPacket(robot_id, now, state, None if pose is None else _pose(pose),
+                             pending, used, last_seq, text[:500], _extras(extras or {}))
+    return int(pk.Kind.STATUS), pk.encode(packet)
+
+
+def reply_body(command_id: int, ok: bool, text: str, extras: dict | None = None,
+               reason: pk.Reason = pk.Reason.INTERNAL) -> tuple[int, bytes]:
+    if ok:
+        packet: Any = pk.AckPacket(command_id, text[:500], _extras(extras or {}))
+        return int(pk.Kind.ACK), pk.encode(packet)
+    return int(pk.Kind.NACK), pk.encode(pk.NackPacket(command_id, reason, text[:500]))
+
+
+def _extras(d: dict) -> dict:
+    """Fit a result map into the packet's extension fields (16 keys, scalars or short lists)."""
+    out: dict[str, Any] = {}
+    for k, v in list(d.items())[:16]:
+        if isinstance(v, (list, tuple)):
+            v = [x if isinstance(x, (int, float, str, bool)) or x is None else str(x) for x in v][:64]
+        elif not (isinstance(v, (int, float, str, bool)) or v is None):
+            v = str(v)
+        if isinstance(v, str):
+            v = v[:500]
+        out[str(k)[:32]] = v
+    return out

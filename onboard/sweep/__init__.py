@@ -1,0 +1,2 @@
+"""The sweep: its plan and progress (persisted so a restarted robot resumes) and its control.
+"""

@@ -1,0 +1,139 @@
+"""The remote-control commands, declared once: each one's name, argument schema, what it
+does to the arm, its `btf-host cmd` form and help.
+
+The packet decoder checks a COMMAND's arguments against `COMMANDS` (`check_args`), the robot
+dispatches on it (`onboard.dispatch`: `moves_arm`, `interrupts`, `query`), and `btf-host cmd`
+builds its subcommands and help from it (`tools.cli.cmd`).
+"""
+from __future__ import annotations
+
+import enum
+import json
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from radio import FrameError
+from radio.packets.base import MAX_ANGLES, UINT32, check_extras, want_float, want_int, want_str
+
+
+class CommandName(enum.IntEnum):
+    PING = 1
+    STATUS = 2
+    GOTO = 3
+    CAPTURE = 4
+    SWEEP = 5
+    ABORT = 6
+    SET = 7
+    TORQUE_OFF = 8
+    REBOOT_SERVO = 9
+    SEND_MASK = 10
+    TORQUE_ON = 11
+
+
+@dataclass(frozen=True, slots=True)
+class Arg:
+    """One argument: its wire check (untrusted value -> value, FrameError naming it) and its
+    command-line form (`--flag`, or a positional name), parser and help."""
+
+    key: str
+    check: Callable[[Any], Any]
+    cli: str
+    parse: Callable[[str], Any] = float
+    help: str = ""
+    default: Any = None  # given on the command line when the option is left out
+    metavar: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    name: CommandName
+    cli: str  # the `btf-host cmd` subcommand
+    help: str
+    args: tuple[Arg, ...] = ()
+    forms: tuple[frozenset[str], ...] = ()  # accepted key sets; default: every arg
+    optional: frozenset[str] = frozenset()  # keys any form may add
+    moves_arm: bool = False  # refused while a pose is being measured
+    interrupts: bool = False  # ends the pose being measured
+    query: bool = False  # reads state only: answered even in failsafe
+
+    def key_sets(self) -> tuple[frozenset[str], ...]:
+        return self.forms or (frozenset(a.key for a in self.args) - self.optional,)
+
+    def arg(self, key: str) -> Arg:
+        return next(a for a in self.args if a.key == key)
+
+
+def floats(text: str) -> list[float]:
+    """`90,80,70` on the command line."""
+    try:
+        return [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ValueError(f"{text!r}: expected comma-separated numbers") from None
+
+
+def json_or_text(text: str) -> Any:
+    """A SET value: JSON if it parses (`32`, `true`, `[0, 90]`), else the string itself."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def _angle_list(v: Any, name: str, lo: float, hi: float) -> tuple[float, ...]:
+    if type(v) is not list or not 1 <= len(v) <= MAX_ANGLES:
+        raise FrameError(f"{name} must be a list of 1..{MAX_ANGLES} angles")
+    return tuple(want_float(x, name, lo, hi, allow_int=True) for x in v)
+
+
+def _angle(name: str, lo: float, hi: float) -> Callable[[Any], float]:
+    return lambda v: want_float(v, name, lo, hi, allow_int=True)
+
+
+C = CommandName
+COMMANDS: dict[CommandName, Command] = {c.name: c for c in (
+    Command(C.PING, "ping", "check the robot answers (its clock in the reply)", query=True),
+    Command(C.STATUS, "status", "the robot's state", query=True),
+    Command(C.GOTO, "goto", "move the arm; the reply holds the measured angle", (
+        Arg("elevation", _angle("elevation", -90.0, 90.0), "--elevation", help="degrees above the horizon"),
+        Arg("azimuth", _angle("azimuth", -360.0, 360.0), "--azimuth", help="degrees", default=0.0),
+    ), moves_arm=True),
+    Command(C.CAPTURE, "capture", "capture at the current pose", moves_arm=True),
+    Command(C.SWEEP, "sweep", "start a sweep: --start/--stop/--step or --elevations", (
+        Arg("start", _angle("sweep start", -90.0, 90.0), "--start", help="first elevation, e.g. 90"),
+        Arg("stop", _angle("sweep stop", -90.0, 90.0), "--stop", help="last elevation, e.g. 30"),
+        Arg("step", _angle("sweep step", 0.1, 180.0), "--step", help="elevation step, e.g. 10"),
+        Arg("elevations", lambda v: _angle_list(v, "elevations", -90.0, 90.0), "--elevations", floats,
+            "explicit elevations, e.g. 90,80,70"),
+        Arg("azimuths", lambda v: _angle_list(v, "azimuths", -360.0, 360.0), "--azimuths", floats,
+            "e.g. 0,90", default=[0.0]),
+    ), forms=(frozenset({"start", "stop", "step"}), frozenset({"elevations"})),
+        optional=frozenset({"azimuths"}), interrupts=True),
+    Command(C.ABORT, "abort", "stop the sweep and hold the arm", interrupts=True),
+    Command(C.SET, "set", "change a run-time setting", (
+        Arg("key", lambda v: want_str(v, "setting key", 64, allow_empty=False), "setting", str,
+            "section.key, e.g. skip.min_pixels"),
+        Arg("value", lambda v: check_extras({"value": v}, "setting")["value"], "value", json_or_text,
+            "the value (JSON if it parses, else a string)"),
+    )),
+    Command(C.TORQUE_OFF, "torque-off", "stop and release the servos (torque-on brings them back)",
+            interrupts=True),
+    Command(C.TORQUE_ON, "torque-on", "power the servos and hold the arm where it stands", moves_arm=True),
+    Command(C.REBOOT_SERVO, "reboot-servo", "reboot one servo (clears its alert)", (
+        Arg("servo_id", lambda v: want_int(v, "servo id", 0, 252), "--servo-id", int, "the servo's bus id"),
+    ), moves_arm=True),
+    Command(C.SEND_MASK, "send-mask", "re-send the label map of a capture", (
+        Arg("seq", lambda v: want_int(v, "capture seq", 0, UINT32), "--seq", int, "capture sequence number"),
+    )),
+)}
+
+
+def check_args(name: CommandName, args: dict) -> dict[str, Any]:
+    """The command's arguments, each checked; FrameError for a missing, extra or bad one."""
+    cmd = COMMANDS[name]
+    given = {str(k) for k in args}
+    forms = cmd.key_sets()
+    if not any(given - cmd.optional == form for form in forms):
+        extra = f" (+ optional {sorted(cmd.optional)})" if cmd.optional else ""
+        want = " or ".join(str(sorted(f)) + extra for f in forms)
+        raise FrameError(f"{name.name} takes arguments {want}, got {sorted(given)}")
+    return {a.key: a.check(args[a.key]) for a in cmd.args if a.key in given}

@@ -1,0 +1,116 @@
+"""`btf-host cmd`: one remote-control command to the robot, printing its answer.
+
+The subcommands, their options and help come from the command table (`radio.packets.commands`).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+
+from radio.packets.commands import COMMANDS, Command, CommandName
+from tools.cli.options import CliError
+
+
+def _cli_type(parse):
+    """An argparse type from a table parser: a ValueError becomes argparse's own usage error."""
+    def convert(text: str):
+        try:
+            return parse(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from None
+    convert.__name__ = getattr(parse, "__name__", "value")
+    return convert
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser("cmd", help="send the robot a command through the station and print its answer",
+                       description="Talks to the station serving DB over its control socket (DB.sock); with no "
+                                   "station running and --port given, opens the port itself for this one command "
+                                   "and stores what arrives in DB as the station would.")
+    p.add_argument("--db", help="the station's database (its control socket is DB.sock)")
+    p.add_argument("--socket", help="the station's control socket, if not DB.sock")
+    p.add_argument("--port", help="with no station running: the pyserial URL to open for this command "
+                   "(btfsim://?port=URL&loss=0.2: lossy)")
+    p.add_argument("--key", help="with no station running: the link key file")
+    p.add_argument("--baud", type=int, default=115200)
+    p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for the answer")
+    p.add_argument("--json", action="store_true", help="print the answer as one JSON object")
+    c = p.add_subparsers(dest="what", required=True, metavar="COMMAND")
+    for cmd in COMMANDS.values():
+        s = c.add_parser(cmd.cli, help=cmd.help, description=cmd.help)
+        required = set.intersection(*(set(f) for f in cmd.key_sets()))
+        for arg in cmd.args:  # dest apart from cmd's own options (--key is the key file)
+            kind = _cli_type(arg.parse)
+            if arg.cli.startswith("-"):
+                s.add_argument(arg.cli, dest=_dest(arg.key), type=kind, default=arg.default, help=arg.help,
+                               required=arg.key in required and arg.default is None,
+                               metavar=arg.metavar or arg.key.upper())
+            else:
+                s.add_argument(_dest(arg.key), type=kind, help=arg.help, metavar=arg.metavar or arg.cli)
+    return p
+
+
+def _dest(key: str) -> str:
+    return f"arg_{key}"
+
+
+def _by_cli(what: str) -> Command:
+    return next(c for c in COMMANDS.values() if c.cli == what)
+
+
+def command_of(args: argparse.Namespace) -> tuple[CommandName, dict]:
+    """(CommandName, args) for the parsed subcommand, in one of the command's forms."""
+    cmd = _by_cli(args.what)
+    given = {a.key: getattr(args, _dest(a.key)) for a in cmd.args if getattr(args, _dest(a.key)) is not None}
+    if not any(set(given) - cmd.optional == form for form in cmd.key_sets()):
+        forms = " or ".join("/".join(cmd.arg(k).cli for k in sorted(form, key=_order(cmd)))
+                            for form in cmd.key_sets())
+        named = ", ".join(cmd.arg(k).cli for k in sorted(set(given) - cmd.optional, key=_order(cmd)))
+        raise CliError(f"{cmd.cli} takes {forms}, not {named or 'none of them'}")
+    for key, value in given.items():
+        if isinstance(value, list) and not value:
+            raise CliError(f"{cmd.cli} {cmd.arg(key).cli}: needs at least one value")
+    return cmd.name, given
+
+
+def _order(cmd: Command):
+    keys = [a.key for a in cmd.args]
+    return keys.index
+
+
+def run(args: argparse.Namespace) -> int:
+    import secrets
+
+    from radio import packets as pk
+    from tools.station.command_route import ask
+
+    name, cargs = command_of(args)
+    try:
+        pk.encode(pk.CommandPacket(0, name, cargs))
+    except ValueError as exc:
+        raise CliError(f"{args.what}: {exc}") from None
+    if not (args.timeout > 0):
+        raise CliError(f"--timeout {args.timeout}: must be positive")
+    if not args.db and not args.socket:
+        raise CliError("cmd needs --db DB: the database of the station to talk to (with no station running, "
+                       "where what arrives is stored)")
+    if args.port and not (args.key and args.db):
+        raise CliError("cmd --port (no station running) needs --key KEY and --db DB: what arrives is stored")
+    answer = ask(args, name, cargs, secrets.randbits(31))
+    ok = bool(answer["ok"])
+    if args.json:
+        print(json.dumps({"command": args.what, **answer}))
+    else:
+        verdict = "ACK" if ok else f"NACK {answer.get('reason')}"
+        extras = ", ".join(f"{k}={_shown(k, v)}" for k, v in (answer.get("extras") or {}).items())
+        print(f"{verdict}: {answer.get('text', '')}" + (f" ({extras})" if extras else ""))
+    return 0 if ok else 1
+
+
+def _shown(key: str, value):
+    """An answer's value for a person: short floats, clock times in ISO 8601."""
+    if key == "time" and isinstance(value, (int, float)):
+        from tools.station.snapshot import iso
+
+        return iso(value)
+    return f"{value:.6g}" if isinstance(value, float) else value

@@ -1,0 +1,76 @@
+"""The options and checks that several `btf-host` subcommands share."""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from collections import Counter
+from pathlib import Path
+
+from onboard.cli.runner import CliError  # noqa: F401  (subcommands raise it)
+
+# The feature spaces of tools.data.images.SPACES, named here so that building the parser needs no OpenCV.
+FEATURE_SPACES = ("rgb", "hsv", "gray", "pca")
+
+
+def add_force(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--force", action="store_true", help="replace an existing --out")
+
+
+def check_out(out: str | os.PathLike, inputs: tuple, force: bool) -> Path:
+    """The output path, refused when it is one of the command's inputs (even with --force)
+    or, without `force`, when it exists."""
+    path = Path(out)
+    for given in inputs:
+        if given is not None and _same_file(path, Path(given)):
+            raise CliError(f"--out {out} is an input of this command ({given}); write somewhere else")
+    if path.is_dir():
+        raise CliError(f"--out {out} is a directory; give a file name")
+    if path.exists() and not force:
+        raise CliError(f"--out {out} exists; pass --force to replace it")
+    return path
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return a.resolve() == b.resolve()
+
+
+def elevation(value: float, option: str = "--angle") -> float:
+    """An elevation in degrees above the horizon: finite and within 0..90."""
+    if not math.isfinite(value):
+        raise CliError(f"{option} {value}: not a finite number of degrees")
+    if not 0.0 <= value <= 90.0:
+        raise CliError(f"{option} {value:g}: an elevation lies in 0..90 degrees")
+    return value
+
+
+def add_source_filters(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--robot", help="only this robot's captures (as listed when several are stored)")
+    parser.add_argument("--scene", help="only captures of this scene")
+
+
+def holdings(captures) -> str:
+    """What captures a database holds, per robot and scene: 'robot 1 scene dark (2 captures), ...'."""
+    counts = Counter((c.robot, c.scene) for c in captures)
+    if not counts:
+        return "no captures"
+    return ", ".join(f"robot {r}" + (f" scene {s}" if s else "") + f" ({n} capture{'s' * (n != 1)})"
+                     for (r, s), n in sorted(counts.items()))
+
+
+def choose_source(captures, db, robot: str | None, scene: str | None) -> tuple[str, str]:
+    """The one (robot, scene) the filters leave; an error listing the database's content otherwise."""
+    chosen = [c for c in captures if robot in (None, c.robot) and scene in (None, c.scene)]
+    if not captures:
+        raise CliError(f"database {db}: no captures")
+    if not chosen:
+        asked = " and ".join(f"{k} {v}" for k, v in (("robot", robot), ("scene", scene)) if v is not None)
+        raise CliError(f"database {db}: no captures of {asked}; it holds {holdings(captures)}")
+    pairs = sorted({(c.robot, c.scene) for c in chosen})
+    if len(pairs) > 1:
+        raise CliError(f"database {db} holds several robots and scenes: {holdings(chosen)}; "
+                       "choose one with --robot or --scene")
+    return pairs[0]

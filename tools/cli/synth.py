@@ -1,0 +1,266 @@
+"""`btf-host synth`: a synthetic image inside a mask, at a measured or interpolated angle."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import warnings
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from tools.cli.options import FEATURE_SPACES, CliError, add_force, add_source_filters, check_out, choose_source, elevation
+
+if TYPE_CHECKING:
+    import numpy as np
+
+
+def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = sub.add_parser("synth", help="synthesize an image from models inside a mask")
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--db", help="database of captures")
+    src.add_argument("--model", help="MODELS.json: one document of `fit --json`, or a list of them")
+    p.add_argument("--mask", required=True)
+    p.add_argument("--angle", required=True,
+                   help="view elevation, or EL,AZ[,LIGHT_EL,LIGHT_AZ] in degrees (several angles need --db)")
+    p.add_argument("--azimuth", type=float, help="view azimuth, degrees")
+    p.add_argument("--light-elevation", type=float, help="light elevation, degrees (with --light-azimuth)")
+    p.add_argument("--light-azimuth", type=float, help="light azimuth, degrees")
+    p.add_argument("--out", required=True, help="output image (never an input; an existing file needs --force)")
+    add_force(p)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--space", choices=FEATURE_SPACES, help="which stored feature space (--db)")
+    add_source_filters(p)
+    p.add_argument("--independent", action="store_true",
+                   help="draw every pixel on its own even when grain and band correlation are stored")
+    p.add_argument("--exposure", type=float, metavar="US",
+                   help="synthesize as if every capture had been taken at this exposure, in microseconds "
+                        "(--db, rgb or gray; default: each capture's own)")
+    p.add_argument("--normalise-reference", action="store_true",
+                   help="scale each capture so its reference card's level is the sweep's median (takes out "
+                        "drift of the light between captures; --db, rgb or gray)")
+    return p
+
+
+def _from_json(path: str) -> tuple[dict, dict, str, int, dict | None]:
+    """(models by angle, dependence by angle, space, levels, pca record) of a models file."""
+    from tools.analysis.synth import dependence_from_document, models_from_document
+
+    try:
+        raw = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise CliError(f"models {path}: no such file") from None
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise CliError(f"models {path}: not readable JSON ({exc})") from None
+    docs = raw if isinstance(raw, list) else [raw]
+    by_angle: dict = {}
+    deps: dict = {}
+    try:
+        parsed = [models_from_document(d) for d in docs]
+        found = [dependence_from_document(d, 1 + max((b for _, b in m), default=0)) for _, m, d in parsed]
+    except ValueError as exc:
+        raise CliError(f"models {path}: {exc}") from None
+    if not parsed:
+        raise CliError(f"models {path}: no documents")
+    spaces = {d.get("space") for _, _, d in parsed}
+    if len(spaces) != 1:
+        raise CliError(f"models {path}: documents mix feature spaces {sorted(map(str, spaces))}")
+    for (angle, models, _), dep in zip(parsed, found):
+        if angle is None and len(parsed) > 1:
+            raise CliError(f"models {path}: with several documents each needs its angle")
+        by_angle[0.0 if angle is None else angle] = models
+        deps[0.0 if angle is None else angle] = dep
+    first = parsed[0][2]
+    levels = first.get("levels") or 256
+    if type(levels) is not int or not 2 <= levels <= 65536:
+        raise CliError(f"models {path}: levels {levels!r} is not an integer in 2..65536")
+    if levels > 256 and first.get("space") not in ("rgb", "gray"):
+        raise CliError(f"models {path}: {levels} levels in space {first.get('space')!r}; deep models are rgb or gray")
+    if parsed[0][0] is None:  # one document without an angle serves every angle
+        by_angle, deps = {float("-inf"): parsed[0][1]}, {float("-inf"): found[0]}
+    return by_angle, deps, str(first.get("space") or "rgb"), levels, first.get("pca")
+
+
+def _source(store, args: argparse.Namespace) -> dict:
+    """Store filters for the one robot, scene and feature space to synthesize from."""
+    robot, scene = choose_source(store.captures(), args.db, args.robot, args.scene)
+    space = args.space
+    spaces = sorted({c.space for c in store.captures(robot=robot, scene=scene)})
+    if space is None:
+        if len(spaces) > 1:
+            raise CliError(f"database {args.db}: several feature spaces {spaces}; choose one with --space")
+        space = spaces[0]
+    if space not in spaces:
+        raise CliError(f"database {args.db}: no captures in feature space {space} (it holds {', '.join(spaces)})")
+    return {"robot": robot, "scene": scene, "space": space}
+
+
+def _radiometry(args: argparse.Namespace, space: str) -> bool:
+    """Whether --exposure or --normalise-reference asks for anything (checked for this space)."""
+    import math
+
+    asked = args.exposure is not None or args.normalise_reference
+    if not asked:
+        return False
+    if args.exposure is not None and not (math.isfinite(args.exposure) and args.exposure > 0):
+        raise CliError(f"--exposure must be a positive number of microseconds, got {args.exposure:g}")
+    if not args.db:
+        raise CliError("--exposure and --normalise-reference need --db (a models document carries no camera settings)")
+    from tools.analysis.radiometry import check_space
+
+    try:
+        check_space(space, "--exposure and --normalise-reference")
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    return True
+
+
+def _load_models(store, source: dict, args: argparse.Namespace, direction=None) -> dict:
+    """Models by angle (or by direction), each capture's radiometry applied; warnings printed."""
+    from tools.analysis.interpolation import models_by_direction
+    from tools.analysis.radiometry import sweep_models
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            if direction is not None:
+                found = models_by_direction(store, **source, exposure_us=args.exposure,
+                                            normalise=args.normalise_reference)
+            elif _radiometry(args, source["space"]):
+                found = sweep_models(store, store.latest_by_angle(**source), args.exposure, args.normalise_reference)
+            else:
+                found = store.models_by_angle(**source)
+        except ValueError as exc:
+            raise CliError(f"database {args.db}: {exc}") from None
+    _warn(caught)
+    return found
+
+
+def _open_db(path: str):
+    from tools.store.database import CorruptDatabase, Store
+
+    try:
+        return Store.open(path, create=False)
+    except CorruptDatabase as exc:
+        raise CliError(str(exc)) from None
+
+
+def _stored_basis(bases: dict, db: str):
+    """The one PCA basis of the stored pca captures (components of different bases do not mix)."""
+    distinct = {b for b in bases.values()}
+    if None in distinct:
+        raise CliError(f"database {db}: pca captures without a stored PCA basis; cannot turn them into RGB")
+    if len(distinct) != 1:
+        raise CliError(f"database {db}: pca captures use {len(distinct)} different PCA bases (one per scene)")
+    return distinct.pop()
+
+
+def _read_mask(path: str) -> np.ndarray:
+    from tools.data.images import ImageError, read_mask
+
+    try:
+        return read_mask(path)
+    except ImageError as exc:
+        raise CliError(str(exc)) from None
+
+
+def _write(args: argparse.Namespace, bands: np.ndarray, space: str, pca=None) -> int:
+    """The image at the models' depth: uint8 up to 256 levels, else 16-bit (PNG or TIFF)."""
+    from tools.data.images import ImageError, to_rgb, write_image
+
+    try:
+        write_image(args.out, to_rgb(bands, space, pca))
+    except ImageError as exc:
+        raise CliError(str(exc)) from None
+    return 0
+
+
+def _run_direction(args: argparse.Namespace, direction) -> int:
+    """Several angles: barycentric quantile blending over the stored directions (tools.analysis.interpolation)."""
+    import numpy as np
+
+    from tools.analysis.interpolation import synthesize_at_direction
+    from tools.analysis.synth import ExtrapolationWarning, MissingModels
+
+    if not args.db:
+        raise CliError("synth: several angles need --db (a models document holds one angle)")
+    if args.space == "pca":
+        raise CliError("synth --db: pca bases are not stored yet; use --model from `fit --json`")
+    with _open_db(args.db) as store:
+        source = _source(store, args)
+        _radiometry(args, source["space"])
+        by_direction = _load_models(store, source, args, direction)
+        levels = store.levels(**source)
+    _check_depth(args.out, levels)
+    mask = _read_mask(args.mask)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ExtrapolationWarning)
+        try:
+            bands = synthesize_at_direction(by_direction, mask, direction, np.random.default_rng(args.seed), levels)
+        except (MissingModels, ValueError) as exc:
+            raise CliError(str(exc)) from None
+    _warn(caught)
+    return _write(args, bands, source["space"])
+
+
+def _check_depth(out: str, levels: int) -> None:
+    """Refuses, before any work, an output file that cannot hold the models' depth."""
+    from tools.data.images import DEEP_SUFFIXES
+
+    if levels > 256 and Path(out).suffix.lower() not in DEEP_SUFFIXES:
+        raise CliError(f"image {out}: 16-bit pixels need a .png or .tif file (the models have {levels} levels)")
+
+
+def _warn(caught) -> None:
+    for w in caught:
+        print(f"btf-host: warning: {w.message}", file=sys.stderr)
+
+
+def run(args: argparse.Namespace) -> int:
+    from tools.analysis.interpolation import requested_direction
+
+    check_out(args.out, (args.db, args.model, args.mask), args.force)
+    try:
+        direction = requested_direction(args.angle, args.azimuth, args.light_elevation, args.light_azimuth)
+    except ValueError as exc:
+        raise CliError(str(exc)) from None
+    if direction is not None:
+        return _run_direction(args, direction)
+    args.angle = elevation(float(args.angle))
+    import numpy as np
+
+    from btf.fit.features import PcaBasis
+    from tools.analysis.synth import ExtrapolationWarning, MissingModels, synthesize_at
+
+    pca = None
+    dependence: dict = {}
+    if args.db:
+        with _open_db(args.db) as store:
+            source = _source(store, args)
+            space = source["space"]
+            by_angle = _load_models(store, source, args)
+            levels = store.levels(**source)
+            if not args.independent:
+                dependence = store.dependence_by_angle(**source)
+            if space == "pca":
+                pca = _stored_basis(store.pca_by_angle(**source), args.db)
+    else:
+        _radiometry(args, "rgb")  # refuses --exposure and --normalise-reference without --db
+        by_angle, found, space, levels, pca_rec = _from_json(args.model)
+        if not args.independent:
+            dependence = found
+        pca = PcaBasis.from_record(pca_rec) if pca_rec else None
+    _check_depth(args.out, levels)
+    mask = _read_mask(args.mask)
+    angle = args.angle
+    if float("-inf") in by_angle:
+        by_angle, angle = {angle: by_angle[float("-inf")]}, angle
+        dependence = {angle: d for d in dependence.values()}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", ExtrapolationWarning)
+        try:
+            bands = synthesize_at(by_angle, mask, angle, np.random.default_rng(args.seed), levels,
+                                  dependence=dependence, independent=args.independent)
+        except (MissingModels, ValueError) as exc:
+            raise CliError(str(exc)) from None
+    _warn(caught)
+    return _write(args, bands, space, pca)

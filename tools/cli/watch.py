@@ -1,0 +1,63 @@
+"""`btf-host watch`: what the station sees, live (a status subscription), or its snapshot."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from tools.cli.options import CliError
+
+
+def add_parser(sub) -> argparse.ArgumentParser:
+    p = sub.add_parser("watch", help="follow a running station: its events as they happen, or its snapshot")
+    p.add_argument("--db", help="the station's database (its control socket is DB.sock)")
+    p.add_argument("--socket", help="the station's control socket, if not DB.sock")
+    p.add_argument("--snapshot", action="store_true", help="print what the station knows once and exit")
+    p.add_argument("--json", action="store_true", help="one JSON object a line")
+    return p
+
+
+def run(args: argparse.Namespace) -> int:
+    from tools.station.control import StationClient, StationGone, socket_path
+
+    if not args.db and not args.socket:
+        raise CliError("watch needs --db DB (or --socket PATH) of a running station")
+    path = Path(args.socket) if args.socket else socket_path(args.db)
+    try:
+        client = StationClient.connect(path, timeout=10.0)
+    except OSError as exc:
+        raise CliError(f"control socket {path}: {exc.strerror or exc}") from None
+    if client is None:
+        raise CliError(f"no station serves {args.db or path} (start one with `btf-host station`)")
+    try:
+        client.send({"op": "snapshot" if args.snapshot else "subscribe"})
+        first = client.receive(timeout=10.0)
+        print(json.dumps(first["snapshot"]) if args.json else summary(first["snapshot"]), flush=True)
+        if args.snapshot:
+            return 0
+        while True:
+            ev = client.receive()["event"]
+            print(json.dumps(ev) if args.json else f"{ev['time']} {ev['kind']}: {ev['text']}", flush=True)
+    except StationGone:
+        raise CliError("the station stopped") from None
+    finally:
+        client.close()
+
+
+def summary(s: dict) -> str:
+    """The snapshot in a few lines, for a person."""
+    ln, r, sw = s["link"], s["robot"], s["sweep"]
+    pose = "?" if r["pose"] is None else f"{r['pose']['elevation']:.1f}°/{r['pose']['azimuth']:.1f}°"
+    heard = "never" if ln["last_heard_s"] is None else f"{ln['last_heard_s']:g} s ago"
+    rejected = ", ".join(f"{k} {v}" for k, v in ln["rejected"].items()) or "none"
+    lines = [f"station on {s['station']['port']} -> {s['station']['db']} since {s['station']['started']}",
+             f"link {'up' if ln['up'] else 'down'}, heard {heard}; frames sent {ln['frames_sent']}, "
+             f"accepted {ln['frames_accepted']}, retransmitted {ln['retransmissions']}, rejected: {rejected}",
+             f"robot {r['id']}: {r['mode'] or '?'} at {pose}, outbox {r['outbox']}, "
+             f"faults {len(r['faults'])}, errors {len(r['errors'])}"]
+    if sw["id"] is not None:
+        lines.append(f"sweep {sw['id']}: pose {sw['next']} of {sw['poses']}, {len(sw['skipped'])} skipped"
+                     + ("" if sw["active"] else " (not running)"))
+    c = s["captures"]
+    lines.append(f"captures stored {c['stored']}, duplicates {c['duplicates']}, masks {c['masks']}")
+    return "\n".join(lines)

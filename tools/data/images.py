@@ -1,0 +1,229 @@
+"""Reading and writing images and label masks on the host, with one-line errors.
+
+Images are RGB (H, W, 3) in memory at their sensor depth: uint8 (256 levels) or uint16
+(65536 levels; 16-bit PNG and TIFF, and float images in 0..1 quantized to 16 bits). Masks
+are label arrays (H, W) uint8, stored as single-channel PNG so every label value survives
+a round trip.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import cv2
+import numpy as np
+
+if TYPE_CHECKING:
+    from btf.fit.features import FeatureFrame, PcaBasis
+
+
+class ImageError(ValueError):
+    """A file that cannot be used as an image or mask; the message names the file and why."""
+
+
+def _imread(p: Path, what: str) -> np.ndarray:
+    if not p.is_file():
+        raise ImageError(f"{what} {p}: {'not a regular file' if p.exists() else 'no such file'}")
+    raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    if raw is None or raw.size == 0:
+        raise ImageError(f"{what} {p}: not a readable image file")
+    return raw
+
+
+FLOAT_LEVELS = 65536  # a float image in 0..1 is read as 16-bit levels
+
+
+def levels_of(image: np.ndarray) -> int:
+    """The sensor levels of an image read by read_image: 256 (uint8) or 65536 (uint16)."""
+    return 256 if image.dtype == np.uint8 else 65536
+
+
+def _as_levels(raw: np.ndarray, p: Path) -> np.ndarray:
+    """uint8 and uint16 pixels as they are; float in 0..1 as 16-bit levels; anything else refused."""
+    if raw.dtype in (np.uint8, np.uint16):
+        return raw
+    if raw.dtype.kind != "f":
+        raise ImageError(f"image {p}: {raw.dtype} pixels; expected 8- or 16-bit unsigned integers "
+                         "or floating point in 0..1")
+    if not np.isfinite(raw).all():
+        raise ImageError(f"image {p}: floating-point pixels that are NaN or infinite")
+    lo, hi = float(raw.min()), float(raw.max())
+    if lo < 0.0 or hi > 1.0:
+        raise ImageError(f"image {p}: floating-point pixels span {lo:g}..{hi:g}; expected 0..1 "
+                         "(scale them, or save the image as 16-bit)")
+    return np.rint(raw * (FLOAT_LEVELS - 1)).astype(np.uint16)
+
+
+def read_image(path: str | Path) -> np.ndarray:
+    """An image file as RGB (H, W, 3), uint8 or uint16 (float images in 0..1 become uint16);
+    grayscale files are repeated to three channels."""
+    p = Path(path)
+    raw = _as_levels(_imread(p, "image"), p)
+    if raw.ndim == 2:
+        return np.repeat(raw[:, :, None], 3, axis=2)
+    if raw.shape[2] == 4:
+        return cv2.cvtColor(raw, cv2.COLOR_BGRA2RGB)
+    # In place: a copy would double the peak memory of a large image.
+    return cv2.cvtColor(raw, cv2.COLOR_BGR2RGB, dst=raw)
+
+
+def stretched_8bit(image: np.ndarray, span: tuple[int, int] | None = None) -> np.ndarray:
+    """A 16-bit image as 8 bits over the levels it occupies, or `span` (all channels alike, so
+    colours keep their order): what segmentation and viewing need, not the absolute levels."""
+    if image.dtype == np.uint8:
+        return image
+    from tools.analysis.tiles import row_tiles
+
+    lo, hi = (int(image.min()), int(image.max())) if span is None else span
+    scale = 255.0 / max(1, hi - lo)
+    out = np.empty(image.shape, np.uint8)
+    for r in row_tiles(image.shape[0], image.shape[1] * (image.shape[2] if image.ndim == 3 else 1)):
+        out[r] = np.clip(np.rint((image[r].astype(np.float32) - lo) * np.float32(scale)), 0, 255)
+    return out
+
+
+def read_mask(path: str | Path, shape: tuple[int, int] | None = None) -> np.ndarray:
+    """A label mask (H, W) uint8; `shape` (H, W) is the image it must match."""
+    p = Path(path)
+    raw = _imread(p, "mask")
+    if raw.dtype != np.uint8:
+        raise ImageError(f"mask {p}: {raw.dtype} pixels; masks are 8-bit label images")
+    if raw.ndim == 3:
+        # A colour-saved mask is usable only when its channels agree.
+        if not all(np.array_equal(raw[:, :, 0], raw[:, :, c]) for c in range(1, min(3, raw.shape[2]))):
+            raise ImageError(f"mask {p}: colour image; a mask holds one label per pixel")
+        raw = raw[:, :, 0]
+    if shape is not None and tuple(raw.shape) != tuple(shape[:2]):
+        raise ImageError(
+            f"mask {p}: size {raw.shape[1]}x{raw.shape[0]} differs from the image's "
+            f"{shape[1]}x{shape[0]}"
+        )
+    return np.ascontiguousarray(raw)
+
+
+def _write(path: Path, array: np.ndarray, what: str) -> None:
+    if path.parent and not path.parent.exists():
+        raise ImageError(f"{what} {path}: directory {path.parent} does not exist")
+    ok = False
+    try:
+        ok = cv2.imwrite(str(path), array)
+    except cv2.error as exc:
+        raise ImageError(f"{what} {path}: cannot write ({str(exc).splitlines()[-1]})") from None
+    if not ok:
+        raise ImageError(f"{what} {path}: cannot write (unknown extension or unwritable place)")
+
+
+DEEP_SUFFIXES = (".png", ".tif", ".tiff")  # files that hold 16-bit pixels
+
+
+def write_image(path: str | Path, image: np.ndarray) -> None:
+    """Writes RGB (H, W, 3) or single-band (H, W) uint8 pixels, or uint16 as 16-bit PNG or TIFF."""
+    img = np.asarray(image)
+    if img.dtype not in (np.uint8, np.uint16):
+        raise ImageError(f"image {path}: {img.dtype} pixels; expected uint8 or uint16")
+    if img.dtype == np.uint16 and Path(path).suffix.lower() not in DEEP_SUFFIXES:
+        raise ImageError(f"image {path}: 16-bit pixels need a .png or .tif file")
+    if img.ndim == 3 and img.shape[2] == 3:
+        img = img[:, :, ::-1]
+    elif img.ndim == 3 and img.shape[2] == 1:
+        img = img[:, :, 0]
+    elif img.ndim != 2:
+        raise ImageError(f"image {path}: shape {img.shape}; expected (H, W) or (H, W, 3)")
+    _write(Path(path), np.ascontiguousarray(img), "image")
+
+
+def write_mask(path: str | Path, labels: np.ndarray) -> None:
+    """Writes a label mask as a single-channel PNG (labels 0..255)."""
+    lab = np.asarray(labels)
+    if lab.ndim != 2:
+        raise ImageError(f"mask {path}: shape {lab.shape}; expected (H, W)")
+    if lab.size and (lab.min() < 0 or lab.max() > 255):
+        raise ImageError(f"mask {path}: labels outside 0..255")
+    p = Path(path)
+    if p.suffix.lower() != ".png":
+        raise ImageError(f"mask {p}: masks are written as .png so labels stay exact")
+    _write(p, lab.astype(np.uint8, copy=False), "mask")
+
+
+def encode_png(labels: np.ndarray) -> bytes:
+    ok, buf = cv2.imencode(".png", np.ascontiguousarray(labels.astype(np.uint8)))
+    if not ok:
+        raise ImageError("mask: PNG encoding failed")
+    return buf.tobytes()
+
+
+def decode_png(data: bytes) -> np.ndarray:
+    arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+    if arr is None:
+        raise ImageError("mask: stored PNG bytes are damaged")
+    return arr
+
+
+SPACES = ("rgb", "hsv", "gray", "pca")
+DEEP_SPACES = ("rgb", "gray")  # the spaces of 16-bit images
+
+
+def feature_bands(image: np.ndarray, space: str, pca=None):
+    """The robot's own feature bands of an RGB image (btf.fit.features); pca fits a basis if none
+    is given. A 16-bit image keeps its depth: rgb as it is, gray by OpenCV's weights."""
+    from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
+
+    if space not in SPACES:
+        raise ImageError(f"feature space {space!r}: expected one of {', '.join(SPACES)}")
+    if image.dtype == np.uint16:
+        if space not in DEEP_SPACES:
+            raise ImageError(f"feature space {space}: 16-bit images are fitted in "
+                             f"{' or '.join(DEEP_SPACES)} ({space} is defined for 8-bit pixels)")
+        data = image if space == "rgb" else cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)[:, :, None]
+        names = ("R", "G", "B") if space == "rgb" else ("Y",)
+        return FeatureFrame(data, names, 65536, FeatureSpace(space)), None
+    if space == "pca" and pca is None:
+        pca = PcaBasis.fit(image)
+    return compute(image, FeatureSpec(FeatureSpace(space)), pca=pca), pca
+
+
+@dataclass(frozen=True)
+class FittedImage:
+    """An image on disk fitted with the robot's own FrameFitter, label by label, band by band,
+    with each region's grain and band dependence measured as the robot measures it."""
+
+    feats: "FeatureFrame"
+    pca: "PcaBasis | None"
+    labels: np.ndarray  # the mask's labels, or all 0 without a mask
+    results: dict
+    dependence: dict  # {label: btf.dependence.Dependence}; {} when not measured
+
+
+def fit_image(image_path: str | Path, mask_path: str | Path | None, space: str,
+              dependence: bool = True) -> FittedImage:
+    """Read, convert and fit one image, and measure its dependence (btf.fit.dependence) unless
+    `dependence` is False; ImageError (a ValueError) names what is wrong."""
+    from btf.fit.dependence import measure
+    from btf.fit.fitter import FrameFitter
+
+    image = read_image(image_path)
+    labels = read_mask(mask_path, image.shape[:2]) if mask_path else np.zeros(image.shape[:2], np.uint8)
+    feats, pca = feature_bands(image, space)
+    del image
+    fitter = FrameFitter(int(labels.max()) + 1, feats.data.shape[2], bins=feats.levels)
+    fitter.add(feats.data, labels)
+    results = fitter.fit()
+    deps = (measure(feats.data, labels, {k: r.model for k, r in results.items()}, feats.levels)
+            if dependence and results else {})
+    return FittedImage(feats, pca, labels, results, deps)
+
+
+def to_rgb(bands: np.ndarray, space: str, pca=None) -> np.ndarray:
+    """Synthesized feature bands back to a viewable RGB (or single-band) image at their depth."""
+    if space == "rgb" or space == "gray":
+        return bands if space == "rgb" else bands[:, :, 0]
+    if space == "hsv":
+        hsv = bands.copy()
+        hsv[:, :, 0] = np.minimum(hsv[:, :, 0], 179)
+        return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+    if space == "pca":
+        if pca is None:
+            raise ImageError("pca bands need their basis to become an image")
+        return np.rint(pca.invert(bands)).astype(np.uint8)
+    raise ImageError(f"feature space {space!r}: cannot turn it back into an image")

@@ -1,0 +1,167 @@
+"""The operator page's view of the database: the latest capture at each pose (read on a thread
+of its own, with its own connection, so the station's loop never waits on a query), and each
+capture's section and images (`tools.report.look`, `tools.report.capture_views`: the report's own), drawn in a
+worker process so that synthesis and plotting never hold the station's interpreter.
+"""
+from __future__ import annotations
+
+import asyncio
+import multiprocessing
+from collections import OrderedDict
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import Any
+
+from tools.station.snapshot import iso
+
+CACHED = 128  # rendered captures kept (thumbnails and sections)
+SHOWN_FIRST = "correlated", "independent", "measured"  # a card's picture: the likest to the surface
+
+
+def pose_key(c: Any) -> str:
+    """One pose of one robot: the commanded angles (measured for captures without them), to 0.1°."""
+    el, az = (c.commanded if c.commanded[0] is not None else c.measured)
+    return f"{c.robot}|{el:.1f}|{(az or 0.0) % 360.0:.1f}"
+
+
+def card(c: Any) -> dict:
+    """A capture as the page lists it."""
+    from tools.analysis.radiometry import describe
+
+    return {"id": c.id, "key": pose_key(c), "robot": c.robot, "seq": c.sequence, "scene": c.scene,
+            "elevation": round(c.measured[0], 2), "azimuth": round(c.measured[1], 2),
+            "commanded": None if c.commanded[0] is None else [c.commanded[0], c.commanded[1]],
+            "time": iso(c.time), "space": c.space, "camera": describe(c.camera),
+            "unlocked": bool(c.camera is not None and c.camera.unlocked)}
+
+
+class CaptureIndex:
+    """The latest capture per pose; `refresh()` reads what was stored since the last call.
+    Touched on the reader thread only (its Store is that thread's)."""
+
+    def __init__(self, db: str) -> None:
+        self.db, self.store, self.last_id = db, None, 0
+        self.latest: dict[str, dict] = {}
+        self.count = 0
+
+    def refresh(self) -> list[dict]:
+        """The cards that changed (a new latest capture at their pose)."""
+        if self.store is None:
+            from tools.store.database import Store
+
+            self.store = Store.open(self.db, create=False)
+        changed = {}
+        for c in sorted(self.store.captures_after(self.last_id), key=lambda c: c.id):
+            self.last_id, self.count = c.id, self.count + 1
+            changed[pose_key(c)] = self.latest[pose_key(c)] = card(c)
+        return list(changed.values())
+
+    def close(self) -> None:
+        if self.store is not None:
+            self.store.close()
+
+
+# -- the worker process ---------------------------------------------------------------------
+_worker_store: dict[str, Any] = {}
+
+
+def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
+    """In the worker: `what` "thumb" ({"png"}: the card's picture) or "section" ({"html",
+    "images": {name: png}}) of one capture; {"missing": text} when there is nothing to draw."""
+    import numpy as np
+
+    from tools.report.capture_views import Frames, png, views
+    from tools.report.look import capture_section
+    from tools.store.database import Store
+
+    store = _worker_store.get(db)
+    if store is None:
+        store = _worker_store[db] = Store.open(db, create=False)
+    cap = store.capture_by_id(capture_id)
+    if cap is None:
+        return {"missing": f"no capture {capture_id} in the database"}
+    rng = np.random.default_rng(capture_id)  # the same drawing every time
+    if what == "thumb":  # the synthesis, or the measured frame when there is none
+        v = views(store, cap, rng, None, histograms=False)
+        if not v.images:
+            v = views(store, cap, rng, Frames(fake), histograms=False)
+        name = next((k for k in SHOWN_FIRST if k in v.images), None)
+        return {"png": png(v.images[name])} if name else {"missing": v.problem or "nothing to draw"}
+    v = views(store, cap, rng, Frames(fake))
+    html = capture_section(v, lambda k: f"capture/{capture_id}/{k}.png?r={rev}")
+    return {"html": html, "images": {k: png(img) for k, img in v.images.items()}}
+
+
+def end_with_parent() -> None:
+    """In a child process of the station: SIGTERM when the station dies, even by SIGKILL
+    (Linux's PR_SET_PDEATHSIG), so no drawing worker or demo robot outlives it."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):
+        pass  # not Linux: the station's own exit path ends them
+
+
+def _warm() -> None:
+    """Load the worker's libraries before the first request needs them."""
+    import tools.report.capture_views  # noqa: F401
+    import tools.report.look  # noqa: F401
+
+
+class PageData:
+    """The page's reads and drawings, off the station's loop: `cards()`, `refresh()` and
+    `drawn(capture_id, what)` are awaited on the loop."""
+
+    def __init__(self, db: str, fake: Any = None) -> None:
+        self.db, self.fake = str(db), fake
+        self.index = CaptureIndex(self.db)
+        self._reader = ThreadPoolExecutor(1, thread_name_prefix="page-reader")
+        self._pool: ProcessPoolExecutor | None = None
+        self._cache: OrderedDict[tuple[int, str, int], dict] = OrderedDict()
+        self.rev = 0  # bumped when a mask arrives: drawings made before it may lack it
+
+    async def refresh(self) -> list[dict]:
+        return await asyncio.get_running_loop().run_in_executor(self._reader, self.index.refresh)
+
+    def cards(self) -> list[dict]:
+        return sorted(self.index.latest.values(), key=lambda c: (-c["elevation"], c["azimuth"], c["robot"]))
+
+    def mask_arrived(self) -> None:
+        self.rev += 1
+        self._cache.clear()
+
+    def start_worker(self) -> None:
+        if self._pool is None:
+            self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=end_with_parent)
+            self._pool.submit(_warm)
+
+    async def drawn(self, capture_id: int, what: str) -> dict:
+        key = (capture_id, what, self.rev)
+        if key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key]
+        self.start_worker()
+        loop = asyncio.get_running_loop()
+        try:
+            out = await loop.run_in_executor(self._pool, render, self.db, capture_id, self.fake, what, self.rev)
+        except BrokenProcessPool:  # the worker died (killed, out of memory): a new one next time
+            self._pool = None
+            raise RuntimeError("the drawing worker stopped; reload to try again") from None
+        self._cache[key] = out
+        while len(self._cache) > CACHED:
+            self._cache.popitem(last=False)
+        return out
+
+    def close(self) -> None:
+        self._reader.submit(self.index.close).result()
+        self._reader.shutdown()
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+def static_dir() -> Path:
+    return Path(__file__).with_name("static")

@@ -1,0 +1,279 @@
+"""The operator's page, served by the station itself (`btf-host station --http ADDR:PORT`), in
+the station's own event loop, with aiohttp.
+
+What it serves:
+- `/`: the page (`tools/page/static/`), its command forms generated from the command table
+  (`tools.page.forms`); `/?token=T` trades the station's token for a cookie and redirects to `/`.
+- `/events`: server-sent events, pushed as things happen: `hello` (everything, on connect and
+  after this client fell behind), `snapshot` (`Station.snapshot_json`, after events and every
+  second), `cards` (the latest capture at a pose changed), `event` (every station event, the
+  robot's answers to the page's commands among them), `rev` (a mask arrived: drawings renewed).
+- `/api/state`: the hello as one JSON document.
+- `/capture/ID/section`, `/capture/ID/NAME.png`, `/capture/ID/thumb.png`: a capture drawn as
+  the report draws it (`tools.page.data`).
+- `POST /api/command` `{"name": "GOTO", "fields": {"elevation": "70"}}`: the command to the
+  robot; `{"command_id", "answer"}` once it answers (202 and `{"command_id"}` when it takes
+  longer; the answer then comes as an event).
+
+Security: the token is drawn from the operating system's random source at start-up and printed
+on stderr only (never logged, never sent over the radio). Viewing needs it unless the station
+runs with `--http-public`; a state-changing request needs it always (the cookie, or the
+`X-BTF-Token` header), a JSON body, and, when the token comes as a cookie, an `Origin` that is
+this page's own: a page of another site cannot send commands through the operator's browser.
+"""
+from __future__ import annotations
+
+import asyncio
+import hmac
+import json
+import secrets
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any
+
+from aiohttp import web
+
+from tools.report.look import CSS
+from tools.page.data import PageData, static_dir
+from tools.page.forms import forms_html, parse_form
+from tools.station.station import Station
+from tools.station.bus import EventBus
+
+ANSWER_WAIT_S = 2.0  # a command's POST waits this long for the robot's answer
+SNAPSHOT_EVERY_S = 1.0
+COALESCE_S = 0.05  # events within this go out as one snapshot
+RECENT_EVENTS = 80  # the events a page that opens is shown
+PAGE_QUEUE = 512  # messages a page may fall behind before it is sent everything again
+STATIC = {"page.js": "application/javascript", "page.css": "text/css"}
+
+
+@dataclass
+class PageOptions:
+    host: str = "127.0.0.1"
+    port: int = 8765
+    public: bool = False  # viewing without the token (commands always need it)
+    fake: Any = None  # a fake robot's HalConfig: its renders are the measured frames
+    token: str = field(default_factory=lambda: secrets.token_urlsafe(24))
+
+
+def parse_http(text: str) -> tuple[str, int]:
+    """`PORT`, `ADDR:PORT` or `[V6ADDR]:PORT` -> (host, port); ValueError in one line."""
+    host, sep, port = text.rpartition(":")
+    host = host.strip("[]") if sep else "127.0.0.1"
+    try:
+        number = int(port)
+    except ValueError:
+        raise ValueError(f"--http {text}: expected PORT or ADDR:PORT") from None
+    if not 0 <= number <= 65535:
+        raise ValueError(f"--http {text}: port {number} outside 0..65535")
+    return host or "127.0.0.1", number
+
+
+class PageServer:
+    def __init__(self, station: Station, db: str, options: PageOptions) -> None:
+        self.station, self.options = station, options
+        self.data = PageData(db, options.fake)
+        self.bus = EventBus(PAGE_QUEUE)  # page messages, one bounded queue per open page
+        self.db_name = str(db)
+        self.url = ""
+        self._runner: web.AppRunner | None = None
+        self._tasks: list[asyncio.Task] = []
+        self._dirty = False  # events since the last snapshot
+        self._streams: set[Any] = set()
+        self._recent: deque[dict] = deque(maxlen=RECENT_EVENTS)  # for a page that opens now
+        self._cookie = f"btf_token_{options.port}"
+
+    # -- start and stop ------------------------------------------------------------------------
+    async def start(self) -> str:
+        """Serve; the page's address (without the token). OSError when the address is taken."""
+        await self.data.refresh()  # every capture stored so far, before the first page asks
+        app = web.Application(middlewares=[self._guard], client_max_size=64 * 1024)
+        app.add_routes([
+            web.get("/", self._index), web.get("/static/{name}", self._static), web.get("/events", self._events),
+            web.get("/api/state", self._state), web.post("/api/command", self._command),
+            web.get("/capture/{id:\\d+}/section", self._section),
+            web.get("/capture/{id:\\d+}/{name:[a-z]+}.png", self._image)])
+        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, self.options.host, self.options.port)
+        await site.start()
+        host, port = self._runner.addresses[0][:2]
+        self._cookie = f"btf_token_{port}"
+        self.url = f"http://{host if ':' not in host else f'[{host}]'}:{port}/"
+        self._tasks = [asyncio.ensure_future(self._follow()), asyncio.ensure_future(self._tick())]
+        self.data.start_worker()
+        return self.url
+
+    async def close(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        for sub in list(self._streams):
+            sub.close()  # each open page's stream ends
+        if self._runner is not None:
+            await self._runner.cleanup()
+        await asyncio.get_running_loop().run_in_executor(None, self.data.close)
+
+    # -- following the station -----------------------------------------------------------------
+    async def _follow(self) -> None:
+        sub = self.station.bus.subscribe(4096)
+        try:
+            while True:
+                ev = await sub.get()
+                kind = ev.get("kind")
+                if kind in ("capture", "unchanged") and ev.get("stored") or kind == "lost":
+                    cards = await self.data.refresh()
+                    if cards:
+                        self.bus.publish({"kind": "cards", "cards": cards})
+                elif kind == "mask" and ev.get("stored"):
+                    self.data.mask_arrived()
+                    self.bus.publish({"kind": "rev", "rev": self.data.rev})
+                if kind != "lost":
+                    self._recent.append(ev)
+                    self.bus.publish({"kind": "event", "event": ev})
+                self._dirty = True
+        finally:
+            sub.close()
+
+    async def _tick(self) -> None:
+        """A snapshot after events (those within COALESCE_S as one), and every second anyway."""
+        loop, last = asyncio.get_running_loop(), 0.0
+        while True:
+            await asyncio.sleep(COALESCE_S)
+            if self._dirty or loop.time() - last >= SNAPSHOT_EVERY_S:
+                self._dirty, last = False, loop.time()
+                if self.bus.subscribers:
+                    self.bus.publish({"kind": "snapshot", "snapshot": self.station.snapshot_json()})
+
+    def hello(self, request: web.Request) -> dict:
+        return {"kind": "hello", "snapshot": self.station.snapshot_json(), "cards": self.data.cards(),
+                "rev": self.data.rev, "authorized": request["authorized"], "public": self.options.public,
+                "db": self.db_name, "events": list(self._recent)}
+
+    # -- security --------------------------------------------------------------------------------
+    def _is_token(self, value: str | None) -> bool:
+        return bool(value) and hmac.compare_digest(value.encode(), self.options.token.encode())
+
+    @web.middleware
+    async def _guard(self, request: web.Request, handler) -> web.StreamResponse:
+        if request.path.startswith("/static/"):
+            return await handler(request)  # the page's code and style: no data in them
+        if request.method == "GET" and request.path == "/" and "token" in request.query:
+            if not self._is_token(request.query["token"]):
+                return _refused(401, "wrong token: open the address the station printed at start-up", plain=True)
+            resp = web.HTTPSeeOther("/")
+            resp.set_cookie(self._cookie, self.options.token, httponly=True, samesite="Strict", path="/")
+            return resp
+        by_header = self._is_token(request.headers.get("X-BTF-Token"))
+        by_cookie = self._is_token(request.cookies.get(self._cookie))
+        request["authorized"] = by_header or by_cookie
+        if request.method not in ("GET", "HEAD"):
+            problem = self._refuse_change(request, by_header, by_cookie)
+            if problem:
+                return _refused(403, problem)
+        elif not (request["authorized"] or self.options.public):
+            return _refused(401, "this page needs the station's token: open the address the station printed "
+                                 "at start-up (.../?token=...), or start the station with --http-public to "
+                                 "let anyone on this address watch", plain=request.path == "/")
+        return await handler(request)
+
+    def _refuse_change(self, request: web.Request, by_header: bool, by_cookie: bool) -> str:
+        """Why a state-changing request is refused ('' when it is not)."""
+        if not (by_header or by_cookie):
+            return "commands need the station's token (printed at its start-up)"
+        origin = request.headers.get("Origin")
+        own = f"{request.scheme}://{request.host}"
+        if origin is not None and origin != own:
+            return f"cross-site request refused: Origin {origin} is not this page's ({own})"
+        if request.headers.get("Sec-Fetch-Site", "same-origin") not in ("same-origin", "none"):
+            return "cross-site request refused"
+        if origin is None and not by_header:  # a browser always says where a POST comes from
+            return "a request with the token as a cookie must say its Origin"
+        if request.content_type != "application/json":
+            return "commands are JSON (Content-Type: application/json)"
+        return ""
+
+    # -- handlers --------------------------------------------------------------------------------
+    async def _index(self, request: web.Request) -> web.Response:
+        page = (static_dir() / "index.html").read_text(encoding="utf-8")
+        page = page.replace("{{CSS}}", CSS).replace("{{FORMS}}", forms_html())
+        page = page.replace("{{TITLE}}", _escape(f"btfscout station: {self.db_name}"))
+        return web.Response(text=page, content_type="text/html", headers={"Cache-Control": "no-store"})
+
+    async def _static(self, request: web.Request) -> web.Response:
+        name = request.match_info["name"]
+        if name not in STATIC:
+            raise web.HTTPNotFound()
+        return web.Response(body=(static_dir() / name).read_bytes(), content_type=STATIC[name],
+                            headers={"Cache-Control": "no-cache"})
+
+    async def _state(self, request: web.Request) -> web.Response:
+        return web.json_response(self.hello(request))
+
+    async def _events(self, request: web.Request) -> web.StreamResponse:
+        resp = web.StreamResponse(headers={"Content-Type": "text/event-stream", "Cache-Control": "no-store"})
+        await resp.prepare(request)
+        sub = self.bus.subscribe()
+        self._streams.add(sub)
+        try:
+            await _send(resp, self.hello(request))
+            while True:
+                msg = await sub.get()
+                await _send(resp, self.hello(request) if msg["kind"] == "lost" else msg)
+        except (ConnectionError, EOFError):
+            pass
+        finally:
+            self._streams.discard(sub)
+            sub.close()
+        return resp
+
+    async def _command(self, request: web.Request) -> web.Response:
+        try:
+            body = await request.json()
+            name, args = parse_form(body.get("name") if isinstance(body, dict) else None,
+                                    body.get("fields", {}) if isinstance(body, dict) else None)
+            cid, answer = self.station.submit(name, args)
+        except (ValueError, RuntimeError) as exc:  # a bad form; a link holding too much already
+            return web.json_response({"error": str(exc).splitlines()[0]}, status=400)
+        try:
+            got = await asyncio.wait_for(asyncio.shield(answer), ANSWER_WAIT_S)
+        except asyncio.TimeoutError:
+            return web.json_response({"command_id": cid, "waiting": True}, status=202)
+        except asyncio.CancelledError:  # the station stopped before the robot answered
+            return web.json_response({"command_id": cid, "error": "the station stopped"}, status=503)
+        return web.json_response({"command_id": cid, "answer": got})
+
+    async def _drawn(self, request: web.Request, what: str) -> dict:
+        try:
+            out = await self.data.drawn(int(request.match_info["id"]), what)
+        except Exception as exc:  # a capture the worker cannot draw: said, never a traceback page
+            raise web.HTTPInternalServerError(text=f"{type(exc).__name__}: {exc}".splitlines()[0]) from None
+        if "missing" in out:
+            raise web.HTTPNotFound(text=out["missing"])
+        return out
+
+    async def _section(self, request: web.Request) -> web.Response:
+        return web.Response(text=(await self._drawn(request, "section"))["html"], content_type="text/html")
+
+    async def _image(self, request: web.Request) -> web.Response:
+        name = request.match_info["name"]
+        out = await self._drawn(request, "thumb" if name == "thumb" else "section")
+        data = out["png"] if name == "thumb" else out["images"].get(name)
+        if data is None:
+            raise web.HTTPNotFound(text=f"capture {request.match_info['id']} has no {name} image")
+        return web.Response(body=data, content_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+
+async def _send(resp: web.StreamResponse, msg: dict) -> None:
+    await resp.write(f"event: {msg['kind']}\ndata: {json.dumps(msg, separators=(',', ':'))}\n\n".encode())
+
+
+def _refused(status: int, text: str, plain: bool = False) -> web.Response:
+    """A refusal: JSON for the page's requests, a line of text for a person at the address bar."""
+    return web.Response(text=text + "\n", status=status) if plain else web.json_response({"error": text}, status=status)
+
+
+def _escape(text: str) -> str:
+    import html
+
+    return html.escape(text)

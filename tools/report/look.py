@@ -1,0 +1,110 @@
+"""One look for the static report (`btf-host report`) and the operator's page (`station --http`):
+the stylesheet, the HTML pieces (tables, figures, notes) and a capture's section (its images,
+histograms with the Johnson curves, models table and camera settings), rendered by the same
+functions for both. The images come from `tools.report.capture_views`; `src` says where each is
+found (a file beside the report, a URL of the page).
+"""
+from __future__ import annotations
+
+import html
+from typing import Any, Callable
+
+from tools.analysis.radiometry import describe as describe_camera
+from tools.analysis.radiometry import settings_json
+
+CSS = """
+:root{--ok:#1a7f37;--warn:#b35900;--bad:#c62828;--idle:#57606a;--line:#d0d7de;--bg2:#f6f8fa}
+body{font-family:system-ui,sans-serif;font-size:14px;color:#1f2328;margin:0 auto;max-width:1100px;padding:0 8px}
+h1{font-size:20px}h2{font-size:16px;margin:14px 0 6px}h3{font-size:14px;margin:10px 0 4px}
+table{border-collapse:collapse;font-size:12px}
+td,th{border:1px solid var(--line);padding:2px 6px;text-align:right}th{background:var(--bg2)}
+td.l,th.l{text-align:left}
+img.view{image-rendering:pixelated;width:240px;margin:2px;background:#eee}
+img.hist{width:480px;max-width:100%}
+figure{display:inline-block;margin:2px;vertical-align:top}
+figcaption{font-size:11px;text-align:center;color:var(--idle)}
+.note{color:var(--idle)}.ok{color:var(--ok)}.bad{color:var(--bad)}.warn{color:var(--warn)}
+.capture{border-top:1px solid var(--line);padding-top:4px}
+"""
+
+
+def cell(v: Any) -> str:
+    return f"{v:.4f}" if isinstance(v, float) else html.escape(str(v))
+
+
+def table(head: list[str], rows: list[list[Any]], left: int = 0, cls: str = "") -> str:
+    """An HTML table; the first `left` columns are text, aligned left."""
+    def td(i: int, v: Any, tag: str) -> str:
+        return f"<{tag}{' class=l' if i < left else ''}>{cell(v) if tag == 'td' else html.escape(str(v))}</{tag}>"
+    return (f"<table{f' class={cls}' if cls else ''}><tr>" + "".join(td(i, h, "th") for i, h in enumerate(head))
+            + "</tr>" + "".join("<tr>" + "".join(td(i, v, "td") for i, v in enumerate(r)) + "</tr>" for r in rows)
+            + "</table>")
+
+
+def figure(src: str, caption: str, cls: str = "view") -> str:
+    return (f"<figure><img class={cls} src='{html.escape(src)}' alt='{html.escape(caption)}' "
+            f"title='{html.escape(caption)}'><figcaption>{html.escape(caption)}</figcaption></figure>")
+
+
+def note(text: str) -> str:
+    return f"<p class=note><em>{html.escape(text)}</em></p>"
+
+
+MODEL_HEAD = ["label", "band", "family", "gamma", "delta", "xi", "lambda", "pixels", "fitted at (us)"]
+
+
+def model_rows(capture: Any, fitted: dict) -> list[list[Any]]:
+    """A capture's models, one row each (`MODEL_HEAD`): the stored records as fitted, with the
+    exposure each was fitted at (a bracketed region's own)."""
+    rows = []
+    for (label, band), m in fitted.items():
+        j = m.model
+        at = capture.camera.exposure_of(label) if capture.camera is not None else None
+        rows.append([label, capture.band_names[band] if band < len(capture.band_names) else band,
+                     j.family.value, j.gamma, j.delta, j.xi, j.lam, m.count, "" if at is None else f"{at:g}"])
+    return rows
+
+
+def camera_table(capture: Any) -> str:
+    """The capture's camera settings, one row each (none recorded: a note)."""
+    s = settings_json(capture.camera)
+    if s is None:
+        return note("Camera settings not recorded.")
+    def shown(v: Any) -> str:
+        if isinstance(v, list):
+            return ", ".join(shown(x) for x in v)
+        return f"{v:g}" if isinstance(v, float) else str(v)
+    rows = [[k.replace("_", " "), shown(v)] for k, v in s.items() if v not in (None, [], {})]
+    if isinstance(s.get("bracketed"), dict) and s["bracketed"]:
+        rows = [r for r in rows if r[0] != "bracketed"] + [["bracketed", describe_camera(capture.camera)]]
+    return table(["setting", "value"], rows, left=2, cls="camera")
+
+
+def capture_title(capture: Any) -> str:
+    az = capture.measured[1]
+    where = f"{capture.elevation:.1f}°" + (f" / {az:.1f}°" if az else "")
+    return f"{capture.scene or 'robot ' + capture.robot} at {where} (seq {capture.sequence})"
+
+
+def capture_section(views: Any, src: Callable[[str], str], models: bool = True) -> str:
+    """A capture's section: measured (when known), synthesized (independent, and correlated when
+    the capture carries dependence), histograms with the Johnson curves, then its models and
+    camera settings (`models`). `src(name)` is where image `name` (`views.images`) is found."""
+    cap = views.capture
+    captions = {"measured": "measured", "independent": "independent pixels" if "correlated" in views.images
+                else "synthesized", "correlated": "grain and band correlation"}
+    imgs = [figure(src(name), captions[name]) for name in ("measured", "independent", "correlated")
+            if name in views.images]
+    if "histograms" in views.images:
+        imgs.append(figure(src("histograms"), "histograms and Johnson curves", cls="hist"))
+    parts = [f"<div class=capture data-capture='{cap.id}'><h3>{html.escape(capture_title(cap))}</h3>"]
+    if views.problem:
+        parts.append(note(views.problem))
+    parts.append("<div>" + "".join(imgs) + "</div>")
+    if models:
+        parts.append(table(MODEL_HEAD, model_rows(cap, views.fitted), left=3, cls="models")
+                     if views.fitted else note("No models stored for this capture."))
+        parts.append(camera_table(cap))
+    elif cap.camera is not None:
+        parts.append(f"<p class=note>camera: {html.escape(describe_camera(cap.camera))}</p>")
+    return "".join(parts) + "</div>"

@@ -1,0 +1,294 @@
+"""The station: the one process that owns the radio (`btf-host station`; `listen` is it in the
+foreground, and `cmd` without a station runs one for its command's length).
+
+It holds the port for as long as it runs, stores every packet before its acknowledgement
+leaves (the only owner of the `Receiver` and its `Store`), keeps the link's counters, and
+serves everyone else who wants the link: `cmd` clients and status subscribers over the control
+socket (`tools.station.control`), and, inside the same event loop, the operator's page.
+
+One asyncio event loop runs it all. The link pump (`run`) turns a `radio.pump.LinkPump` with the
+port on a thread of its own, so the loop never waits on the port: `LinkPump.transfer` (write
+what is due, read what arrived) runs there; on the loop, what arrived is fed to the link and
+every delivered packet is stored (`LinkPump.feed`), and only then is the next write taken
+(`LinkPump.due`): an acknowledgement never leaves before its packet is in the database. The
+`Link`, the `Store`, the snapshot and the bus are touched on the loop only.
+
+The interface for code inside the station (the control socket, the operator's page):
+
+- `station.snapshot_json() -> dict`: `tools.station.snapshot.StationSnapshot.to_json`, every
+  field named there: `station` (port, db, started, clients, subscribers, commands_pending),
+  `link` (up, changed, last_heard, last_heard_s, and `radio.events.LinkStats`: frames_sent,
+  frames_accepted, retransmissions, delivered, duplicates, rejected {reason: n}, ...;
+  delivered_bytes, goodput_bps), `robot` (id, mode, state, pose, commanded, outbox, paused,
+  torque, faults, errors, failsafe, failsafe_s, failsafe_assumed, disk, disk_free, rejected,
+  last_status), `sweep` (id, plan, next, poses, active, measured, skipped [{index, elevation,
+  azimuth, reason}], grid: `tools.station.sweep_grid.grid_json`) and `captures` (stored, duplicates,
+  masks, bad, latest [...]).
+- `sub = station.bus.subscribe(maxsize)`, then `await sub.get()`: every event in order; a
+  subscriber that falls behind loses the oldest and is told how many (`tools.station.bus`).
+  `sub.close()` when done.
+- `cid, answer = station.submit(name, args, command_id)`: the command goes to the robot at
+  the next turn; `await answer` gives its ACK or NACK as a dict (`{"command_id", "ok",
+  "type": "ACK"|"NACK", "text", "reason"?, "extras"?}`), once, however often the robot says it.
+  A command id the robot saw before is answered from its memory, never run twice, so a client
+  that lost its station re-submits the same id to the next one.
+- `station.stop()` ends `run` after the current turn; `station.failure` says why it ended on
+  its own (`StationFailure`: a wrong key, a store that cannot be written, a port that failed).
+
+Every event is a dict `{"kind", "time" (ISO 8601, UTC), "t" (epoch s), "text", ...}` with kind
+one of: capture, unchanged, mask (`robot`, `seq`, `stored`, and `capture`: where it was filed),
+status, log, bad, other (a packet: `robot`, `seq`, `stored`, `packet` as
+`tools.station.receiver.packet_json`; a status event is also the answer to the station's own STATUS
+request, published every `status_every` seconds and not logged), failsafe (the robot's report of
+one), command (sent:
+`command_id`, `name`, `args`), answer (`command_id`, `ok`, `answer`), link (`up`), rejected
+(`reason`, `count`, `total`, the likely `cause`), station (started, stopping, failed); the
+subscriber's own `lost` (`count`). The log (`tools.station.log`) writes each one.
+"""
+from __future__ import annotations
+
+import asyncio
+import secrets
+import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable
+
+from radio import packets as pk
+from radio.packets.commands import CommandName, check_args
+from radio.link import Delivered, LinkDown, LinkUp, PeerStale
+from radio.pump import LinkPump
+from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json
+from tools.station.bus import EventBus
+from tools.station.log import StationLog, event, likely_cause
+from tools.station.snapshot import StationSnapshot
+
+WRONG_KEY_FRAMES = 8  # frames failing authentication, none passing: the key is wrong
+REJECTED_EVERY_S = 1.0  # rejected-frame events, per reason, at most this often
+SENT_KEPT = 1024  # commands remembered until answered (for the snapshot)
+POLLS_KEPT = 16  # the station's own STATUS requests it recognises the answers of
+
+
+class StationFailure(Exception):
+    """The station cannot go on; `status` is the exit status its CLI gives (2: fix the setup)."""
+
+    def __init__(self, text: str, status: int = 1) -> None:
+        super().__init__(text)
+        self.status = status
+
+
+class Station:
+    def __init__(self, pump: LinkPump, receiver: Receiver, log: StationLog, *, port: str, db: str,
+                 status_every: float = 10.0, on_item: Callable[[Item], None] | None = None,
+                 clock: Callable[[], float] = time.monotonic, wall: Callable[[], float] = time.time) -> None:
+        self.pump, self.receiver, self.log = pump, receiver, log
+        self.clock, self.wall = clock, wall
+        self.status_every, self.on_item = status_every, on_item
+        self.bus = EventBus()
+        self.snapshot = StationSnapshot(port, db, wall())
+        self.failure: StationFailure | None = None
+        self.last_delivery = clock()
+        self._stop = False
+        self._waiting: dict[int, list[asyncio.Future]] = {}
+        self._sent: dict[int, tuple[CommandName, dict]] = {}
+        self._poll: tuple[int, float] | None = None  # the STATUS this station asked for, and when
+        self._polls: deque[int] = deque(maxlen=POLLS_KEPT)  # its earlier ones: answered late, still its own
+        self._rejected: dict[str, int] = {}  # counts already reported
+        self._rejected_at: dict[str, float] = {}
+        self._accepted = 0
+        self._polled_at = -1e9
+
+    # -- the interface -------------------------------------------------------------------------
+    def snapshot_json(self) -> dict:
+        s = self.snapshot
+        s.commands_pending, s.subscribers = sum(map(len, self._waiting.values())), self.bus.subscribers
+        return s.to_json(self.wall())
+
+    def submit(self, name: CommandName, args: dict, command_id: int | None = None) -> tuple[int, asyncio.Future]:
+        """Queue a command for the robot; (its id, a future of its answer). ValueError for
+        arguments the robot would refuse to decode, or when the link holds too much already."""
+        cid = secrets.randbits(31) if command_id is None else command_id
+        try:
+            check_args(name, args)
+            body = pk.encode(pk.CommandPacket(cid, name, args))
+        except Exception as exc:  # FrameError, or an id outside the packet's range
+            raise ValueError(f"{name.name}: {exc}") from None
+        fut = asyncio.get_running_loop().create_future()
+        self.pump.send(body)  # QueueFull (a RuntimeError) when the link holds 1 MB unacknowledged
+        self._waiting.setdefault(cid, []).append(fut)
+        self._sent[cid] = (name, dict(args))
+        while len(self._sent) > SENT_KEPT:
+            del self._sent[next(iter(self._sent))]
+        fut.add_done_callback(lambda f, cid=cid: self._forget(cid, f))
+        said = " ".join(f"{k}={v}" for k, v in args.items())
+        self.emit(event("command", f"{name.name} {said}".strip() + f" sent (command {cid})", self.wall(),
+                        command_id=cid, name=name.name, args=packet_json_args(args)))
+        return cid, fut
+
+    def stop(self) -> None:
+        self._stop = True
+
+    def emit(self, ev: dict) -> None:
+        """Log an event and publish it to every subscriber."""
+        self.log.write(ev)
+        self.bus.publish(ev)
+
+    # -- the pump ------------------------------------------------------------------------------
+    async def run(self) -> None:
+        """Turn the link until `stop()`; StationFailure when it cannot go on (nothing unstored
+        is ever acknowledged: a failed store ends the turn before its write)."""
+        loop = asyncio.get_running_loop()
+        io = ThreadPoolExecutor(1, thread_name_prefix="station-port")
+        self.emit(event("station", f"started: port {self.snapshot.port}, database {self.snapshot.db}", self.wall()))
+        out = b""
+        try:
+            while not self._stop:
+                try:
+                    data, room = await loop.run_in_executor(io, self.pump.transfer, out)
+                except Exception as exc:
+                    raise StationFailure(f"port {self.snapshot.port}: {type(exc).__name__}: {exc}") from None
+                try:
+                    out = self._turn(data, room)
+                except StationFailure:
+                    raise
+                except StoreFailed as exc:  # no room (1: run it again), or a damaged row (2)
+                    raise StationFailure(f"{exc}; nothing unstored was acknowledged (the robot keeps it)",
+                                         status=2 if exc.damaged else 1) from None
+                except Exception as exc:  # the store: nothing of this turn is acknowledged
+                    raise StationFailure(f"database {self.snapshot.db}: {type(exc).__name__}: {exc}") from None
+            if out and self.failure is None:  # the acknowledgements of the last turn
+                await loop.run_in_executor(io, self.pump.port.write, out)
+        except StationFailure as exc:
+            self.failure = exc
+        finally:
+            for futs in self._waiting.values():
+                for f in futs:
+                    f.cancel()
+            await loop.run_in_executor(io, self.pump.close)
+            io.shutdown()
+            text = f"failed: {self.failure}" if self.failure else "stopped"
+            self.emit(event("station", text, self.wall()))
+
+    def _turn(self, data: bytes, room: int) -> bytes:
+        """Feed the link what arrived, store and route what it delivered; what to write next."""
+        now, wall = self.clock(), self.wall()
+        for ev in self.pump.feed(data, now):
+            if isinstance(ev, Delivered):
+                self.last_delivery = now
+                self.snapshot.note_delivered(len(ev.payload), wall)
+                self._delivered(self.receiver.handle(ev.payload, ev.incarnation.hex()), wall)
+            elif isinstance(ev, (LinkUp, LinkDown)):
+                up = isinstance(ev, LinkUp)
+                self.snapshot.note_link(up, wall)
+                self.emit(event("link", "up: the robot is heard" if up else
+                                f"down: nothing heard from the robot for {self.pump.link.link_timeout:g} s",
+                                wall, up=up))
+            elif isinstance(ev, PeerStale):  # the robot's counters are behind: said once, with the remedy
+                self.emit(event("link", ev.text, wall, up=self.pump.up))
+                if self.on_item is not None:
+                    self.on_item(Item(ItemKind.LINK, ev.sender, None, False, ev.text))
+        self._watch_link(wall)
+        self._ask_status(now)
+        return self.pump.due(room, now)
+
+    def _delivered(self, item: Item, wall: float) -> None:
+        if self.on_item is not None:
+            self.on_item(item)
+        if item.kind is ItemKind.ANSWER:
+            self._answer(item.packet, wall)
+            return
+        kind = item.kind.value
+        s = self.snapshot
+        if item.kind in (ItemKind.CAPTURE, ItemKind.UNCHANGED):
+            s.note_capture(item, wall)
+        elif item.kind is ItemKind.MASK:
+            s.counts["masks"] += 1
+        elif item.kind is ItemKind.BAD:
+            s.counts["bad"] += 1
+        elif item.kind is ItemKind.STATUS:
+            s.note_status(item.packet, wall)
+            if item.packet.text.startswith("failsafe"):
+                kind = "failsafe"
+        if item.kind in (ItemKind.CAPTURE, ItemKind.UNCHANGED, ItemKind.MASK):
+            # the models stay in the database: the event says what was filed where
+            fields = {"capture": s.latest[0]} if item.kind is not ItemKind.MASK else {}
+            text = f"robot {item.robot} seq {item.seq}: {item.text}" + ("" if item.stored else " (already stored)")
+        else:
+            fields = {"packet": None if item.packet is None else packet_json(item.packet)}
+            text = item.text
+        self.emit(event(kind, text, wall, robot=item.robot, seq=item.seq, stored=item.stored, **fields))
+
+    def _answer(self, p: Any, wall: float) -> None:
+        cid, ok = p.command_id, isinstance(p, pk.AckPacket)
+        answer = {"command_id": cid, "ok": ok, **packet_json(p)}
+        name, args = self._sent.pop(cid, (None, {}))
+        if name is None and ok and p.text in CommandName.__members__:
+            name = CommandName[p.text]  # a command an earlier station sent
+        if ok and name is not None:
+            self.snapshot.note_answer(name, dict(p.extras), args)
+            if name is CommandName.SWEEP and "sweep" in p.extras:
+                self.snapshot.note_sweep_started(packet_json_args(args), dict(p.extras))
+            elif name is CommandName.STATUS:
+                self.snapshot.note_status_answer(dict(p.extras), wall)
+        futures = self._waiting.pop(cid, [])
+        for f in futures:
+            if not f.done():
+                f.set_result(answer)
+        if cid in self._polls:
+            if self._poll is not None and cid == self._poll[0]:
+                self._poll = None
+            self.bus.publish(event("status", "the robot's report", wall, robot=None, seq=None, stored=False,
+                                   packet=answer))
+            return
+        said = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items())
+        said = said if len(said) <= 160 else said[:157] + "..."
+        verdict = f"ACK {said}".strip() if ok else f"NACK {p.reason.name}: {p.text}"
+        label = name.name if name is not None else f"command {cid}"
+        self.emit(event("answer", f"{label} (command {cid}): {verdict}"
+                        + ("" if futures else " (no client waits for it)"), wall,
+                        command_id=cid, ok=ok, answer=answer))
+
+    def _forget(self, cid: int, fut: asyncio.Future) -> None:
+        futs = self._waiting.get(cid)
+        if futs and fut in futs:
+            futs.remove(fut)
+            if not futs:
+                del self._waiting[cid]
+
+    def _watch_link(self, wall: float) -> None:
+        """Quality counters from the link; rejected frames with their likely cause; a key
+        that authenticates nothing ends the station."""
+        st = self.pump.stats()
+        self.snapshot.link.stats = st
+        if st.frames_accepted > self._accepted:
+            self._accepted, self.snapshot.link.last_heard = st.frames_accepted, wall
+        for reason, total in st.rejected.items():
+            new = total - self._rejected.get(reason, 0)
+            if new and wall - self._rejected_at.get(reason, -1e9) >= REJECTED_EVERY_S:
+                self._rejected[reason], self._rejected_at[reason] = total, wall
+                self.emit(event("rejected", f"{new} frame{'s' * (new > 1)} refused: {likely_cause(reason)}",
+                                wall, reason=reason, count=new, total=total, cause=likely_cause(reason)))
+        tags = st.rejected.get("tag", 0)
+        if tags >= WRONG_KEY_FRAMES and st.frames_accepted == 0:
+            self._stop = True
+            self.failure = StationFailure(
+                f"{tags} frames failed authentication and none passed: wrong key? --key must hold the "
+                "same key as the robot's link.key_file", status=2)
+
+    def _ask_status(self, now: float) -> None:
+        """A STATUS every `status_every` seconds while the link is up, for the snapshot."""
+        if not self.status_every or not self.pump.up:
+            return
+        if self._poll is not None and now - self._poll[1] < 3 * self.status_every:
+            return
+        if self._poll is None and now - self._polled_at < self.status_every:
+            return
+        cid = secrets.randbits(31)
+        self.pump.send(pk.encode(pk.CommandPacket(cid, CommandName.STATUS, {})))
+        self._poll, self._polled_at = (cid, now), now
+        self._polls.append(cid)
+
+
+def packet_json_args(args: dict) -> dict:
+    """Command arguments as JSON (tuples as lists)."""
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in args.items()}
