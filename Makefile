@@ -41,8 +41,8 @@ stress: $(STAMP)
 FUZZ_RUNS ?= 500000
 fuzz: $(STAMP)
 	$(BIN)/python -m pip install --quiet 'atheris>=2.3'
-	$(BIN)/python tests/fuzz_radio.py --seeds .fuzz-corpus
-	$(BIN)/python tests/fuzz_radio.py .fuzz-corpus -atheris_runs=$(FUZZ_RUNS)
+	$(BIN)/python tests/radio/fuzz_radio.py --seeds .fuzz-corpus
+	$(BIN)/python tests/radio/fuzz_radio.py .fuzz-corpus -atheris_runs=$(FUZZ_RUNS)
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache .hypothesis .fuzz-corpus

@@ -1,0 +1,115 @@
+"""What the page draws, without a browser: the sweep's grid from the robot's own STATUS answer,
+advanced by captures between reports; the failsafe assumed while the link is silent; the robot's
+disk and rejections; goodput; the latest capture per pose."""
+import dataclasses
+import json
+
+from onboard.link.status import flat
+from onboard.sweep.plan import SweepPlan
+from radio import packets as pk
+from tests.tools.station.test_receiver import models_body
+from tools.page.data import CaptureIndex
+from tools.station.receiver import Item, ItemKind, Receiver
+from tools.station.snapshot import StationSnapshot
+from tools.store.database import Store
+from tools.station.sweep_grid import grid_json, plan_of_command
+
+
+def report(plan, next_index=0, skipped=(), mode="sweeping"):
+    """The robot's STATUS report (onboard.link.status.Status.report), as its answer carries it."""
+    return {"mode": mode, "outbox": 2, "paused": "", "disk": "ok", "disk_free": 10**9, "rejected": {},
+            "failsafe": [], "failsafe_s": 1.5, "torque": True,
+            "faults": ["servo 2: overload (retried)"], "errors": [],
+            "sweep": {"id": 4, "next": next_index, "poses": plan.count, "active": True, "plan": plan.to_record(),
+                      "skipped": [list(s) for s in skipped]}}
+
+
+def answer_extras(rep):
+    """The extras as they arrive: through the ACK packet's encoder and decoder."""
+    body = pk.encode(pk.AckPacket(7, "STATUS", flat(rep)))
+    return dict(pk.decode(body).extras)
+
+
+def capture_item(seq, elevation, azimuth):
+    body, _, _ = models_body(seq, elevation)
+    p = pk.decode(body)
+    p = dataclasses.replace(p, commanded=(elevation, azimuth))
+    return Item(ItemKind.CAPTURE, p.robot_id, seq, True, "capture", p)
+
+
+def test_the_grid_comes_from_the_robots_plan_and_advances_with_each_capture():
+    plan = SweepPlan(80.0, 60.0, 10.0, (0.0, 90.0))  # 80, 70, 60 at 0 then at 90
+    snap = StationSnapshot("pty", "db", 0.0)
+    snap.note_status_answer(answer_extras(report(plan, 1, [(2, 60.0, 0.0, "servo 1: no answer")])), 10.0)
+    grid = snap.to_json(10.0)["sweep"]["grid"]
+    assert grid["elevations"] == [80.0, 70.0, 60.0] and grid["azimuths"] == [0.0, 90.0]
+    # row by row (azimuth 0, then 90): 80 done, pending; 70 measuring, pending; 60 skipped, pending
+    assert grid["cells"] == "dpmpsp" and grid["reasons"] == {"2,0": "servo 1: no answer"}
+    snap.note_capture(capture_item(5, 70.0, 0.0), 11.0)
+    assert snap.to_json(11.0)["sweep"]["grid"]["cells"] == "dmdpsp"
+    snap.note_capture(capture_item(6, 80.0, 90.0), 12.0)
+    assert snap.to_json(12.0)["sweep"]["grid"]["cells"] == "dddmsp"
+    # the robot's next report says the same: nothing counted twice
+    snap.note_status_answer(answer_extras(report(plan, 4, [(2, 60.0, 0.0, "servo 1: no answer")])), 13.0)
+    js = snap.to_json(13.0)
+    assert js["sweep"]["grid"]["cells"] == "dddmsp" and js["sweep"]["next"] == 4
+    assert js["robot"]["failsafe_s"] == 1.5 and js["robot"]["torque"] is True
+    assert js["robot"]["faults"] == ["servo 2: overload (retried)"] and js["robot"]["outbox"] == 2
+
+
+def test_a_sweep_this_station_sent_has_its_grid_before_the_robot_reports_it():
+    assert plan_of_command({"elevations": [80.0, 40.0]}) is None  # azimuths from the robot's config
+    plan = plan_of_command({"elevations": [80.0, 40.0], "azimuths": [0.0]})
+    assert grid_json(plan, 0, set(), [], True)["cells"] == "mp"
+    plan = plan_of_command({"start": 90.0, "stop": 70.0, "step": 10.0, "azimuths": [0.0, 180.0]})
+    assert grid_json(plan, None, {4}, [], False) == {"elevations": [90.0, 80.0, 70.0], "azimuths": [0.0, 180.0],
+                                                    "cells": "pppdpp", "reasons": {}}
+
+
+def test_a_plan_too_long_for_a_status_string_is_left_out_and_the_answer_still_encodes():
+    plan = SweepPlan(0.0, 0.0, 1.0, tuple(float(a) for a in range(64)), tuple(80.0 - i * 0.37 for i in range(64)))
+    extras = answer_extras(report(plan))
+    assert "plan" not in extras and extras["poses"] == 64 * 64
+    short = answer_extras(report(SweepPlan(90.0, 30.0, 10.0, (0.0,))))
+    assert json.loads(short["plan"])["step"] == 10.0
+
+
+def test_a_silent_link_past_the_robots_failsafe_is_shown_as_the_failsafe():
+    snap = StationSnapshot("pty", "db", 0.0)
+    assert snap.to_json(0.0)["robot"]["failsafe_assumed"] is False  # never heard: nothing assumed
+    snap.note_link(True, 1.0)
+    snap.link.last_heard = 1.0
+    snap.note_status_answer({"mode": "idle", "failsafe_s": 3.0}, 1.0)
+    snap.note_link(False, 6.0)
+    assert snap.to_json(3.5)["robot"]["failsafe_assumed"] is False
+    assert snap.to_json(6.0)["robot"]["failsafe_assumed"] is True
+    snap.note_link(True, 7.0)
+    assert snap.to_json(7.0)["robot"]["failsafe_assumed"] is False
+
+
+def test_the_robots_disk_and_rejections_and_the_goodput_are_in_the_snapshot():
+    snap = StationSnapshot("pty", "db", 0.0)
+    snap.note_status_answer({"mode": "idle", "disk": "low", "disk_free": 123456, "rejected": ["crc:3", "tag:1"]}, 1.0)
+    for t in range(10):
+        snap.note_delivered(100, 100.0 + t)
+    js = snap.to_json(109.0)
+    assert (js["robot"]["disk"], js["robot"]["disk_free"]) == ("low", 123456)
+    assert js["robot"]["rejected"] == {"crc": 3, "tag": 1}
+    assert js["link"]["goodput_bps"] == 100.0 and js["link"]["delivered_bytes"] == 1000
+    assert snap.to_json(200.0)["link"]["goodput_bps"] == 0.0
+
+
+def test_the_page_lists_the_latest_capture_at_each_pose(tmp_path):
+    with Store.open(tmp_path / "scene.db") as s:
+        rx = Receiver(s, scene="mixed")
+        for seq, el in ((1, 60.0), (2, 70.0), (3, 60.0)):
+            rx.handle(models_body(seq, el)[0])
+    index = CaptureIndex(str(tmp_path / "scene.db"))
+    cards = index.refresh()
+    assert sorted((c["seq"], c["commanded"][0]) for c in cards) == [(2, 70.0), (3, 60.0)]
+    assert index.refresh() == []
+    with Store.open(tmp_path / "scene.db") as s:
+        Receiver(s, scene="mixed").handle(models_body(4, 70.0)[0])
+    assert [c["seq"] for c in index.refresh()] == [4]
+    assert sorted(c["seq"] for c in index.latest.values()) == [3, 4]
+    index.close()

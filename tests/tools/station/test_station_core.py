@@ -1,0 +1,152 @@
+"""The station's parts in one process, over a simulated cable: the event bus, the store before
+the acknowledgement, the wrong key, the snapshot, and a command answered once."""
+import asyncio
+import time
+
+import pytest
+
+from radio import packets as pk
+from radio.auth import MemoryCounterStore
+from radio.channel import ChannelConfig
+from radio.channel_port import Cable
+from radio.link import Acked, Link
+from radio.pump import LinkPump
+from tests.tools.station.test_receiver import models_body
+from tools.station.receiver import Receiver
+from tools.station.station import Station
+from tools.station.bus import EventBus
+from tools.station.log import StationLog
+from tools.store.database import Store
+
+KEY = bytes(range(32))
+
+
+def test_a_slow_subscriber_loses_the_oldest_events_and_is_told_how_many():
+    async def go():
+        bus = EventBus()
+        fast, slow = bus.subscribe(100), bus.subscribe(3)
+        for i in range(10):
+            bus.publish({"kind": "x", "i": i})
+        got_fast = [(await fast.get())["i"] for _ in range(10)]
+        lost = await slow.get()
+        got_slow = [(await slow.get())["i"] for _ in range(3)]
+        slow.close()
+        with pytest.raises(EOFError):
+            await slow.get()
+        bus.publish({"kind": "x", "i": 10})
+        return got_fast, lost, got_slow, bus.subscribers, await fast.get()
+
+    got_fast, lost, got_slow, subscribers, last = asyncio.run(go())
+    assert got_fast == list(range(10)) and last["i"] == 10
+    assert lost["kind"] == "lost" and lost["count"] == 7 and got_slow == [7, 8, 9]
+    assert subscribers == 1
+
+
+class Robot:
+    """The robot's end of the cable: a link that sends packets and answers commands."""
+
+    def __init__(self, end, key=KEY):
+        self.pump = LinkPump(Link(1, 2, 1, key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), end)
+        self.acked: set[int] = set()
+        self.commands: list[pk.CommandPacket] = []
+
+    def turn(self):
+        for ev in self.pump.step():
+            if isinstance(ev, Acked):
+                self.acked.add(ev.msg_id)
+            elif hasattr(ev, "payload"):
+                cmd = pk.decode(ev.payload)
+                self.commands.append(cmd)
+                if [c.command_id for c in self.commands].count(cmd.command_id) == 1:  # as the robot: once
+                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, {"n": len(self.commands)})))
+
+
+def station_on_cable(tmp_path, store=None, host_key=KEY, robot_key=KEY):
+    cable = Cable(ChannelConfig(latency=0.0, bandwidth=1e7, buffer=1 << 20))
+    store = store or Store.open(tmp_path / "host.db")
+    pump = LinkPump(Link(2, 1, 1, host_key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), cable.ends[1])
+    station = Station(pump, Receiver(store), StationLog(tmp_path / "host.db.log", echo=None),
+                      port="sim", db=str(tmp_path / "host.db"), status_every=0)
+    return station, Robot(cable.ends[0], robot_key), store
+
+
+async def drive(station, robot, until, limit_s=20.0):
+    """Run the station, turning the robot beside it, until `until()`."""
+    task = asyncio.ensure_future(station.run())
+    end = time.monotonic() + limit_s
+    while not until() and not task.done() and time.monotonic() < end:
+        robot.turn()
+        await asyncio.sleep(0.002)
+    station.stop()
+    await task
+
+
+def test_a_packet_is_acknowledged_only_once_it_is_stored(tmp_path):
+    station, robot, store = station_on_cable(tmp_path)
+    mid = robot.pump.send(models_body(7)[0], msg_id=41)
+    asyncio.run(drive(station, robot, lambda: mid in robot.acked))
+    assert mid in robot.acked and [c.sequence for c in store.captures()] == [7]
+    events = [e for e in station_log(tmp_path) if e["kind"] == "capture"]
+    assert events[0]["stored"] and events[0]["seq"] == 7 and events[0]["capture"]["regions"] == 2
+
+
+def station_log(tmp_path):
+    import json
+    return [json.loads(line) for line in (tmp_path / "host.db.log").read_text().splitlines()]
+
+
+def test_a_store_that_fails_ends_the_station_and_nothing_is_acknowledged(tmp_path):
+    class BrokenStore(Store):
+        def add_capture(self, *a, **k):
+            raise OSError("disk full")
+
+    from tools.store.schema import connect
+    broken = BrokenStore(connect(tmp_path / "host.db", True), tmp_path / "host.db")
+    station, robot, _ = station_on_cable(tmp_path, store=broken)
+    mid = robot.pump.send(models_body(7)[0], msg_id=41)
+    asyncio.run(drive(station, robot, lambda: False, limit_s=3.0))
+    assert station.failure is not None and station.failure.status == 1 and "disk full" in str(station.failure)
+    for _ in range(50):  # whatever the station wrote before it failed has arrived by now
+        robot.turn()
+    assert mid not in robot.acked and robot.pump.link.queued_bytes > 0  # still the robot's to send
+
+
+def test_a_wrong_key_ends_the_station_saying_so(tmp_path):
+    station, robot, _ = station_on_cable(tmp_path, robot_key=bytes(32))
+    asyncio.run(drive(station, robot, lambda: False, limit_s=20.0))
+    assert station.failure is not None and station.failure.status == 2
+    assert "wrong key?" in str(station.failure)
+    rejected = [e for e in station_log(tmp_path) if e["kind"] == "rejected"]
+    assert rejected and rejected[0]["reason"] == "tag" and "tag mismatch: wrong key?" in rejected[0]["cause"]
+
+
+def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path):
+    station, robot, _ = station_on_cable(tmp_path)
+    status = pk.StatusPacket(1, 1_700_000_000.0, pk.RobotState.SWEEPING, (60.0, 0.0), 3, 900, 6,
+                             "skipped pose: settle failed", {"sweep": 2, "skipped_index": 4,
+                                                             "skipped_elevation": 50.0, "skipped_azimuth": 0.0})
+    robot.pump.send(pk.encode(status))
+    answers = []
+
+    async def go():
+        sub = station.bus.subscribe()
+        _, fut = station.submit(pk.CommandName.PING, {}, command_id=77)
+        _, again = station.submit(pk.CommandName.PING, {}, command_id=77)  # the same id, twice
+        drive_task = asyncio.ensure_future(drive(station, robot, lambda: fut.done() and again.done()))
+        answers.extend([await fut, await again])
+        await drive_task
+        kinds = []
+        while (e := sub.get_nowait()) is not None:
+            kinds.append(e["kind"])
+        return kinds
+
+    kinds = asyncio.run(go())
+    assert [a["command_id"] for a in answers] == [77, 77] and all(a["ok"] and a["type"] == "ACK" for a in answers)
+    assert len(robot.commands) == 2 and answers[0] == answers[1]  # both waiters, one answer
+    assert kinds.count("answer") == 1 and "status" in kinds and "link" in kinds
+    snap = station.snapshot_json()
+    assert set(snap) == {"station", "link", "robot", "sweep", "captures"}
+    assert snap["link"]["up"] and snap["link"]["frames_accepted"] > 0 and snap["link"]["last_heard"]
+    assert snap["robot"]["state"] == "sweeping" and snap["robot"]["pose"] == {"elevation": 60.0, "azimuth": 0.0}
+    assert snap["sweep"]["id"] == 2 and snap["sweep"]["skipped"] == [
+        {"index": 4, "elevation": 50.0, "azimuth": 0.0, "reason": "settle failed"}]
