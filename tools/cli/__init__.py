@@ -30,6 +30,7 @@ COMMANDS: tuple[str, ...] = (
     "watch",
     "decode",
     "report",
+    "btf",
 )
 
 
