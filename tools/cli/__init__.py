@@ -31,6 +31,7 @@ COMMANDS: tuple[str, ...] = (
     "decode",
     "report",
     "btf",
+    "export",
 )
 
 
