@@ -11,7 +11,7 @@ from collections import OrderedDict
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from tools.station.snapshot import iso
 
@@ -111,6 +111,10 @@ def _warm() -> None:
     import tools.report.look  # noqa: F401
 
 
+def _warm_btf() -> None:
+    import tools.page.btf_panel  # noqa: F401
+
+
 class PageData:
     """The page's reads and drawings, off the station's loop: `cards()`, `refresh()` and
     `drawn(capture_id, what)` are awaited on the loop."""
@@ -120,8 +124,10 @@ class PageData:
         self.index = CaptureIndex(self.db)
         self._reader = ThreadPoolExecutor(1, thread_name_prefix="page-reader")
         self._pool: ProcessPoolExecutor | None = None
+        self._btf_pool: ProcessPoolExecutor | None = None
         self._cache: OrderedDict[tuple[int, str, int], dict] = OrderedDict()
         self.rev = 0  # bumped when a mask arrives: drawings made before it may lack it
+        self._btf: dict[tuple, dict] = {}  # the BTF panel's last answer
 
     async def refresh(self) -> list[dict]:
         return await asyncio.get_running_loop().run_in_executor(self._reader, self.index.refresh)
@@ -138,6 +144,10 @@ class PageData:
             self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
                                              initializer=end_with_parent)
             self._pool.submit(_warm)
+        if self._btf_pool is None:  # its own process: the panel never waits behind a capture's drawing
+            self._btf_pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                                 initializer=end_with_parent)
+            self._btf_pool.submit(_warm_btf)
 
     async def drawn(self, capture_id: int, what: str) -> dict:
         key = (capture_id, what, self.rev)
@@ -156,11 +166,34 @@ class PageData:
             self._cache.popitem(last=False)
         return out
 
+    async def btf(self, query: Mapping[str, str]) -> tuple[int, dict]:
+        """(HTTP status, JSON) of the BTF panel (`tools.page.btf_panel`), drawn in the worker and
+        kept until the next capture is stored."""
+        from tools.page.btf_panel import BadQuery, panel, parse_query
+
+        try:
+            params = parse_query(query)
+        except BadQuery as exc:
+            return 400, {"error": str(exc)}
+        key = ("btf", self.index.last_id, *sorted(params.items()))
+        if key not in self._btf:
+            self.start_worker()
+            try:
+                out = await asyncio.get_running_loop().run_in_executor(self._btf_pool, panel, self.db, params)
+            except BrokenProcessPool:
+                self._btf_pool = None
+                return 503, {"error": "the drawing worker stopped; it restarts with the next request"}
+            except Exception as exc:  # a BTF the worker cannot compute: said, never a traceback
+                return 500, {"error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+            self._btf = {key: out}  # the latest capture's only: older ones are stale
+        return 200, self._btf[key]
+
     def close(self) -> None:
         self._reader.submit(self.index.close).result()
         self._reader.shutdown()
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+        for pool in (self._pool, self._btf_pool):
+            if pool is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
 
 
 def static_dir() -> Path:
