@@ -253,7 +253,6 @@ function drawBtf() {
   options($("btf-region"), d.regions.map(([l, b]) => `<option value="${l},${b}">region ${l}, band ${esc(d.bands[b] ?? b)}</option>`).join(""),
     `${d.label},${d.band}`);
   $("btf-title").textContent = `${d.scene || "robot " + d.robot}, region ${d.label}, band ${d.band_name}: ${d.points} point${d.points === 1 ? "" : "s"}`;
-  window.btfPage.btfPoints = d.points;
   plotBtf(d);
   looBtf(d);
 }
