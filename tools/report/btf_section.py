@@ -56,9 +56,10 @@ def loo_html(btf: Any, rows: list) -> str:
         return note("Leave one out: no measured angle has measured neighbours on both sides yet.")
     s = btf_loo.summary(rows)
     verdict = "ok" if s.better == s.interior else "warn"
-    parts = [f"<p class={verdict}>Leave one out: the interpolation beats the nearest measured angle at "
-             f"<b>{s.better} of {s.interior}</b> interior (region, band, angle)s; mean exact L1 "
-             f"{s.interpolated_mean:.4f} interpolated against {s.nearest_mean:.4f} nearest.</p>"]
+    parts = [f"<p class={verdict}>Leave one out: the interpolation beats the nearest measured angle in "
+             f"<b>{s.better} of {s.interior}</b> cases (a region's band at an angle with measured angles on "
+             f"both sides); mean exact L1 {s.interpolated_mean:.4f} interpolated against {s.nearest_mean:.4f} "
+             "nearest.</p>"]
     points = sorted({r.point for r in rows}, key=lambda i: btf.directions[i].angles())
     by = {(r.label, r.band, r.point): r for r in rows}
     head = "".join(f"<th>{html.escape(btf_loo.angle_text(btf, i))}</th>" for i in points)
