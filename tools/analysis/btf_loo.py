@@ -149,6 +149,29 @@ def loo_json(btf: Btf, rows: list[LooRow]) -> list[dict]:
     return out
 
 
+def table_json(btf: Btf) -> dict:
+    """One robot and scene's BTF as `btf-host btf --json` gives it: a row per region, band and
+    measured direction (its model, pixels, moments and leave-one-out figures), and the summary."""
+    loo = leave_one_out(btf)
+    by = {(r.label, r.band, r.point): r for r in loo}
+    rows = []
+    for label, band in btf.regions():
+        for i in btf.at(label, band):
+            m, c, r = btf.models[i][(label, band)], btf.captures[i], by.get((label, band, i))
+            rows.append({"label": label, "band": band, "band_name": btf.band_name(band), "angle": angle_text(btf, i),
+                         "direction": _direction_json(btf.directions[i]),
+                         "capture": {"id": c.id, "sequence": c.sequence, "incarnation": c.incarnation},
+                         "family": m.family.value, "gamma": m.gamma, "delta": m.delta, "xi": m.xi, "lam": m.lam,
+                         "pixels": btf.counts[i].get((label, band)),
+                         **moments(btf.probabilities(i, label, band)).as_dict(),
+                         "interpolated_l1": None if r is None else r.interpolated,
+                         "nearest_l1": None if r is None else r.nearest,
+                         "nearest_angle": None if r is None else angle_text(btf, r.nearest_point)})
+    return {"robot": btf.robot, "scene": btf.scene, "space": btf.space, "levels": btf.levels,
+            "bands": list(btf.band_names), "varied": list(btf.varied), "directions": len(btf.directions),
+            "rows": rows, "leave_one_out": {"summary": summary(loo).as_dict(), "rows": loo_json(btf, loo)}}
+
+
 def _direction_json(d) -> dict:
     return {a: getattr(d, a) for a in AXIS_TITLES}
 

@@ -6,52 +6,17 @@ import argparse
 import json
 from pathlib import Path
 
-from tools.cli.options import FEATURE_SPACES, CliError, add_force, add_source_filters, check_out, open_database, sources_of
+from tools.cli.options import FEATURE_SPACES, CliError, add_force, add_source_filters, check_out, sources_of
+from tools.store.database import CorruptDatabase, Store
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("btf", help="the BTF: models, moments and leave-one-out per region, band and angle")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--db", required=True, help="database written by station, listen, ingest or demo")
     add_source_filters(p)
     p.add_argument("--space", help=f"only captures in this feature space ({', '.join(FEATURE_SPACES)})")
     p.add_argument("--json", action="store_true", help="one JSON document instead of the table")
     p.add_argument("--plot", metavar="FILE.png", help="draw the BTF of the one robot and scene into this PNG")
     add_force(p)
-    return p
-
-
-def _rows(btf, loo) -> list[dict]:
-    from tools.analysis.btf_loo import angle_text
-    from tools.analysis.btf_view import moments
-
-    by = {(r.label, r.band, r.point): r for r in loo}
-    rows = []
-    for label, band in btf.regions():
-        for i in btf.at(label, band):
-            m, c, r = btf.models[i][(label, band)], btf.captures[i], by.get((label, band, i))
-            rows.append({"label": label, "band": band, "band_name": btf.band_name(band), "angle": angle_text(btf, i),
-                         "direction": {"elevation": btf.directions[i].elevation, "azimuth": btf.directions[i].azimuth,
-                                       "light_elevation": btf.directions[i].light_elevation,
-                                       "light_azimuth": btf.directions[i].light_azimuth},
-                         "capture": {"id": c.id, "sequence": c.sequence, "incarnation": c.incarnation},
-                         "family": m.family.value, "gamma": m.gamma, "delta": m.delta, "xi": m.xi, "lam": m.lam,
-                         "pixels": btf.counts[i].get((label, band)),
-                         **moments(btf.probabilities(i, label, band)).as_dict(),
-                         "interpolated_l1": None if r is None else r.interpolated,
-                         "nearest_l1": None if r is None else r.nearest,
-                         "nearest_angle": None if r is None else angle_text(btf, r.nearest_point)})
-    return rows
-
-
-def document(btf) -> dict:
-    """One robot and scene's BTF as `--json` prints it."""
-    from tools.analysis.btf_loo import leave_one_out, loo_json, summary
-
-    loo = leave_one_out(btf)
-    return {"robot": btf.robot, "scene": btf.scene, "space": btf.space, "levels": btf.levels,
-            "bands": list(btf.band_names), "varied": list(btf.varied), "directions": len(btf.directions),
-            "rows": _rows(btf, loo),
-            "leave_one_out": {"summary": summary(loo).as_dict(), "rows": loo_json(btf, loo)}}
 
 
 def _num(v, width: int = 8, digits: int = 3) -> str:
@@ -59,7 +24,7 @@ def _num(v, width: int = 8, digits: int = 3) -> str:
 
 
 def table(doc: dict) -> list[str]:
-    """The document as lines of text: a heading, the rows, the leave-one-out summary."""
+    """A `table_json` document as lines of text: a heading, the rows, the leave-one-out summary."""
     lines = [f"BTF of {doc['scene'] or 'no scene'} (robot {doc['robot']}, {doc['space']}, {doc['levels']} levels): "
              f"{doc['directions']} direction(s), varied: {', '.join(doc['varied']) or 'nothing'}",
              f"{'label':>5} {'band':>4} {'angle':>16} {'family':>6} {'gamma':>8} {'delta':>8} {'xi':>8} {'lambda':>8} "
@@ -81,35 +46,39 @@ def table(doc: dict) -> list[str]:
     return lines
 
 
-def run(args: argparse.Namespace) -> int:
-    from tools.analysis import btf_view
-    from tools.store.database import CorruptDatabase
-
+def _check(args: argparse.Namespace) -> None:
     if args.space is not None and args.space not in FEATURE_SPACES:
         raise CliError(f"--space {args.space}: a feature space is one of {', '.join(FEATURE_SPACES)}")
     if args.plot is not None:
         if Path(args.plot).suffix.lower() != ".png":
             raise CliError(f"--plot {args.plot}: the plot is a PNG file (name it .png)")
         check_out(args.plot, (args.db,), args.force)
-    with open_database(args.db) as store:
-        try:
+
+
+def run(args: argparse.Namespace) -> int:
+    # heavy (scipy, matplotlib): loaded to run, not for --help
+    from tools.analysis.btf_loo import table_json
+    from tools.analysis.btf_view import load, sources
+    from tools.report.btf_plots import figure_png, region_blocks
+
+    _check(args)
+    try:
+        with Store.open(args.db, create=False) as store:
             caps = [c for c in store.captures() if args.space in (None, c.space)]
             if not caps and store.captures():
                 raise CliError(f"database {args.db}: no captures in feature space {args.space}")
             pairs = sources_of(caps, args.db, args.robot, args.scene)
-            found = [s for s in btf_view.sources(store, args.robot, args.scene)
+            found = [s for s in sources(store, args.robot, args.scene)
                      if (s[0], s[1]) in pairs and args.space in (None, s[2])]
             if args.plot is not None and len(found) > 1:
                 raise CliError(f"--plot draws one robot and scene; the database holds {len(found)} "
                                f"({'; '.join(f'robot {r} scene {s!r} {sp}' for r, s, sp in found[:4])}): "
                                "choose one with --robot, --scene or --space")
-            btfs = [btf_view.load(store, *s) for s in found]
-            docs = [document(b) for b in btfs]
-        except CorruptDatabase as exc:
-            raise CliError(str(exc)) from None
+            btfs = [load(store, *s) for s in found]
+            docs = [table_json(b) for b in btfs]
+    except CorruptDatabase as exc:
+        raise CliError(str(exc)) from None
     if args.plot is not None:
-        from tools.report.btf_plots import figure_png, region_blocks
-
         try:
             Path(args.plot).write_bytes(figure_png(btfs[0], region_blocks(btfs[0])))
         except OSError as exc:

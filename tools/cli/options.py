@@ -85,12 +85,3 @@ def sources_of(captures, db, robot: str | None, scene: str | None) -> list[tuple
         choose_source(captures, db, robot, scene)  # names what the database holds
     return chosen
 
-
-def open_database(db: str):
-    """An existing btfscout database, read as it is (never created); its problem in one line."""
-    from tools.store.database import CorruptDatabase, Store
-
-    try:
-        return Store.open(db, create=False)
-    except CorruptDatabase as exc:
-        raise CliError(str(exc)) from None

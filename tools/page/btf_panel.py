@@ -1,40 +1,19 @@
-"""The operator page's BTF panel data (`GET /api/btf`), computed in the page's drawing worker:
+"""The operator page's BTF panel data (`GET /api/btf`), computed in a worker process of the page:
 for one robot, scene and feature space and one (region, band), the measured points against the
 sweep's main angle, the interpolated curve between them and the leave-one-out figures
 (`tools.analysis.btf_view`, `tools.analysis.btf_loo`: what the report and `btf-host btf` show).
 """
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any
 
 from tools.analysis import btf_loo, btf_view
+from tools.store.database import Store
 
-_stores: dict[str, Any] = {}
-
-
-class BadQuery(ValueError):
-    """A query the panel cannot answer; the message says which parameter."""
+_stores: dict[str, Store] = {}
 
 
-def parse_query(query: Mapping[str, str]) -> dict:
-    """The panel's parameters from the address's query (strings), checked."""
-    out: dict[str, Any] = {k: query.get(k) or None for k in ("robot", "scene", "space")}
-    if query.get("scene") == "" and "scene" in query:
-        out["scene"] = ""  # a robot's captures without a scene name
-    for name in ("label", "band"):
-        v = query.get(name)
-        if v in (None, ""):
-            out[name] = None
-            continue
-        if not v.isdigit() or len(v) > 6:
-            raise BadQuery(f"{name} must be a small non-negative integer, got {v[:20]!r}")
-        out[name] = int(v)
-    return out
-
-
-def _store(db: str):
-    from tools.store.database import Store
-
+def _store(db: str) -> Store:
     if db not in _stores:
         _stores[db] = Store.open(db, create=False)
     return _stores[db]
