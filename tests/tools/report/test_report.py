@@ -13,7 +13,7 @@ def test_report_has_the_captures_models_synthetic_images_and_histograms(tmp_path
     db = filled_database(tmp_path / "scene.db")
     with Store.open(db) as s:
         html = write_report(s, tmp_path / "rep").read_text()
-    assert html.count("<h3>") == 2
+    assert html.count("<div class=capture ") == 2  # one section per capture
     assert "SU" in html or "SB" in html or "SL" in html or "NORMAL" in html.upper()
     pngs = sorted(p.name for p in (tmp_path / "rep").glob("*.png"))
     assert len([p for p in pngs if p.endswith("_synthetic.png")]) == 2
