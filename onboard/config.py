@@ -80,9 +80,9 @@ class FeatureConfig:
     space: str = "rgb"  # rgb | hsv | gray | pca | raw
     bands: tuple[str, ...] = ()  # empty: every band of the space
     bins_16bit: int = 4096  # histogram bins over 0..65535 for 16-bit sensors (memory: labels x bands x bins)
-    # also send grain and band correlation per region (btf.fit.dependence): on, its cost is 35 ms
-    # and 44 bytes a capture at most (RESULTS.md "dependence"), without it the host cannot
-    # reproduce grain or colour
+    # also send grain and band correlation per region (btf.fit.dependence): on, it costs no more
+    # than the fit and 87 bytes an RGB region (RESULTS.md "dependence"); without it the host
+    # cannot reproduce grain or colour (each region's observed levels travel either way)
     dependence: bool = True
 
 

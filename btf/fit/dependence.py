@@ -1,20 +1,26 @@
-"""Cross-band and spatial dependence of a region, measured on board in fixed memory.
+"""A region's grain and band dependence, measured on board in one anchored pass of fixed memory.
 
-Per region, in one bounded pass over a deterministic lattice of anchor pixels:
+Per region (btf.dependence.Dependence):
 
   corr  the correlation matrix of the bands' pixel values, upper triangle;
-  dx    the autocorrelation of the pixels at horizontal lags LAGS (band average);
-  dy    the same at vertical lags.
+  acf   the autocorrelation of the pixels at every lag of the half-plane window W(R)
+        (btf.dependence.window), the bands' average or one row per band;
+  lo/hi the lowest and highest level of each band, from the fitter's histograms (`observed`).
 
-These are plain Pearson correlations of the pixels, what an image comparison measures.
-The host turns them into the correlations of the models' normal scores z that reproduce
-them through the Johnson quantile functions (a Gaussian copula fitted by moment matching,
-`tools.analysis.fields.latent`), so the robot needs no table of z per level and quantization needs
-no correction: the pixels are what they are. One spatial autocorrelation serves all bands
-of a region (space x band separable), so synthesis mixes identically filtered fields.
+Anchors lie on a deterministic lattice (at most `max_anchors`, inside the frame by R so every
+partner exists). Each anchor's whole window of partners is read at once as a strided view of
+the frame; a pair counts only when both pixels carry the anchor's label, so a mask edge never
+mixes regions. Values are centred on the region's median (from its models) before the float32
+products, which keeps 8-bit products exact and 16-bit ones accurate. Per region, lag and band
+the pass keeps the pair count and the sums of a, b, a^2, b^2 and a b (anchor a, partner b),
+each an one-hot matrix product per chunk; the Pearson correlation of the pairs follows. The
+lags (0, dx) are read on both sides of the anchor, doubling their pairs.
 
-Memory is fixed: accumulators per label and at most `chunk` anchors gathered at a time;
-the frame itself is only indexed.
+These are plain Pearson correlations of the pixels, what an image comparison measures; the
+host turns them into the correlations of normal scores that reproduce them through the
+models (tools.analysis.latent). Memory is fixed: the accumulators (regions x window x bands)
+and, per chunk of anchors, chunk x bands x (R+1)(2R+1) float32 values; the frame itself is
+only viewed.
 """
 from __future__ import annotations
 
@@ -23,99 +29,241 @@ from typing import Mapping
 
 import numpy as np
 
-from btf.dependence import LAGS, Dependence
+from btf.dependence import RADIUS, Dependence, check_radius
 from btf.johnson import Family, Johnson
 
-MAX_ANCHORS = 65536
+# 16,384 anchors were no more accurate than 8,192 at twice the time (benchmarks: "dependence").
+MAX_ANCHORS = 8192
+CHUNK = 2048  # anchors per chunk: about 1 MB of temporaries
 MIN_PAIRS = 32  # fewer pairs than this: the correlation is reported as 0 (independent)
-_MAX_LAG = max(LAGS)
+CORR_ANCHORS = MAX_ANCHORS  # points of the band correlations' own lattice, over the whole frame
 
 
-def _anchor_step(h: int, w: int, max_anchors: int) -> int:
-    return max(1, math.ceil(math.sqrt(h * w / max_anchors)))
+def observed(counts: np.ndarray, centre0: float = 0.0, bin_width: float = 1.0,
+             levels: int = 256) -> dict[int, tuple[tuple[int, ...], tuple[int, ...]]]:
+    """{label: (lo per band, hi per band)}: the lowest and highest level of every label with
+    pixels in a fitter's histograms (labels x bands x bins, FrameFitter.counts). Bins wider
+    than a level give the levels their edges cover."""
+    out = {}
+    occupied = counts > 0
+    for label in np.flatnonzero(occupied[:, 0].any(axis=1)):
+        first = occupied[label].argmax(axis=1)
+        last = counts.shape[2] - 1 - occupied[label, :, ::-1].argmax(axis=1)
+        lo = np.floor(centre0 + (first - 0.5) * bin_width + 0.5)
+        hi = np.ceil(centre0 + (last + 0.5) * bin_width - 0.5)
+        out[int(label)] = (tuple(int(v) for v in np.clip(lo, 0, levels - 1)),
+                           tuple(int(v) for v in np.clip(hi, 0, levels - 1)))
+    return out
+
+
+def _lattice(h: int, w: int, radius: int, max_anchors: int) -> list[tuple[np.ndarray, int, int]]:
+    """Anchor blocks: (window top rows, first window column, windows per row) per phase. A
+    row's windows lie side by side (2R + 1 columns each), so its partners are one run of the
+    frame's row."""
+    width = 2 * radius + 1
+    hv, nx = h - radius, w // width
+    if hv < 1 or nx < 1:
+        return []
+    # Phases: several runs of windows per row, shifted, so the lattice is about as fine across
+    # as down (13 x 10 pixels for 8192 anchors of a 1 MP frame; finer phases for small frames).
+    phases = min(width, max(1, round(width / math.sqrt(hv * w / max_anchors))))
+    step = max(1, math.ceil(hv * nx * phases / max_anchors))
+    out = []
+    for p in range(phases):
+        off = p * width // phases
+        if (w - off) // width >= 1:
+            out.append((np.arange(p * step // phases, hv, step), off, (w - off) // width))
+    return out
+
+
+class _Sums:
+    """Per region, window position and band: the pair count and the pairs' sums of a, a^2
+    (anchor side), b, a b and b^2 (partner side); and the anchors' own moments for the band
+    correlation."""
+
+    def __init__(self, n_regions: int, n_bands: int, positions: int) -> None:
+        self.k, self.b = n_regions, n_bands
+        self.anchor_side = np.zeros((1 + 2 * n_bands, n_regions, positions))  # n, sum a, sum a^2
+        self.partner = np.zeros((3, n_bands, n_regions, positions))  # sum b, sum a b, sum b^2
+
+    def anchors(self, onehot: np.ndarray, anchor: np.ndarray) -> np.ndarray:
+        """Starts a chunk: the rows (n, sum a, sum a^2 per band) to weigh each window position's
+        pairs with, and the chunk's own accumulators (its regions only). anchor (n, B)."""
+        n, kk = onehot.shape[1], onehot.shape[0]
+        weighted = onehot[None] * anchor.T[:, None, :]  # (B, K', n)
+        self._side = np.zeros((1 + 2 * self.b, kk, self.anchor_side.shape[2]))
+        self._partner = np.zeros((3, self.b, kk, self.anchor_side.shape[2]))
+        self._weighted = weighted.reshape(-1, n)  # sum a b: each band's block of the product is kept
+        left = np.concatenate([onehot, self._weighted, (weighted * anchor.T[:, None, :]).reshape(-1, n)])
+        self._whole = left.sum(axis=1)  # what every window position would get were all partners inside
+        return left
+
+    def pairs(self, cols: slice, left: np.ndarray, off: np.ndarray, edge: np.ndarray, values: np.ndarray) -> None:
+        """One row of window positions (`cols`): values (n, (2R+1) B) the partners' centred
+        values, position-major; `edge` the anchors with a partner off their region, `off`
+        (edge x 2R+1) 1 there. Most anchors have every partner inside their region: the sums
+        take all partners, then take back the few off it (not a mask over every value)."""
+        kk, b = self._side.shape[1], self.b
+        side = np.repeat(self._whole[:, None], off.shape[1], axis=1)
+        onehot = left[:kk]
+        total, products, squares = onehot @ values, self._weighted @ values, onehot @ (values * values)
+        if edge.size:
+            side -= left[:, edge] @ off
+            stray = values[edge] * np.repeat(off, b, axis=1)
+            total -= onehot[:, edge] @ stray
+            products -= self._weighted[:, edge] @ stray
+            squares -= onehot[:, edge] @ (stray * stray)
+        self._side[:, :, cols] += side.reshape(1 + 2 * b, kk, -1)
+        for band in range(b):
+            self._partner[0, band, :, cols] += total[:, band::b]
+            self._partner[1, band, :, cols] += products[band * kk:(band + 1) * kk, band::b]
+            self._partner[2, band, :, cols] += squares[:, band::b]
+
+    def flush(self, present: np.ndarray) -> None:
+        """Ends a chunk: its regions' sums into the totals."""
+        self.anchor_side[:, present] += self._side
+        self.partner[:, :, present] += self._partner
+
+    def pearson(self, region: int) -> np.ndarray:
+        """Per band and window position, the Pearson correlation of one region's pairs."""
+        n = self.anchor_side[0, region]
+        sa, saa = self.anchor_side[1:1 + self.b, region], self.anchor_side[1 + self.b:, region]
+        sb, sab, sbb = self.partner[:, :, region]
+        with np.errstate(all="ignore"):
+            m = (sa + sb) / (2 * n)
+            var = (saa + sbb) / (2 * n) - m * m
+            cov = sab / n - m * m
+            r = np.where((n >= MIN_PAIRS) & (var > 1e-9), cov / var, 0.0)
+        return np.clip(np.nan_to_num(r), -1.0, 1.0)
 
 
 def measure(
     data: np.ndarray, labels: np.ndarray, models: Mapping[tuple[int, int], Johnson],
-    levels: int = 256, max_anchors: int = MAX_ANCHORS, chunk: int = 8192,
+    levels: int = 256, max_anchors: int = MAX_ANCHORS, chunk: int = CHUNK, radius: int = RADIUS,
+    per_band: bool = False, levels_seen: Mapping[int, tuple[tuple[int, ...], tuple[int, ...]]] | None = None,
 ) -> dict[int, Dependence]:
-    """Dependence of every label that has a model for each band of `data` (H x W x B pixels).
-    `levels` is accepted for symmetry with the fitter; pixel correlations do not need it."""
+    """Dependence of every label that has a model for each band of `data` (H x W x B pixels);
+    `levels_seen` ({label: (lo, hi)}, `observed`) fills in the observed levels, `per_band`
+    keeps one autocorrelation row per band instead of their average."""
     if data.ndim == 2:
         data = data[..., None]
     if data.ndim != 3 or labels.shape != data.shape[:2]:
         raise ValueError(f"data {data.shape} and labels {labels.shape} do not match")
-    h, w, n_bands = data.shape
     if max_anchors < 1 or chunk < 1:
         raise ValueError("max_anchors and chunk must be positive")
+    check_radius(radius)
+    h, w, n_bands = data.shape
     regions = sorted({lab for lab, _ in models if all((lab, b) in models for b in range(n_bands))})
     if not regions:
         return {}
-    index = np.full(max(int(labels.max(initial=0)), max(regions)) + 1, -1, dtype=np.int64)
-    index[regions] = np.arange(len(regions))
-    n_reg = len(regions)
-    live = np.array([[models[(lab, b)].family is not Family.CONST for b in range(n_bands)]
-                     for lab in regions])
-
-    def pixels_at(rr: np.ndarray, cc: np.ndarray, li: np.ndarray) -> np.ndarray:
-        return data[rr, cc].astype(np.float64)  # (n, B)
-
-    # Accumulators: anchors (n, sum z, sum z z') and pairs per direction and lag.
-    n0 = np.zeros(n_reg)
-    s1 = np.zeros((n_reg, n_bands))
-    s2 = np.zeros((n_reg, n_bands, n_bands))
-    npair = np.zeros((2, len(LAGS), n_reg))
-    ps = np.zeros((2, len(LAGS), 5, n_reg, n_bands))  # sum a, sum b, sum a^2, sum b^2, sum ab
-
-    step = _anchor_step(h, w, max_anchors)
-    rows, cols = np.arange(0, h, step), np.arange(0, w, step)
-    per = max(1, chunk // max(1, len(cols)))
-    for start in range(0, len(rows), per):
-        rr, cc = np.meshgrid(rows[start:start + per], cols, indexing="ij")
-        rr, cc = rr.ravel(), cc.ravel()
-        li = index[labels[rr, cc]]
-        ok = li >= 0
-        rr, cc, li = rr[ok], cc[ok], li[ok]
-        if not rr.size:
-            continue
-        za = pixels_at(rr, cc, li)
-        n0 += np.bincount(li, minlength=n_reg)
-        s1 += _sum_by(li, za, n_reg)
-        s2 += _sum_by(li, za[:, :, None] * za[:, None, :], n_reg)
-        for d, (dr, dc) in enumerate(((0, 1), (1, 0))):
-            for k, lag in enumerate(LAGS):
-                r2, c2 = rr + dr * lag, cc + dc * lag
-                inside = (r2 < h) & (c2 < w)
-                sel = np.flatnonzero(inside)
-                sel = sel[index[labels[r2[sel], c2[sel]]] == li[sel]]
-                if not sel.size:
-                    continue
-                a, lk = za[sel], li[sel]
-                b = pixels_at(r2[sel], c2[sel], lk)
-                npair[d, k] += np.bincount(lk, minlength=n_reg)
-                for q, v in enumerate((a, b, a * a, b * b, a * b)):
-                    ps[d, k, q] += _sum_by(lk, v, n_reg)
-
+    index = np.full(max(int(labels.max(initial=0)), max(regions)) + 2, -1, dtype=np.int64)
+    index[regions] = np.arange(len(regions))  # the last entry stays -1: negative labels land there
+    centre = np.array([[_median(models[(lab, b)], levels) for b in range(n_bands)] for lab in regions],
+                      dtype=np.float32)
+    sums = _Sums(len(regions), n_bands, (radius + 1) * (2 * radius + 1))
+    for rows, col, nx in _lattice(h, w, radius, max_anchors):
+        per = max(1, chunk // nx)
+        for start in range(0, len(rows), per):
+            _chunk(sums, data, labels, rows[start:start + per], col, nx, index, centre, radius)
+    live = np.array([[models[(lab, b)].family is not Family.CONST for b in range(n_bands)] for lab in regions])
+    corrs = _band_correlations(data, labels, index, centre, CORR_ANCHORS * max_anchors // MAX_ANCHORS, chunk)
     out = {}
     for j, lab in enumerate(regions):
-        corr = _pearson_matrix(n0[j], s1[j], s2[j])
-        iu = np.triu_indices(n_bands, 1)
-        spatial = []
-        for d in range(2):
-            per_lag = []
-            for k in range(len(LAGS)):
-                r = _pearson_pairs(npair[d, k, j], ps[d, k, :, j, :])
-                use = live[j]
-                per_lag.append(float(np.mean(r[use])) if use.any() else 0.0)
-            spatial.append(tuple(_clip1(v) for v in per_lag))
-        out[lab] = Dependence(tuple(_clip1(v) for v in corr[iu]), spatial[0], spatial[1])
+        r, corr = sums.pearson(j), corrs[j]
+        grain = _window(r, radius)
+        rows_out = grain if per_band else (grain[live[j]].mean(axis=0) if live[j].any()
+                                          else np.zeros(grain.shape[1]))[None]
+        seen = (levels_seen or {}).get(lab, ((), ()))
+        out[lab] = Dependence(tuple(corr[np.triu_indices(n_bands, 1)].tolist()),
+                              tuple(tuple(row.tolist()) for row in rows_out), radius, *seen)
     return out
 
 
-def _sum_by(index: np.ndarray, values: np.ndarray, n: int) -> np.ndarray:
-    flat = values.reshape(len(index), -1)
-    return np.stack([np.bincount(index, flat[:, i], minlength=n) for i in range(flat.shape[1])],
-                    axis=1).reshape((n,) + values.shape[1:])
+def _chunk(sums: _Sums, data: np.ndarray, labels: np.ndarray, rows: np.ndarray, col: int, nx: int,
+           index: np.ndarray, centre: np.ndarray, radius: int) -> None:
+    """One block of anchor rows: per window row dy, the frame's rows below the anchors, read as
+    planes (anchors x 2R+1 columns) per band."""
+    width = 2 * radius + 1
+    span, step = nx * width, int(rows[1] - rows[0]) if len(rows) > 1 else 1
+    r0, r1 = int(rows[0]), int(rows[-1]) + 1
+    n_bands = data.shape[2]
+    anchor_labels = labels[r0:r1:step, col + radius:col + span:width]  # (ny, nx)
+    n = anchor_labels.size
+    region = index[np.where(anchor_labels < 0, -1, anchor_labels)].reshape(n)
+    inside = region >= 0
+    present, local = np.unique(region[inside], return_inverse=True)
+    if not present.size:
+        return
+    onehot = np.zeros((len(present), n), dtype=np.float32)
+    onehot[local, np.flatnonzero(inside)] = 1.0
+    wide_labels = np.repeat(anchor_labels, width, axis=1)
+    centres = np.repeat(centre[np.where(inside, region, 0)].reshape(anchor_labels.shape + (1, n_bands)), width, axis=2)
+    values = np.empty((len(anchor_labels), nx, width, n_bands), dtype=np.float32)
+    off = np.empty(wide_labels.shape, dtype=bool)
+    all_inside = bool(inside.all())
+    left = None
+    for dy in range(radius + 1):
+        np.not_equal(labels[r0 + dy:r1 + dy:step, col:col + span], wide_labels, out=off)
+        np.subtract(data[r0 + dy:r1 + dy:step, col:col + span].reshape(values.shape), centres, out=values,
+                    casting="unsafe")
+        if left is None:  # the first window row holds the anchors themselves
+            left = sums.anchors(onehot, values[:, :, radius].reshape(n, n_bands))
+        rows_off = off.reshape(n, width)
+        stray = rows_off.any(axis=1)
+        edge = np.flatnonzero(stray if all_inside else stray & inside)
+        sums.pairs(slice(dy * width, (dy + 1) * width), left, rows_off[edge].astype(np.float32), edge,
+                   values.reshape(n, width * n_bands))
+    sums.flush(present)
+
+
+def _band_correlations(data: np.ndarray, labels: np.ndarray, index: np.ndarray, centre: np.ndarray,
+                       max_points: int, chunk: int) -> np.ndarray:
+    """(regions, B, B) band correlation matrices from a lattice over the whole frame, its edges
+    included (the window's anchors keep R pixels off them, which biased regions that lie there)."""
+    h, w, n_bands = data.shape
+    step = max(1, math.ceil(math.sqrt(h * w / max(1, max_points))))
+    k = len(centre)
+    pairs = [(b, c) for b in range(n_bands) for c in range(b + 1)]
+    sums = np.zeros((k, 1 + n_bands + len(pairs)))  # n, sum x_b, sum x_b x_c
+    cols = np.arange((w - 1) % step // 2, w, step)
+    per = max(1, 8 * chunk // len(cols))
+    for r0 in range(((h - 1) % step) // 2, h, step * per):
+        lab = labels[r0:r0 + step * per:step, cols[0]::step].reshape(-1)
+        region = index[np.where(lab < 0, -1, lab)]
+        inside = region >= 0
+        if not inside.any():
+            continue
+        region = region[inside]
+        x = data[r0:r0 + step * per:step, cols[0]::step].reshape(-1, n_bands)[inside].astype(np.float32)
+        x -= centre[region]
+        columns = np.empty((len(region), sums.shape[1]), np.float32)
+        columns[:, 0] = 1.0
+        columns[:, 1:1 + n_bands] = x
+        for q, (b, c) in enumerate(pairs):
+            np.multiply(x[:, b], x[:, c], out=columns[:, 1 + n_bands + q])
+        onehot = np.zeros((k, len(region)), np.float32)
+        onehot[region, np.arange(len(region))] = 1.0
+        sums += onehot @ columns
+    out = []
+    for j in range(k):
+        s2 = np.zeros((n_bands, n_bands))
+        for q, (b, c) in enumerate(pairs):
+            s2[b, c] = s2[c, b] = sums[j, 1 + n_bands + q]
+        out.append(_pearson_matrix(sums[j, 0], sums[j, 1:1 + n_bands], s2))
+    return np.array(out)
+
+
+def _window(r: np.ndarray, radius: int) -> np.ndarray:
+    """(B, window) in record order from (B, positions): the lags (0, dx) from both sides of the
+    anchor (weighted alike: each side a like number of pairs)."""
+    width = 2 * radius + 1
+    right = r[:, radius + 1:width]
+    left = r[:, radius - 1::-1][:, :radius]
+    return np.concatenate([0.5 * (right + left), r[:, width:]], axis=1)
+
+
+def _median(model: Johnson, levels: int) -> float:
+    return float(np.clip(model.x_of_z(0.0), 0, levels - 1))
 
 
 def _pearson_matrix(n: float, s1: np.ndarray, s2: np.ndarray) -> np.ndarray:
@@ -125,25 +273,8 @@ def _pearson_matrix(n: float, s1: np.ndarray, s2: np.ndarray) -> np.ndarray:
     mean = s1 / n
     cov = s2 / n - np.outer(mean, mean)
     sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
-    with np.errstate(all="ignore"):
-        r = cov / np.outer(sd, sd)
-    r = np.where(np.outer(sd, sd) > 1e-9, r, 0.0)
-    np.fill_diagonal(r, 1.0)
-    return np.clip(np.nan_to_num(r, nan=0.0), -1.0, 1.0)
-
-
-def _pearson_pairs(n: float, s: np.ndarray) -> np.ndarray:
-    """Per band correlation of pair sets from (sum a, sum b, sum a^2, sum b^2, sum ab)."""
-    if n < MIN_PAIRS:
-        return np.zeros(s.shape[1])
-    ma, mb = s[0] / n, s[1] / n
-    va, vb = s[2] / n - ma * ma, s[3] / n - mb * mb
-    cov = s[4] / n - ma * mb
-    den = np.sqrt(np.maximum(va, 0.0) * np.maximum(vb, 0.0))
+    den = np.outer(sd, sd)
     with np.errstate(all="ignore"):
         r = np.where(den > 1e-9, cov / den, 0.0)
+    np.fill_diagonal(r, 1.0)
     return np.clip(np.nan_to_num(r, nan=0.0), -1.0, 1.0)
-
-
-def _clip1(v: float) -> float:
-    return float(min(1.0, max(-1.0, v)))

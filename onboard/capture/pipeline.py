@@ -65,7 +65,8 @@ class FittedView:
     unchanged: bool = False
     stride: int = 1
     pca: PcaBasis | None = None  # the scene's basis, on the first capture made with it
-    dependence: dict[int, Dependence] | None = None  # grain and band correlation, when configured
+    # each region's observed levels, and its grain and band correlation when configured
+    dependence: dict[int, Dependence] | None = None
     camera: CaptureSettings | None = None  # what it was taken with (None: a frame from elsewhere)
 
 
@@ -268,6 +269,8 @@ class Pipeline:
         data = feats.data
         stride = skip.subsample_stride(counts, keep, cfg.skip.percentile_precision, data.shape[1])
         results = {k: r for k, r in self.fit_frame(data, labels, feats.levels, stride).items() if k[0] in keep}
+        fitter = self.fitter(data.shape[2], feats.levels)  # its histograms give each region's levels
+        seen = dependence.observed(fitter.counts, fitter.centre0, fitter.bin_width, feats.levels)
         primary, camera = results, None  # `primary`: the models of this frame's own pixels
         if settings is not None and self.lock is not None:
             camera = self.settings_record(settings, data, labels, feats.levels)
@@ -282,7 +285,10 @@ class Pipeline:
         self.pca_pending = False
         dep = None
         if cfg.features.dependence and results and not same:  # a bounded second pass
-            dep = dependence.measure(data, labels, {k: r.model for k, r in primary.items()}, feats.levels)
+            dep = dependence.measure(data, labels, {k: r.model for k, r in primary.items()}, feats.levels,
+                                     levels_seen=seen)
+        elif results and not same:  # the levels each region took: free, and what synthesis keeps to
+            dep = {lab: Dependence.observed(*seen[lab]) for lab in {lab for lab, _ in results} if lab in seen}
         return FittedView(commanded, measured, feats.band_names, feats.levels, results, dropped,
                           labels, changed, same, stride, pca, dep, camera)
 

@@ -21,8 +21,10 @@ The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
            label ids present (bit i of byte j: label 8j + i; the last byte non-zero), then per
            label, in id order, the varint (LEB128) of count * 16 + z index
   codes    per label, per band, four codes (>H up to 256 levels, else >I)
-  dependence  when flagged: per label, its grain and band correlation in int8
-           (`radio.packets.dependence`, 11 bytes per RGB label); never flagged empty
+  dependence  when flagged: per label, its observed levels and (when measured) its grain and
+           band correlation (`radio.packets.dependence`: a versioned section, 93 bytes per
+           RGB label at the robot's window; robots before the version sent 11); never flagged
+           empty
   camera   when flagged: the capture's camera settings, reference level and brackets
            (`radio.packets.camera`, 10 bytes for a locked capture without either)
   records  (`radio.packets.records`) absent when every model is plain; else 2 bits per model (model i at bits 2(i%4) of
@@ -33,10 +35,9 @@ The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
            censored high H.
 A model is plain when it was read at its label's z, unshifted, with the SL band and nothing
 censored; the fitter chooses among a few reads per region (btf.fit.reads), so a model read
-another way costs its 8 bytes, 2 bits and one byte. Dependence costs its section and no
-header beyond the flag bit (the section's length follows from the labels and bands), so a
-packet grows by 11 bytes per RGB label, plus one byte of the blob's msgpack header when the
-section pushes it past 255 bytes.
+another way costs its 8 bytes, 2 bits and one byte. Dependence costs its section (3 bytes of
+header and 2 bits a label, then the records) and no header beyond the flag bit, plus one byte
+of the blob's msgpack header when the section pushes it past 255 bytes.
 """
 from __future__ import annotations
 
@@ -70,7 +71,7 @@ from radio.packets.base import (
     want_str,
 )
 from radio.packets.camera import decode_camera, encode_camera
-from radio.packets.dependence import decode_dependence, encode_dependence, quantized, section_size
+from radio.packets.dependence import decode_dependence, encode_dependence, quantized
 from radio.packets.records import Tail, censor_code, read_tails, tail_bytes, tail_of
 from radio.varint import get_varint, put_varint
 
@@ -123,7 +124,7 @@ class ModelsPacket:
     levels: int
     labels: tuple[LabelModels, ...]
     extras: Mapping[str, Any] = field(default_factory=dict)
-    # Grain and band correlation per label id, for some or all labels (empty: none measured).
+    # Observed levels, grain and band correlation per label id, for some or all labels (empty: none).
     dependence: Mapping[int, Dependence] = field(default_factory=dict)
     camera: CaptureSettings | None = None  # what the capture was taken with (None: not sent)
     # Filled by decode: (label, band index) -> the record, its model recomputed from the codes.
@@ -165,7 +166,7 @@ class ModelsPacket:
             raise ValueError(f"percentile codes do not fit {dtype}")
         out += codes.astype(dtype).tobytes()
         if self.dependence:
-            out += encode_dependence(self.dependence, ids, len(self.bands))
+            out += encode_dependence(self.dependence, ids, len(self.bands), self.levels)
         if self.camera is not None:
             out += encode_camera(self.camera, len(self.bands), codec, ids)
         entries = [tail_bytes(t, lab.z_index) for lab in self.labels
@@ -218,14 +219,7 @@ class ModelsPacket:
         pos += size
         dependence: dict[int, Dependence] = {}
         if has_dependence:
-            end = pos + section_size(n, n_bands)
-            if end > len(blob):
-                raise FrameError(f"dependence section has {len(blob) - pos} bytes, expected "
-                                 f"{n} labels x {section_size(1, n_bands)}")
-            dependence = decode_dependence(blob[pos:end], ids, n_bands)
-            if not dependence:
-                raise FrameError("dependence section flagged but no label has a measurement")
-            pos = end
+            dependence, pos = decode_dependence(blob, ids, n_bands, levels, pos)
         camera = None
         if has_camera:
             camera, pos = decode_camera(blob, pos, n_bands, codec, ids)
@@ -283,7 +277,7 @@ def models_packet(
     return ModelsPacket(
         robot_id, seq, time, tuple(commanded), tuple(measured), feature_space, tuple(bands),
         levels, tuple(records), dict(extras or {}),
-        quantized(dependence, ids, len(bands)) if dependence else {}, camera,
+        quantized(dependence, ids, len(bands), levels) if dependence else {}, camera,
     )
 
 

@@ -17,7 +17,7 @@ from btf.johnson import Family, Johnson
 
 EXPECTED = {"bracketing", "core", "dependence", "hostmem", "ingest", "onboard", "page", "peers", "runtime", "sampling", "scene", "stability",
             "startup",
-            "subsample", "synth", "wire", "link", "failsafe"}
+            "subsample", "synth", "texture", "wire", "link", "failsafe"}
 
 
 def test_every_expected_benchmark_is_discovered():
@@ -66,11 +66,21 @@ def test_quick_run_gives_titled_sections_with_tables_and_existing_plots(name, qu
         assert (out / image).stat().st_size > 1000
 
 
-def test_dependence_quick_run_reports_both_masks_and_the_anchor_rows(quick):
+def test_dependence_quick_run_reports_anchor_rows_against_the_fit_and_the_bytes(quick):
     text, _ = quick("dependence")
-    assert "one region" in text and "four quadrants" in text
+    assert re.search(r"^\| 2048 \| \d\.\d{3} \| \d\.\d{3} \| \d+\.\d\dx \| \d+\.\d\dx \|$", text, re.M)
+    assert re.search(r"\*\*dependence pass / fit at \d+ anchors: \d+\.\d\dx\*\*", text)
+    assert re.search(r"\| \d+ B \| \d+ B \| \+\d+ B \|", text)
+
+
+def test_texture_quick_run_judges_each_photograph_and_times_both_paths(quick):
+    text, out = quick("texture")
+    rows = [r for r in tables(text)[0][2:]]
+    assert [r.split("|")[1].strip() for r in rows] == ["grass", "coffee"]
     assert re.search(r"\*\*correlated / independent = \d+\.\d\dx\*\*", text)
-    assert re.search(r"^\| 4096 \| \d+\.\d ms \| \d\.\d{3} \| \d\.\d{3} \|$", text, re.M)
+    assert "one region" in text and "four quadrants" in text
+    assert re.search(r"outside the observed levels: worst region 0\.000%", text)  # never a level a region lacked
+    assert (out / "texture_coffee.png").stat().st_size > 1000
 
 
 def test_ingest_quick_run_times_every_executor_on_the_same_database(quick):

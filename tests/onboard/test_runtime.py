@@ -269,7 +269,7 @@ def test_a_kill_at_any_commit_delivers_every_pose_exactly_once(fake_robot, tmp_p
 
 def test_a_full_outbox_pauses_the_pose_and_measures_it_once_after_the_ack(fake_robot):
     tr = MemoryTransport(auto_ack=False)
-    rt, _ = make(fake_robot, "black", extra=PLAN3, transport=tr, quota=400)
+    rt, _ = make(fake_robot, "black", extra=PLAN3, transport=tr, quota=600)
     box = rt.outbox
     rt.boot()
     for _ in range(6):
@@ -286,7 +286,7 @@ def test_a_full_outbox_pauses_the_pose_and_measures_it_once_after_the_ack(fake_r
     got = poses_by_seq(host_view(tr))
     assert [e for e, _ in got] == [70, 80, 90] and len({s for _, s in got}) == 3
     assert not rt.progress.skipped and rt.paused_reason == ""
-    assert box.bytes_used <= 400
+    assert box.bytes_used <= 600
 
 
 def test_a_restart_after_a_finished_sweep_does_not_sweep_again(fake_robot):
@@ -312,7 +312,7 @@ def test_a_restart_after_a_finished_sweep_does_not_sweep_again(fake_robot):
 
 def test_a_sweep_paused_by_a_full_outbox_rests_between_turns_instead_of_spinning(fake_robot):
     rests = []
-    rt, _ = make(fake_robot, "black", extra=PLAN3, transport=MemoryTransport(auto_ack=False), quota=400,
+    rt, _ = make(fake_robot, "black", extra=PLAN3, transport=MemoryTransport(auto_ack=False), quota=600,
                  sleep=lambda s: rests.append(s))
     turns = []
     rt.run(lambda r: turns.append(1) or len(turns) > 20, tick_s=0.01)

@@ -40,7 +40,7 @@ from radio.packets import (
     models_packet,
 )
 from radio.packets.base import MAX_FRAME_PIXELS
-from radio.packets.dependence import record_size
+from radio.packets.dependence import decode_dependence, record_size
 from radio.varint import get_varint
 
 HEADER = dict(robot_id=3, seq=41, time=1_700_000_000.25, commanded=(45.0, 30.0),
@@ -169,21 +169,25 @@ def _sections(body: bytes) -> dict[str, int]:
     pos = 11 + nb
     for _ in ids:
         _, pos = get_varint(blob, pos, "count", 6)
-    width = 2 if struct.unpack_from(">H", blob, 8)[0] < 256 else 4
+    levels = struct.unpack_from(">H", blob, 8)[0] + 1
+    width = 2 if levels <= 256 else 4
     codes = len(ids) * n_bands * 4 * width
-    dependence = len(ids) * record_size(n_bands) if blob[10] & 0x80 else 0
+    start = pos + codes
+    dependence = decode_dependence(blob, ids, n_bands, levels, start)[1] - start if blob[10] & 0x80 else 0
     return {"labels": pos - 10, "codes": codes, "dependence": dependence,
             "records": len(blob) - pos - codes - dependence}
 
 
 def test_dependence_sits_between_codes_and_records_and_both_round_trip():
     fits = _fits(3, 3, seed=2)
-    deps = {1: Dependence((0.3, -0.2, 0.9), (0.8, 0.6, 0.4, 0.1), (0.7, 0.5, 0.2, 0.0)),
-            7: Dependence.independent(3)}  # labels 1, 4, 7; label 4 unmeasured
+    deps = {1: Dependence.from_lags((0.3, -0.2, 0.9), (0.8, 0.6, 0.4, 0.1), (0.7, 0.5, 0.2, 0.0)),
+            7: Dependence.independent(3, radius=8)}  # labels 1, 4, 7; label 4 unmeasured
     packet = models_packet(fits, bands=("R", "G", "B"), censored={4: (0.01, 0.2)}, dependence=deps, **HEADER)
     body = encode(packet)
     parts = _sections(body)
-    assert parts["dependence"] == 3 * 11 and parts["records"] > 0
+    # header 3, kinds 1 (three labels), two grain records of radius 8: 3 correlations, 144 lags
+    assert parts["dependence"] == 3 + 1 + 2 * record_size(3, 8, grain=True, observed=False) == 298
+    assert parts["records"] > 0
     back = decode(body)
     assert back.dependence == packet.dependence and set(back.dependence) == {1, 7}
     assert back.models == decode(encode_models(fits, bands=("R", "G", "B"), censored={4: (0.01, 0.2)},
@@ -360,7 +364,11 @@ BAD = {
     "camera section ends inside its flags": _blob(lambda b: b.__setitem__(10, b[10] | 0x40)),
     "dependence section has 0 bytes": _blob(lambda b: b.__setitem__(10, b[10] | 0x80)),
     "no label has a measurement": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80" * 22),
-    "dependence code -128": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80" + b"\x00" * 21),
+    "dependence code -128": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x00\x80" + b"\x00" * 20),
+    "dependence section version 2": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80\x02\x06\x00"),
+    "no label has a record": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80\x01\x06\x00"),
+    "radius outside 1..8": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80\x01\x09\x01"),
+    "observed levels": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80\x01\x06\x01" + bytes([9, 9, 9, 1, 1, 1])),
     "unknown command": _raw(SCHEMA_VERSION, int(Kind.COMMAND), 1, 99, {}),
     "takes arguments": _raw(SCHEMA_VERSION, int(Kind.COMMAND), 1, int(CommandName.PING), {"x": 1}),
     "empty run": _raw(SCHEMA_VERSION, int(Kind.MASK), 1, 1, 8, 8, 2, 2, b"\x01\x02", b"\x00\x04\x00\x00"),

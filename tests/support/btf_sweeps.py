@@ -49,7 +49,8 @@ def write_sweep(db: Path, truth: Callable[[float, float, int], Johnson], elevati
                         results[(label, b)] = FittedModel(model, 1000 + label, 0.5, (1.0, 2.0, 3.0, 4.0))
                 store.add_capture(robot, seq, 1000.0 + seq, (el, az), (m_el, m_az), "rgb", BANDS, results,
                                   scene=scene, camera=CaptureSettings(exposure_us=5000.0, gain=2.0),
-                                  dependence={1: Dependence((0.5, 0.4, 0.3), (0.9, 0.8, 0.6, 0.3), (0.9, 0.7, 0.5, 0.2))})
+                                  dependence={1: Dependence.from_lags((0.5, 0.4, 0.3), (0.9, 0.8, 0.6, 0.3), (0.9, 0.7, 0.5, 0.2),
+                                                                     (10, 20, 30), (200, 210, 220))})
                 measured.append((m_el, m_az))
                 seq += 1
     return measured

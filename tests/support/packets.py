@@ -1,5 +1,5 @@
 """Packets a robot would send, made from the fake scene, and a database filled with them."""
-from btf.fit.dependence import measure
+from btf.fit.dependence import measure, observed
 from btf.fit.fitter import FrameFitter
 from hal.interfaces import ViewAngles
 from hal.scene import render
@@ -25,7 +25,10 @@ def dependence_body(seq, elevation=60.0):
     """A MODELS body carrying the dependence measured on its own view, and that dependence."""
     view = render("mixed", ViewAngles(elevation, 0.0), (40, 48), seed=0)
     _, fits, _ = models_body(seq, elevation)
-    deps = measure(view.image, view.mask, {k: r.model for k, r in fits.items()})
+    f = FrameFitter(4, 3)
+    f.add(view.image, view.mask)
+    deps = measure(view.image, view.mask, {k: r.model for k, r in fits.items()},
+                   levels_seen=observed(f.counts, f.centre0, f.bin_width))
     return models_body(seq, elevation, dependence=deps)[0], deps
 
 

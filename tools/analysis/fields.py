@@ -1,240 +1,282 @@
-"""Correlated Gaussian fields for synthesis: the grain (autocorrelation) and the joint colour.
+"""Correlated fields for synthesis: a region's grain (2-D autocorrelation) and joint colour.
 
-A region's bands share one spatial autocorrelation (measured at `btf.fit.dependence.LAGS`
-along rows and columns). It is modelled as separable, r(dy, dx) = r_y(dy) r_x(dx); each 1-D
-sequence is the measured lags joined log-linearly (exact for exponential decay), continued
-past the last lag with the decay rate of the last two, and made a valid autocorrelation by
-alternating projections (non-negative spectrum <-> the measured values). White noise drawn
-straight in the frequency domain, shaped by the spectrum's square root and transformed
-once, gives a unit-variance stationary field; B such fields mixed by the Cholesky factor
-of the band copula give z with both the grain and the cross-band correlation. Each band
-then goes through its Johnson quantile function, so every marginal stays exact.
+Per stored record (cached, `grain_of`): each band's map from z to its levels
+(tools.analysis.levelmap), the latent band correlation matrix (tools.analysis.latent) and the
+non-negative spectrum of the grain on a ring (tools.analysis.spectrum), one shared by the bands
+or one per band. Per call (`draw`), for each band:
+
+1. random-phase noise (Galerne et al.): every coefficient of the rfft half-grid has the
+   amplitude of the spectrum exactly and a uniform phase, 8 random bits, through a table of
+   256 unit phasors: no normal draws, a byte per two pixels; the field is Gaussian by the
+   central limit theorem and its periodogram is the spectrum;
+2. per-band spectra are mixed before the amplitude, so each band keeps its own spectrum and
+   the bands their correlation (less the coherence their spectra lose, corrected for);
+3. exact sample moments in the frequency domain: the bands' covariance over the grid is read
+   off the coefficients (Parseval) and a lower-triangular matrix folded into them makes it the
+   target exactly, so one realisation of a long grain does not scatter the band correlation;
+   the mean is the zero-frequency coefficient, set to the table's offset;
+4. one inverse real FFT per field (float32, scipy.fft sizes from next_fast_len), the output
+   already the index of each pixel's level in its band's z table.
+A region that does not fill its grid has its moments made exact over its own pixels after the
+transform instead (two passes more).
 """
 from __future__ import annotations
 
-import math
+import threading
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 import scipy.fft as sfft
+from scipy.linalg import blas
+from threadpoolctl import ThreadpoolController
 
-from btf.dependence import LAGS, Dependence
-from btf.johnson import Family, Johnson, normal_ppf
-from tools.analysis.tiles import Region, row_tiles
+from btf.dependence import MAX_RADIUS, Dependence
+from tools.analysis.latent import grain_curve, latent_bands
+from tools.analysis.levelmap import Z_SPAN, LevelMap
+from tools.analysis.spectrum import RING, amplitude, ring_spectrum
 
-_PROJECTIONS = 12
-_NODES = 48  # Gauss-Hermite nodes per axis for the pixel moments
-_BISECT = 30
-
-
-def nearest_correlation(m: np.ndarray, floor: float = 1e-6) -> np.ndarray:
-    """The nearest valid correlation matrix: symmetric, unit diagonal, eigenvalues >= floor."""
-    m = np.asarray(m, dtype=np.float64)
-    if m.ndim != 2 or m.shape[0] != m.shape[1] or not np.all(np.isfinite(m)):
-        raise ValueError(f"need a finite square matrix, got shape {m.shape}")
-    a = 0.5 * (m + m.T)
-    np.fill_diagonal(a, 1.0)
-    for _ in range(50):
-        w, v = np.linalg.eigh(a)
-        if w.min() >= floor * 0.5:
-            break
-        a = (v * np.maximum(w, floor)) @ v.T
-        d = np.sqrt(np.diag(a))
-        a = a / np.outer(d, d)
-        np.fill_diagonal(a, 1.0)
-    return np.clip(a, -1.0, 1.0)
+_PHASES = np.exp(2j * np.pi * np.arange(256) / 256).astype(np.complex64)
+_PHASES.flags.writeable = False
+MIN_EXACT = 64  # fewer region pixels than this: the moments are left to chance
+KEEP_BYTES = 64 << 20  # a workspace up to this size stays for the next call (no page faults)
+_WORK = threading.local()
+# One BLAS thread: the small solves of the setup and the vector steps of a draw ran 10 to 30
+# times slower when OpenBLAS spread them over the cores of a machine other work was using.
+_BLAS = ThreadpoolController()
 
 
-def cholesky(dep: Dependence) -> np.ndarray:
-    """Lower factor L with L L^T = the copula (projected to a valid one when quantization broke it)."""
-    return np.linalg.cholesky(nearest_correlation(dep.matrix()))
+@dataclass(frozen=True, eq=False)
+class Grain:
+    """What a region's correlated fields need beyond their random numbers (cached per record)."""
+
+    latent: np.ndarray  # B x B latent band correlation
+    reached: np.ndarray  # the pixel band correlation that latent gives
+    rings: tuple[np.ndarray, ...]  # ring spectra (mean 1): one shared, or one per band
+
+    @property
+    def n_bands(self) -> int:
+        return len(self.latent)
 
 
-def blend(lo: Dependence, hi: Dependence, weight: float) -> Dependence:
-    """Angle blend: a convex mix of correlation matrices is one, so linear mixing stays valid."""
+@lru_cache(maxsize=256)
+def grain_of(dep: Dependence, maps: tuple[LevelMap, ...]) -> Grain:
+    """A measured record through its bands' maps: latent band matrix and grain spectra."""
+    if not dep.measured or dep.n_bands != len(maps):
+        raise ValueError(f"a measured record of {len(maps)} band(s) is needed for correlated fields")
+    rows = [(list(maps), dep.acf[0])] if not dep.per_band else [([m], row) for m, row in zip(maps, dep.acf)]
+    with _BLAS.limit(limits=1, user_api="blas"):
+        latent, reached = latent_bands(dep.matrix(), list(maps))
+        rings = tuple(ring_spectrum(dep.radius, row, grain_curve(ms), RING, RING) for ms, row in rows)
+    for r in rings:
+        r.flags.writeable = False
+    return Grain(latent, reached, rings)
+
+
+def blend(lo: Grain, hi: Grain, weight: float) -> Grain:
+    """Angle blend: the spectra and latent matrices mixed linearly (a convex mix of spectra is a
+    spectrum, of correlation matrices a correlation matrix), so the latent grain blends linearly."""
     if not 0.0 <= weight <= 1.0:
         raise ValueError(f"blend weight must lie in [0, 1], got {weight}")
     if lo.n_bands != hi.n_bands:
-        raise ValueError(f"cannot blend {lo.n_bands}-band and {hi.n_bands}-band dependence")
-    mix = lambda a, b: tuple(float(np.clip((1 - weight) * x + weight * y, -1, 1)) for x, y in zip(a, b))  # noqa: E731
-    return Dependence(mix(lo.corr, hi.corr), mix(lo.dx, hi.dx), mix(lo.dy, hi.dy))
+        raise ValueError(f"cannot blend {lo.n_bands}-band and {hi.n_bands}-band grain")
+    rings_lo, rings_hi = lo.rings, hi.rings
+    if len(rings_lo) != len(rings_hi):  # one shared against per band: the shared one serves every band
+        rings_lo, rings_hi = (rings_lo * lo.n_bands)[:lo.n_bands], (rings_hi * hi.n_bands)[:hi.n_bands]
+    mix = lambda a, b: (1.0 - weight) * a + weight * b  # noqa: E731
+    return Grain(mix(lo.latent, hi.latent), mix(lo.reached, hi.reached),
+                 tuple(mix(a, b) for a, b in zip(rings_lo, rings_hi)))
 
 
-def _moments(g1: np.ndarray, g2: np.ndarray, w: np.ndarray) -> tuple[float, float, float, float]:
-    m1, m2 = float(w @ g1), float(w @ g2)
-    return m1, m2, math.sqrt(max(float(w @ g1**2) - m1 * m1, 0.0)), math.sqrt(max(float(w @ g2**2) - m2 * m2, 0.0))
+def grid_of(h: int, w: int) -> tuple[int, int]:
+    """The FFT grid of a box: fast lengths, at least twice the longest lag anyone looks at."""
+    fast = lambda n: sfft.next_fast_len(max(n, 2 * MAX_RADIUS + 2), real=True)  # noqa: E731
+    return fast(h), fast(w)
 
 
-def _pixel_corr(a: Johnson, b: Johnson, rho: float, levels: int) -> float:
-    """Pearson correlation of pixels x_a(Z1), x_b(Z2) (clipped to the levels) when corr(Z1, Z2) = rho."""
-    x, w = _gauss_hermite()
-    top = levels - 1
-    g1 = np.clip(a.x_of_z(x), 0, top)
-    m1, m2, s1, s2 = _moments(g1, np.clip(b.x_of_z(x), 0, top), w)
-    if s1 == 0.0 or s2 == 0.0:
-        return 0.0
-    z2 = rho * x[:, None] + math.sqrt(max(1.0 - rho * rho, 0.0)) * x[None, :]
-    e = float(w @ (g1[:, None] * np.clip(b.x_of_z(z2), 0, top)) @ w)
-    return (e - m1 * m2) / (s1 * s2)
+@dataclass(frozen=True, eq=False)
+class _Shaping:
+    amps: tuple[np.ndarray, ...]  # per row: sqrt(S) * scale * N on the half grid, float32
+    mixing: np.ndarray | None  # lower factor mixing the phases before per-band amplitudes
+    weights: np.ndarray  # per half-grid column: 1 for the columns irfft keeps real, else 2
+    power: float  # a field's variance under one amplitude and unit phasors, zero frequency left out
 
 
-@lru_cache(maxsize=1)
-def _gauss_hermite() -> tuple[np.ndarray, np.ndarray]:
-    x, w = np.polynomial.hermite_e.hermegauss(_NODES)
-    return x, w / w.sum()
+@lru_cache(maxsize=8)
+def _shaping(grain: Grain, grid: tuple[int, int], scale: float) -> _Shaping:
+    ny, nx = grid
+    amps = tuple(amplitude(r, ny, nx) * np.float32(scale * ny * nx) for r in grain.rings)
+    weights = np.full(nx // 2 + 1, 2.0)
+    weights[0] = 1.0
+    if nx % 2 == 0:
+        weights[-1] = 1.0
+    mixing = None
+    if len(amps) > 1:  # coherence the differing spectra lose: asked-for / overlap, then valid
+        n = len(amps)
+        overlap = np.array([[float((amps[i] * amps[j]).sum(axis=0, dtype=np.float64) @ weights)
+                             for j in range(n)] for i in range(n)])
+        d = np.sqrt(np.diag(overlap))
+        want = grain.latent / (overlap / np.outer(d, d))
+        w, v = np.linalg.eigh(0.5 * (want + want.T))
+        want = (v * np.maximum(w, 1e-6)) @ v.T
+        d = np.sqrt(np.diag(want))
+        mixing = np.linalg.cholesky(want / np.outer(d, d))
+    a = amps[0].astype(np.float64)
+    power = (float((a * a).sum(axis=0) @ weights) - a[0, 0] ** 2) / (ny * nx) ** 2
+    for a in amps:
+        a.flags.writeable = False
+    return _Shaping(amps, mixing, weights, power)
 
 
-@lru_cache(maxsize=4096)
-def latent_rho(a: Johnson, b: Johnson, target: float, levels: int = 256) -> float:
-    """The normal-score correlation whose pixels, through models a and b, correlate by `target`
-    (moment matching, NORTA); clipped to the reachable range when the target lies beyond it."""
-    if a.family is Family.CONST or b.family is Family.CONST:
-        return 0.0
-    lo, hi = -0.999, 0.999
-    if target >= _pixel_corr(a, b, hi, levels):
-        return hi
-    if target <= _pixel_corr(a, b, lo, levels):
-        return lo
-    for _ in range(_BISECT):  # pixel correlation increases with rho for increasing maps
-        mid = 0.5 * (lo + hi)
-        if _pixel_corr(a, b, mid, levels) < target:
-            lo = mid
-        else:
-            hi = mid
-    return 0.5 * (lo + hi)
+def _workspace(n_bands: int, ny: int, nx: int) -> tuple[np.ndarray, np.ndarray]:
+    """(spectra B x ny x (nx/2 + 1) complex64, fields B x ny x nx float32) for this thread: kept
+    between calls up to KEEP_BYTES, so repeated synthesis does not fault in fresh pages."""
+    key = (n_bands, ny, nx)
+    kept = getattr(_WORK, "buffers", None)
+    if kept is not None and kept[0] == key:
+        return kept[1], kept[2]
+    _WORK.buffers = None
+    buffers = (key, np.empty((n_bands, ny, nx // 2 + 1), np.complex64), np.empty((n_bands, ny, nx), np.float32))
+    if n_bands * ny * nx * 8 <= KEEP_BYTES:
+        _WORK.buffers = buffers
+    return buffers[1], buffers[2]
 
 
-def latent(dep: Dependence, models: tuple[Johnson, ...], levels: int = 256) -> Dependence:
-    """Measured pixel correlations -> the normal-score correlations synthesis draws with."""
-    n = len(models)
-    if dep.n_bands != n:
-        raise ValueError(f"dependence has {dep.n_bands} bands, models {n}")
-    iu = zip(*np.triu_indices(n, 1))
-    corr = tuple(latent_rho(models[i], models[j], r, levels) for (i, j), r in zip(iu, dep.corr))
-    live = [m for m in models if m.family is not Family.CONST] or list(models)
-    lag = lambda r: float(np.mean([latent_rho(m, m, r, levels) for m in live]))  # noqa: E731
-    return Dependence(corr, tuple(lag(r) for r in dep.dx), tuple(lag(r) for r in dep.dy))
+def _phases(rng: np.random.Generator, e: np.ndarray) -> None:
+    """e (ny x nc) <- unit phasors with uniform phase; the columns irfft keeps real made
+    Hermitian in themselves."""
+    ny, nc = e.shape
+    # 8 random bits a coefficient, straight from the bit generator (twice as fast as rng.bytes)
+    bits = rng.bit_generator.random_raw((ny * nc + 7) // 8).view(np.uint8)[:ny * nc]
+    _PHASES.take(bits, out=e.reshape(-1), mode="wrap")  # "raise" would buffer `out`
+    k = np.arange(1, (ny + 1) // 2)
+    for c in ((0, nc - 1) if nc > 1 else (0,)):
+        e[ny - k, c] = np.conj(e[k, c])
+        e[0, c] = 1.0 if e[0, c].real >= 0 else -1.0
+        if ny % 2 == 0:
+            e[ny // 2, c] = 1.0 if e[ny // 2, c].real >= 0 else -1.0
 
 
-def _target(lags: tuple[float, ...], n: int) -> np.ndarray:
-    """Autocorrelation at 0..n-1 on a ring of n: measured lags joined log-linearly, decaying tail."""
-    known_h = np.array((0, *LAGS), dtype=np.float64)
-    known_r = np.array((1.0, *lags), dtype=np.float64).clip(-0.99, 0.999)
-    h = np.minimum(np.arange(n), n - np.arange(n)).astype(np.float64)  # ring distance
-    r = np.interp(h, known_h, known_r)
-    for i in range(len(known_h) - 1):
-        a, b = known_r[i], known_r[i + 1]
-        if a > 0.02 and b > 0.02:  # both clearly positive: geometric between them
-            seg = (h > known_h[i]) & (h < known_h[i + 1])
-            t = (h[seg] - known_h[i]) / (known_h[i + 1] - known_h[i])
-            r[seg] = a * (b / a) ** t
-    last, prev, step = known_r[-1], known_r[-2], known_h[-1] - known_h[-2]
-    q = (last / prev) ** (1.0 / step) if 0.0 < last < prev else 0.5
-    tail = h > known_h[-1]
-    r[tail] = last * np.minimum(q, 0.95) ** (h[tail] - known_h[-1])
-    return r
+def _gram(spectra: np.ndarray, weights: np.ndarray, n: int, diagonal: np.ndarray | None = None) -> np.ndarray:
+    """Covariance over the grid of the fields the half-grid spectra stand for (Parseval);
+    `diagonal`, when known (random phases under one amplitude), is not summed again."""
+    b = len(spectra)
+    g = np.empty((b, b))
+    edges = sorted({0, len(weights) - 1})
+    for i in range(b):
+        for j in range(i + 1):
+            if i == j and diagonal is not None:
+                g[i, i] = diagonal[i]
+                continue
+            whole = 2.0 * float(np.vdot(spectra[j], spectra[i]).real)
+            edge = sum((2.0 - weights[c]) * float(np.vdot(spectra[j][:, c], spectra[i][:, c]).real) for c in edges)
+            g[i, j] = g[j, i] = (whole - edge) / (n * n)
+    return g
 
 
-@lru_cache(maxsize=64)
-def spectrum(lags: tuple[float, ...], n: int) -> np.ndarray:
-    """Non-negative power spectrum (mean 1) whose autocorrelation best matches `lags` on a ring of n."""
-    want = _target(lags, n)
-    fixed = np.zeros(n, dtype=bool)
-    fixed[:max(LAGS) + 1] = True
-    fixed[n - max(LAGS):] = True
-    fixed &= np.minimum(np.arange(n), n - np.arange(n)) < n // 2 + 1
-    r = want.copy()
-    for _ in range(_PROJECTIONS):
-        s = np.maximum(np.fft.rfft(r).real, 0.0)
-        r = np.fft.irfft(s, n)
-        r[fixed] = want[fixed]
-    s = np.maximum(np.fft.rfft(r).real, 0.0)
-    total = (2.0 * s.sum() - s[0] - (s[-1] if n % 2 == 0 else 0.0)) / n  # = r(0) of the result
-    return s / total if total > 0 else np.ones_like(s)
+def _fold(spectra: list[np.ndarray], t: np.ndarray) -> None:
+    """spectra <- t spectra for lower-triangular t, in place from the last band down."""
+    for i in range(len(spectra) - 1, -1, -1):
+        flat = spectra[i].reshape(-1)
+        flat *= np.complex64(t[i, i])
+        for j in range(i):
+            blas.caxpy(spectra[j].reshape(-1), flat, a=np.complex64(t[i, j]))
 
 
-def _fast(n: int) -> int:
-    return sfft.next_fast_len(max(n, 2 * max(LAGS) + 2), real=True)
+def draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale: float = 1.0,
+         offset: float = 0.0, inside: np.ndarray | None = None) -> list[np.ndarray]:
+    """B fields (h x w float32) with the grain and latent band correlation, each pixel
+    z * scale + offset (z standard normal); sample moments exact over the pixels `inside`
+    (an h x w mask; None: the whole box). The fields are views of this thread's workspace:
+    valid until its next call."""
+    with _BLAS.limit(limits=1, user_api="blas"):
+        return _draw(grain, shape, rng, scale, offset, inside)
 
 
-def gaussian_fields(shape: tuple[int, int], dep: Dependence, rng: np.random.Generator) -> np.ndarray:
-    """B x H x W float32 standard normal fields with the region's grain and band copula.
-    Beyond the B fields themselves it holds the spectrum's amplitude and one band's transform."""
+def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale: float, offset: float,
+          inside: np.ndarray | None) -> list[np.ndarray]:
     h, w = shape
-    ny, nx = _fast(h), _fast(w)
-    k = np.arange(ny)
-    full_y = np.sqrt(spectrum(dep.dy, ny))[np.minimum(k, ny - k)]  # all ny frequencies of the y axis
-    sx = np.sqrt(spectrum(dep.dx, nx))
-    n_bands = dep.n_bands
-    out = np.empty((n_bands, h, w), dtype=np.float32)
-    # the spectrum's square root once for all bands (float32, half a band's transform)
-    amplitude = [(r, _amplitude(full_y[r], sx, nx, ny)) for r in row_tiles(ny, nx // 2 + 1)]
+    grid = grid_of(h, w)
+    ny, nx = grid
+    shaping = _shaping(grain, grid, float(scale))
+    n_bands = grain.n_bands
+    spectra, fields = _workspace(n_bands, ny, nx)
     for b in range(n_bands):
-        white = _white(rng, (ny, nx // 2 + 1))
-        for r, amp in amplitude:
-            white[r] *= amp
-        out[b] = sfft.irfft2(white, s=(ny, nx), workers=-1, overwrite_x=True)[:h, :w]
-        del white
-    if n_bands > 1:
-        low = cholesky(dep).astype(np.float32)
-        # Band b mixes fields 0..b (lower factor); updating from the last band reuses the originals.
-        for r in row_tiles(h, w):
-            for b in range(n_bands - 1, -1, -1):
-                out[b, r] *= low[b, b]
-                for j in range(b):
-                    out[b, r] += low[b, j] * out[j, r]
+        _phases(rng, spectra[b])
+    if shaping.mixing is not None:
+        _fold(spectra, shaping.mixing)
+    for b in range(n_bands):
+        spectra[b] *= shaping.amps[b if len(shaping.amps) > 1 else 0]
+        spectra[b, 0, 0] = 0.0
+    whole = inside is None and grid == (h, w)
+    low = np.linalg.cholesky(grain.latent + 1e-9 * np.eye(n_bands))
+    if whole:  # exact over the grid, which is the region
+        known = None if shaping.mixing is not None else np.full(n_bands, shaping.power)
+        gram = _gram(spectra, shaping.weights, ny * nx, known) + 1e-12 * scale * scale * np.eye(n_bands)
+        _fold(spectra, low @ np.linalg.inv(np.linalg.cholesky(gram / (scale * scale))))
+    elif shaping.mixing is None:  # mixed here, made exact over the region's pixels below
+        _fold(spectra, low)
+    out = []
+    for b in range(n_bands):
+        spectra[b, 0, 0] = offset * ny * nx
+        # the inverse real FFT in two steps, both into the workspace (irfft2 allocates twice)
+        rows = sfft.ifft(spectra[b], axis=0, overwrite_x=True, workers=1)
+        np.fft.irfft(rows, n=nx, axis=1, out=fields[b])
+        out.append(fields[b, :h, :w])
+    if not whole:
+        exact_moments(out, inside, low * scale, offset)
     return out
 
 
-@lru_cache(maxsize=1)
-def _normal_table() -> np.ndarray:
-    """2**16 equiprobable standard normal quantiles (float32, scaled to unit variance)."""
-    z = normal_ppf((np.arange(1 << 16) + 0.5) / (1 << 16)).astype(np.float64)
-    z /= np.sqrt(np.mean(z * z))
-    table = z.astype(np.float32)
-    table.flags.writeable = False
-    return table
+def _affine(fields: list[np.ndarray], t: np.ndarray, shift: np.ndarray) -> None:
+    """fields_i <- sum_(j <= i) t_ij fields_j + shift_i in place (t lower triangular), from the
+    last band down so every band still reads the others' originals; views (a crop of a larger
+    grid) take a temporary, contiguous fields BLAS."""
+    flat = [f.reshape(-1) if f.flags.c_contiguous else None for f in fields]
+    scratch = None
+    for i in range(len(fields) - 1, -1, -1):
+        fields[i] *= np.float32(t[i, i])
+        for j in range(i):
+            if flat[i] is not None and flat[j] is not None:
+                blas.saxpy(flat[j], flat[i], a=np.float32(t[i, j]))
+            else:
+                scratch = np.multiply(fields[j], np.float32(t[i, j]), out=scratch)
+                fields[i] += scratch
+        fields[i] += np.float32(shift[i])
 
 
-def _white(rng: np.random.Generator, shape: tuple[int, int]) -> np.ndarray:
-    """Complex64 white noise, unit variance per part: 16-bit uniform draws through the normal
-    table (four times faster here than numpy's float32 normals). Every pixel of the inverse
-    transform sums all the coefficients, so the field is Gaussian whatever the parts' shape;
-    the table keeps even a white field's pixels normal to 2**-16 in probability."""
-    draws = rng.integers(0, 1 << 16, shape + (2,), dtype=np.uint16)
-    return np.take(_normal_table(), draws).view(np.complex64)[..., 0]
+def exact_moments(fields: list[np.ndarray], inside: np.ndarray | None, target: np.ndarray, offset: float) -> None:
+    """fields (B, each h x w) <- T (fields - mean) + offset in place, with the mean and T from
+    the pixels `inside` (None: all), so their sample covariance there is target target^T."""
+    b = len(fields)
+    weight = None if inside is None else inside.astype(np.float32)
+    n = fields[0].size if weight is None else float(weight.sum())
+    if n < max(MIN_EXACT, b + 2):
+        return
+    for f in fields:
+        f -= np.float32(offset)  # centred: float32 products stay accurate
+    ops = [] if weight is None else [weight]
+    spec = "ij,ij->" if weight is None else "ij,ij,ij->"
+    mean = np.array([float(np.einsum("ij,ij->" if ops else "ij->", f, *ops, dtype=np.float64)) / n for f in fields])
+    cov = np.array([[float(np.einsum(spec, fields[i], fields[j], *ops, dtype=np.float64)) / n for j in range(b)]
+                    for i in range(b)]) - np.outer(mean, mean)
+    try:
+        t = target @ np.linalg.inv(np.linalg.cholesky(cov + 1e-12 * np.eye(b) * max(1.0, float(np.trace(cov)))))
+    except np.linalg.LinAlgError:
+        t = np.eye(b)
+    _affine(fields, t, offset - t @ mean)
 
 
-def _amplitude(fy: np.ndarray, sx: np.ndarray, nx: int, ny: int) -> np.ndarray:
-    """Rows `fy` of the spectrum's square root scaled for one inverse transform of white noise."""
-    amp = (fy[:, None] * sx[None, :]).astype(np.float32)
-    # Columns 0 and Nyquist keep only their real part after the transform: twice the power.
-    amp[:, 0] *= math.sqrt(2.0)
-    if nx % 2 == 0:
-        amp[:, -1] *= math.sqrt(2.0)
-    amp *= np.float32(math.sqrt(ny * nx / 2.0))
-    return amp
+def remix(fields: list[np.ndarray], old: np.ndarray, new: np.ndarray, offset: float) -> None:
+    """Fields drawn with latent band correlation `old` (each z * scale + offset) made to carry
+    `new` in place: z <- L_new L_old^-1 z."""
+    with _BLAS.limit(limits=1, user_api="blas"):
+        b = len(fields)
+        t = np.linalg.cholesky(new + 1e-9 * np.eye(b)) @ np.linalg.inv(np.linalg.cholesky(old + 1e-9 * np.eye(b)))
+        _affine(fields, t, offset * (1.0 - t.sum(axis=1)))
 
 
-def empirical_autocorrelation(values: np.ndarray, mask: np.ndarray, lag: int, axis: int) -> float:
-    """Pearson correlation of values at pixel pairs `lag` apart along `axis`, both inside `mask`."""
-    v = np.asarray(values, dtype=np.float64)
-    if axis == 1:
-        a, b, ma, mb = v[:, :-lag], v[:, lag:], mask[:, :-lag], mask[:, lag:]
-    elif axis == 0:
-        a, b, ma, mb = v[:-lag], v[lag:], mask[:-lag], mask[lag:]
-    else:
-        raise ValueError(f"axis must be 0 or 1, got {axis}")
-    both = ma & mb
-    x, y = a[both], b[both]
-    if x.size < 2 or x.std() == 0 or y.std() == 0:
-        return 0.0
-    return float(np.corrcoef(x, y)[0, 1])
-
-
-def region_fields(where: Region, dep: Dependence, rng: np.random.Generator) -> np.ndarray:
-    """B x h x w correlated z over the region's bounding box (pixels outside the region unused)."""
-    h, w = where.rows.stop - where.rows.start, where.cols.stop - where.cols.start
-    if not where.count:
-        return np.zeros((dep.n_bands, 0, 0), dtype=np.float32)
-    return gaussian_fields((h, w), dep, rng)
+def index_units(bits: int) -> tuple[float, float]:
+    """(scale, offset) that turn z into the index of a z table of 2**bits bins."""
+    s = (1 << bits) / (2 * Z_SPAN)
+    return s, Z_SPAN * s

@@ -10,6 +10,7 @@ chose itself.
 """
 from __future__ import annotations
 
+import math
 import statistics
 import warnings
 from collections.abc import Iterable, Mapping
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from btf.capture_settings import LINEAR_SPACES, CaptureSettings, scaled
+from btf.dependence import Dependence
 from btf.johnson import Johnson
 
 Models = Mapping[tuple[int, int], Johnson]
@@ -85,17 +87,14 @@ def median_exposure(cameras: Iterable[CaptureSettings | None]) -> float | None:
     return statistics.median(found) if found else None
 
 
-def adjusted(models: Models, camera: CaptureSettings | None, exposure_us: float | None = None,
-             target: tuple[float, ...] | None = None, base_exposure_us: float | None = None,
-             where: str = "capture") -> Models:
-    """`models` with every region at the capture's own exposure (bracketed regions scaled back),
-    then normalised to the reference level `target` (when given), then scaled to `exposure_us`
-    (from the capture's exposure, or from `base_exposure_us` after normalisation). A capture that
-    cannot be treated as asked warns (RadiometryWarning) and is used as it stands."""
+def _factors(keys, camera: CaptureSettings | None, exposure_us: float | None, target: tuple[float, ...] | None,
+             base_exposure_us: float | None, where: str) -> dict[tuple[int, int], float] | None:
+    """{(label, band): factor} that brings each region to the capture's own exposure, then to the
+    reference level `target`, then to `exposure_us`; None when the capture is used as it stands."""
     if camera is None or camera.exposure_us is None:
         if exposure_us is not None or target is not None:
-            warnings.warn(f"{where}: no recorded exposure; used as measured", RadiometryWarning, stacklevel=2)
-        return models
+            warnings.warn(f"{where}: no recorded exposure; used as measured", RadiometryWarning, stacklevel=3)
+        return None
     band_factor: dict[int, float] = {}
     own = camera.exposure_us
     if target is not None:
@@ -104,13 +103,30 @@ def adjusted(models: Models, camera: CaptureSettings | None, exposure_us: float 
             own = base_exposure_us or own
         else:
             why = "no reference level" if camera.reference is None else "its reference is clipped or dark"
-            warnings.warn(f"{where}: {why}; not normalised", RadiometryWarning, stacklevel=2)
+            warnings.warn(f"{where}: {why}; not normalised", RadiometryWarning, stacklevel=3)
     final = exposure_us if exposure_us is not None else own
-    out = {}
-    for (label, band), m in models.items():
-        factor = camera.exposure_us / camera.exposure_of(label) * band_factor.get(band, 1.0) * final / own
-        out[(label, band)] = scaled(m, factor)
-    return out
+    return {(label, band): camera.exposure_us / camera.exposure_of(label) * band_factor.get(band, 1.0) * final / own
+            for label, band in keys}
+
+
+def adjusted(models: Models, camera: CaptureSettings | None, exposure_us: float | None = None,
+             target: tuple[float, ...] | None = None, base_exposure_us: float | None = None,
+             where: str = "capture") -> Models:
+    """`models` with every region at the capture's own exposure (bracketed regions scaled back),
+    then normalised to the reference level `target` (when given), then scaled to `exposure_us`
+    (from the capture's exposure, or from `base_exposure_us` after normalisation). A capture that
+    cannot be treated as asked warns (RadiometryWarning) and is used as it stands."""
+    factors = _factors(models, camera, exposure_us, target, base_exposure_us, where)
+    return models if factors is None else {k: scaled(m, factors[k]) for k, m in models.items()}
+
+
+def _sweep(captures: Mapping[Any, Any], normalise: bool) -> tuple[tuple[float, ...] | None, float | None]:
+    cams = [c.camera for c in captures.values()]
+    target = reference_target(cams) if normalise else None
+    if normalise and target is None:
+        raise ValueError("no capture carries a usable reference level: nothing to normalise by "
+                         "(the robot records one with [camera] reference_label)")
+    return target, (median_exposure(cams) if normalise else None)
 
 
 def sweep_models(store: Any, captures: Mapping[Any, Any], exposure_us: float | None = None,
@@ -118,15 +134,36 @@ def sweep_models(store: Any, captures: Mapping[Any, Any], exposure_us: float | N
     """The models of `captures` (stored captures keyed by angle or direction), each region at
     its capture's exposure, or normalised to the captures' median reference level (at their
     median exposure) with `normalise`, then at `exposure_us` when given."""
-    cams = [c.camera for c in captures.values()]
-    target = reference_target(cams) if normalise else None
-    if normalise and target is None:
-        raise ValueError("no capture carries a usable reference level: nothing to normalise by "
-                         "(the robot records one with [camera] reference_label)")
-    base = median_exposure(cams) if normalise else None
+    target, base = _sweep(captures, normalise)
     return {k: dict(adjusted({key: m.model for key, m in store.models(c.id).items()}, c.camera, exposure_us, target,
                              base, where=f"capture {c.sequence} of robot {c.robot}"))
             for k, c in captures.items()}
+
+
+def sweep_dependence(store: Any, captures: Mapping[Any, Any], exposure_us: float | None = None,
+                     normalise: bool = False) -> dict[Any, dict[int, Dependence]]:
+    """The records of `captures` as `sweep_models` brings their models: each band's observed
+    levels scaled by its model's factor (a side that reaches the sensor's limit stays open)."""
+    target, base = _sweep(captures, normalise)
+    out = {}
+    for k, c in captures.items():
+        deps = store.dependence(c.id)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RadiometryWarning)  # sweep_models said it already
+            factors = _factors([(lab, b) for lab, d in deps.items() for b in range(d.n_bands)], c.camera,
+                               exposure_us, target, base, "")
+        out[k] = deps if factors is None else {lab: _scaled_levels(d, lab, factors, c.levels)
+                                                for lab, d in deps.items()}
+    return out
+
+
+def _scaled_levels(dep: Dependence, label: int, factors: Mapping[tuple[int, int], float], levels: int) -> Dependence:
+    if not dep.lo:
+        return dep
+    top = levels - 1
+    lo = [min(top, int(math.floor(v * factors[(label, b)]))) for b, v in enumerate(dep.lo)]
+    hi = [top if v >= top else min(top, int(math.ceil(v * factors[(label, b)]))) for b, v in enumerate(dep.hi)]
+    return dep.with_levels(lo, [max(a, b) for a, b in zip(lo, hi)])
 
 
 def reference_means(image: np.ndarray, mask: np.ndarray, label: int) -> np.ndarray:

@@ -1,5 +1,10 @@
 """Synthetic images from a label mask and Johnson models, at measured and unseen angles.
 
+Every pixel is a level its region took: each band's model is drawn truncated to the region's
+observed levels (tools.analysis.levelmap) when its record carries them. A region whose record
+carries its grain and band correlation is drawn as correlated fields (tools.analysis.fields),
+the others pixel by pixel.
+
 Between two measured angles the models are blended in quantile space: one normal
 deviate z per pixel and band, mapped through both neighbours' quantile functions
 x_of_z and mixed by angle weight. For one-dimensional distributions that is the
@@ -13,13 +18,18 @@ from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
-from btf.dependence import LAGS, Dependence
-from btf.johnson import Family, Johnson
-from tools.analysis.fields import blend, latent, region_fields
+from btf.dependence import Dependence
+from btf.johnson import Johnson
+from tools.analysis.fields import Grain, blend, draw, grain_of, index_units, remix
+from tools.analysis.latent import corrected
+from tools.analysis.levelmap import LevelMap, level_map, quantile, uniform_table, z_bits, z_table
 from tools.analysis.tiles import Draws, Region, label_counts, region
 
 Models = Mapping[tuple[int, int], Johnson]
 Dependences = Mapping[int, Dependence]  # per label; labels without one are drawn independently
+REACH = 0.05  # a band correlation missed by more than this is named in a warning
+CHECKED = 1 << 16  # pixels of a draw whose band correlation is checked against the measured one
+TOLERANCE = 0.01  # a draw's band correlation further than this from the measured one is corrected
 
 
 class MissingModels(ValueError):
@@ -28,6 +38,10 @@ class MissingModels(ValueError):
 
 class ExtrapolationWarning(UserWarning):
     """The requested angle lies outside the measured range; the nearest angle was used."""
+
+
+class ReachWarning(UserWarning):
+    """A measured band correlation lies beyond what the region's models can reproduce."""
 
 
 class _ModelSource(Protocol):
@@ -60,33 +74,15 @@ def _output(mask: np.ndarray, n_bands: int, levels: int) -> np.ndarray:
     return np.zeros(mask.shape + (n_bands,), dtype=np.uint8 if levels <= 256 else np.uint16)
 
 
-def _correlated(dep: Dependence | None, n_bands: int) -> bool:
-    return dep is not None and dep.n_bands == n_bands
+def _record(deps: Dependences | None, label: int, n_bands: int) -> Dependence | None:
+    dep = (deps or {}).get(label)
+    return dep if dep is not None and dep.n_bands == n_bands else None
 
 
-def _pixels(model: Johnson, z: np.ndarray, levels: int) -> np.ndarray:
-    """Levels of x(z), rounded and clipped: the transform in float32 (a pixel is within 0.005
-    of a level of where float64 puts it, so at most that rare boundary pixel rounds the other
-    way), a third of x_of_z's time on the fields' float32 z."""
-    z = np.asarray(z, dtype=np.float32)
-    f32 = np.float32
-    g, d, xi, lam = f32(model.gamma), f32(model.delta), f32(model.xi), f32(model.lam)
-    with np.errstate(over="ignore", invalid="ignore"):
-        if model.family is Family.CONST:
-            x = np.full(z.shape, xi, dtype=np.float32)
-        elif model.family is Family.SN:
-            x = xi + lam * z
-        else:
-            t = (z - g) / d
-            if model.family is Family.SU:
-                e = np.exp(t)
-                x = xi + (f32(0.5) * lam) * (e - f32(1.0) / e)
-            elif model.family is Family.SB:
-                x = xi + lam / (f32(1.0) + np.exp(-t))
-            else:  # SL, lam's sign its side
-                x = xi + lam * np.exp(t if model.lam > 0 else -t)
-    x = np.nan_to_num(x, nan=0.0, posinf=levels - 1, neginf=0.0)
-    return np.clip(np.rint(x), 0, levels - 1)
+def band_maps(models: Models, label: int, n_bands: int, levels: int, dep: Dependence | None) -> tuple[LevelMap, ...]:
+    """Each band's z -> level map, truncated to the region's observed levels when known."""
+    return tuple(level_map(models[(label, b)], levels, *(dep.levels(b) if dep is not None and dep.lo else (0,)))
+                 for b in range(n_bands))
 
 
 PixelsOf = Callable[[slice, np.ndarray, int], np.ndarray]  # (rows, region pixels in them, count)
@@ -121,29 +117,97 @@ def _from_stream(draws: Draws, to_pixels: Callable[[np.ndarray], np.ndarray] | N
 
 
 def synthesize(mask: np.ndarray, models: Models, rng: np.random.Generator, levels: int = 256,
-               dependence: Dependences | None = None) -> np.ndarray:
-    """An H x W x B image: each region's pixels drawn from its models, with the region's grain
-    and band copula (a correlated field, `tools.analysis.fields`) when `dependence` has it, else independently.
-    Works region by region in row tiles: beyond the mask and the image it holds a region's
-    correlated fields (B float32 per pixel of its box) or a few tiles."""
+               dependence: Dependences | None = None, independent: bool = False) -> np.ndarray:
+    """An H x W x B image: each region's pixels drawn from its models within its observed
+    levels, with the region's grain and band correlation (correlated fields) when its record
+    has them and not `independent`, else pixel by pixel. Works region by region in row tiles:
+    beyond the mask and the image it holds a region's fields (B float32 per pixel of its box)
+    or a few tiles."""
     n_bands = _bands(models)
     out = _output(mask, n_bands, levels)
+    missed: list[str] = []
     for label in _check(mask, models, n_bands):
         where = region(mask, label)
-        dep = (dependence or {}).get(label)
-        if _correlated(dep, n_bands):
-            dep = latent(dep, tuple(models[(label, b)] for b in range(n_bands)), levels)
-            fields = region_fields(where, dep, rng)
-            for b in range(n_bands):
-                fill(out, b, mask, where, _from_fields(
-                    fields[b], where, lambda z, m=models[(label, b)]: _pixels(m, z, levels)))
-            del fields
-            continue
-        for b in range(n_bands):
-            model = models[(label, b)]
-            draws = Draws(lambda size, m=model: m.sample_pixels(size, rng, levels), where.count)
-            fill(out, b, mask, where, _from_stream(draws))
+        dep = _record(dependence, label, n_bands)
+        maps = band_maps(models, label, n_bands, levels, dep)
+        if dep is not None and dep.measured and not independent and where.count:
+            grain = grain_of(dep, maps)
+            missed += _missed(label, dep, grain)
+            _fill_correlated(out, mask, where, maps, grain, rng, levels, dep.matrix())
+        else:
+            for b, m in enumerate(maps):
+                fill(out, b, mask, where, _from_stream(Draws(_independent(m, rng, levels), where.count)))
+    if missed:
+        warnings.warn("band correlation beyond what the models can reach: " + "; ".join(missed)
+                      + " (the observed levels of the bands cannot couple closer)", ReachWarning, stacklevel=2)
     return out
+
+
+def _missed(label: int, dep: Dependence, grain: Grain) -> list[str]:
+    want, got = dep.matrix(), grain.reached
+    return [f"label {label} bands {i}-{j} {want[i, j]:.2f}, at most {got[i, j]:.2f}"
+            for i, j in zip(*np.triu_indices(len(want), 1)) if abs(want[i, j] - got[i, j]) > REACH]
+
+
+def _independent(m: LevelMap, rng: np.random.Generator, levels: int) -> Callable[[int], np.ndarray]:
+    """Independent pixels of a map: uniform 16-bit draws through its table (8-bit sensors), or
+    normal draws through its z table (deeper ones)."""
+    if levels <= 256:
+        table = uniform_table(m)
+        return lambda size: table.take(np.frombuffer(rng.bytes(2 * size), dtype=np.uint16))
+    bits = z_bits(levels)
+    table, (scale, offset) = z_table(m, bits), index_units(bits)
+    return lambda size: table.take((rng.standard_normal(size, dtype=np.float32) * np.float32(scale)
+                                    + np.float32(offset)).astype(np.int32), mode="clip")
+
+
+def _drawn_corr(fields: list[np.ndarray], tables: list[np.ndarray], inside: np.ndarray | None) -> np.ndarray:
+    """The band correlation of a draw's pixels, on a lattice of about CHECKED of them."""
+    h, w = fields[0].shape
+    step = max(1, int(np.sqrt(h * w / CHECKED)))
+    keep = None if inside is None else inside[::step, ::step]
+    cols = []
+    for f, table in zip(fields, tables):
+        sub = f[::step, ::step] if keep is None else f[::step, ::step][keep]
+        cols.append(table.take(sub.astype(np.int32).ravel(), mode="clip").astype(np.float64))
+    with np.errstate(all="ignore"):
+        return np.nan_to_num(np.corrcoef(np.stack(cols)))
+
+
+def region_fields(grain: Grain, maps: tuple[LevelMap, ...], measured: np.ndarray, shape: tuple[int, int],
+                  inside: np.ndarray | None, rng: np.random.Generator, levels: int) -> list[np.ndarray]:
+    """A region's fields in the index units of its bands' z tables (fields.draw); a draw whose
+    pixels' band correlation strays from the measured one is corrected once (latent.corrected)."""
+    bits = z_bits(levels)
+    scale, offset = index_units(bits)
+    fields = draw(grain, shape, rng, scale, offset, inside=inside)
+    if len(maps) > 1:
+        drawn = _drawn_corr(fields, [z_table(m, bits) for m in maps], inside)
+        live = np.array([m.sd > 0 for m in maps])
+        miss = np.abs(drawn - measured)[np.ix_(live, live)]
+        if miss.size and miss.max() > TOLERANCE:
+            remix(fields, grain.latent, corrected(grain.latent, measured, drawn, list(maps), REACH), offset)
+    return fields
+
+
+def _fill_correlated(out: np.ndarray, mask: np.ndarray, where: Region, maps: tuple[LevelMap, ...],
+                     grain: Grain, rng: np.random.Generator, levels: int, measured: np.ndarray) -> None:
+    """A region from its fields: one table lookup per pixel and band, the region's tiles found
+    once for all bands."""
+    h, w = where.rows.stop - where.rows.start, where.cols.stop - where.cols.start
+    inside = None if where.count == h * w else mask[where.rows, where.cols] == where.label
+    fields = region_fields(grain, maps, measured, (h, w), inside, rng, levels)
+    tables = [z_table(m, z_bits(levels)) for m in maps]
+    r0 = where.rows.start
+    for r in where.tiles:
+        sel = None if inside is None else inside[r.start - r0:r.stop - r0]
+        full = sel is None or bool(sel.all())
+        for b, (field, table) in enumerate(zip(fields, tables)):
+            rows = field[r.start - r0:r.stop - r0]
+            if full:
+                out[r, where.cols, b] = table.take(rows.astype(np.int32), mode="clip")
+            elif sel.any():
+                out[r, where.cols, b][sel] = table.take(rows[sel].astype(np.int32), mode="clip")
 
 
 def blend_pixels(weighted: list[tuple[float, Johnson]], levels: int) -> Callable[[np.ndarray], np.ndarray]:
@@ -158,10 +222,12 @@ def blend_pixels(weighted: list[tuple[float, Johnson]], levels: int) -> Callable
 
 def interpolate(lo: Models, hi: Models, weight: float, mask: np.ndarray,
                 rng: np.random.Generator, levels: int = 256,
-                dependence: tuple[Dependences | None, Dependences | None] = (None, None)) -> np.ndarray:
-    """Quantile-space blend: x = (1 - w) x_lo(z) + w x_hi(z), rounded and clipped to the levels.
-    z is a correlated field where both angles (or the only one that has it) carry dependence,
-    blended linearly across the angles (a mix of correlation matrices stays one)."""
+                dependence: tuple[Dependences | None, Dependences | None] = (None, None),
+                independent: bool = False) -> np.ndarray:
+    """Quantile-space blend: x = (1 - w) x_lo(z) + w x_hi(z), each quantile function truncated
+    to its angle's observed levels, rounded. z is a correlated field where both angles (or the
+    only one that has it) carry grain, the grain and latent band correlation blended linearly
+    across the angles (a mix of spectra stays one, of correlation matrices too)."""
     if not 0.0 <= weight <= 1.0:
         raise ValueError(f"interpolation weight must lie in [0, 1], got {weight}")
     n_bands = max(_bands(lo), _bands(hi))
@@ -170,21 +236,29 @@ def interpolate(lo: Models, hi: Models, weight: float, mask: np.ndarray,
     out = _output(mask, n_bands, levels)
     for label in labels:
         where = region(mask, label)
-        d_lo, d_hi = ((d or {}).get(label) for d in dependence)
-        d_lo, d_hi = (latent(d, tuple(m[(label, b)] for b in range(n_bands)), levels)
-                      if _correlated(d, n_bands) else None for d, m in ((d_lo, lo), (d_hi, hi)))
-        dep = blend(d_lo, d_hi, weight) if d_lo and d_hi else (d_lo or d_hi)
-        fields = None if dep is None else region_fields(where, dep, rng)
+        deps = [_record(d, label, n_bands) for d in dependence]
+        grains = [None if independent or d is None or not d.measured or not where.count
+                  else grain_of(d, band_maps(m, label, n_bands, levels, d)) for d, m in zip(deps, (lo, hi))]
+        grain = blend(grains[0], grains[1], weight) if all(grains) else (grains[0] or grains[1])
+        fields = None
+        if grain is not None:
+            h, w = where.rows.stop - where.rows.start, where.cols.stop - where.cols.start
+            inside = None if where.count == h * w else mask[where.rows, where.cols] == label
+            fields = draw(grain, (h, w), rng, inside=inside)
         for b in range(n_bands):
-            to_pixels = _blend2(lo[(label, b)], hi[(label, b)], weight, levels)
+            to_pixels = _blend2(lo[(label, b)], hi[(label, b)], weight, levels,
+                                *(d.levels(b) if d is not None and d.lo else None for d in deps))
             fill(out, b, mask, where, _from_stream(Draws(rng.standard_normal, where.count), to_pixels)
                  if fields is None else _from_fields(fields[b], where, to_pixels))
     return out
 
 
-def _blend2(lo: Johnson, hi: Johnson, weight: float, levels: int) -> Callable[[np.ndarray], np.ndarray]:
+def _blend2(lo: Johnson, hi: Johnson, weight: float, levels: int, seen_lo: tuple[int, int] | None = None,
+            seen_hi: tuple[int, int] | None = None) -> Callable[[np.ndarray], np.ndarray]:
+    x_lo = lo.x_of_z if seen_lo is None else (lambda z: quantile(lo, levels, *seen_lo, z))
+    x_hi = hi.x_of_z if seen_hi is None else (lambda z: quantile(hi, levels, *seen_hi, z))
     # (1 - w) x_lo + w x_hi in this order: the same floating-point sum as before tiling
-    return lambda z: np.clip(np.rint((1.0 - weight) * lo.x_of_z(z) + weight * hi.x_of_z(z)), 0, levels - 1)
+    return lambda z: np.clip(np.rint((1.0 - weight) * x_lo(z) + weight * x_hi(z)), 0, levels - 1)
 
 
 def neighbours(angles: list[float], angle: float) -> tuple[float, float, float]:
@@ -216,78 +290,13 @@ def synthesize_at(source: _ModelSource | Mapping[float, Models], mask: np.ndarra
                   independent: bool = False) -> np.ndarray:
     """An image at `angle` from models by angle (a mapping, or a Store's models_by_angle()).
     Dependence by angle comes from `dependence`, else from the source's dependence_by_angle()
-    when it has one; `independent` ignores it and draws every pixel on its own."""
+    when it has one; `independent` ignores the grain and draws every pixel on its own (still
+    within the observed levels)."""
     by_angle = source.models_by_angle() if hasattr(source, "models_by_angle") else source
     if dependence is None and hasattr(source, "dependence_by_angle"):
         dependence = source.dependence_by_angle()
-    deps = {} if independent or dependence is None else dependence
+    deps = dependence or {}
     lo, hi, w = neighbours(list(by_angle), float(angle))
     if lo == hi:
-        return synthesize(mask, by_angle[lo], rng, levels, deps.get(lo))
-    return interpolate(by_angle[lo], by_angle[hi], w, mask, rng, levels, (deps.get(lo), deps.get(hi)))
-
-
-# --- the MODELS.json document that `btf-host fit --json` prints ----------------------------
-def models_document(space: str, band_names: tuple[str, ...], levels: int, angle: float | None,
-                    results: Mapping[tuple[int, int], object], pca: dict | None = None,
-                    image: str | None = None, dependence: Dependences | None = None) -> dict:
-    """The MODELS.json document; `dependence` None (not measured) is written as null."""
-    rows = []
-    for (label, band), r in sorted(results.items()):
-        m = r.model
-        rows.append({
-            "label": int(label), "band": int(band), "band_name": band_names[band],
-            "family": str(m.family.value), "gamma": m.gamma, "delta": m.delta, "xi": m.xi, "lam": m.lam,
-            "percentiles": [float(p) for p in r.percentiles], "z": float(r.z), "count": int(r.count),
-            "beta1": float(r.beta1), "beta2": float(r.beta2),
-        })
-    return {"image": image, "space": space, "bands": list(band_names), "levels": int(levels),
-            "angle": angle, "pca": pca, "models": rows,
-            "dependence": None if dependence is None else dependence_record(dependence)}
-
-
-def dependence_record(dependence: Dependences) -> dict:
-    """{"lags", "regions": [{"label", "corr", "dx", "dy"}]}: the document's dependence section."""
-    return {"lags": list(LAGS), "regions": [
-        {"label": int(lab), "corr": list(d.corr), "dx": list(d.dx), "dy": list(d.dy)}
-        for lab, d in sorted(dependence.items())]}
-
-
-def dependence_from_document(doc: dict, n_bands: int) -> dict[int, Dependence]:
-    """The per-label dependence of a models document ({} when it has none); ValueError says what is wrong."""
-    rec = doc.get("dependence")
-    if rec is None:
-        return {}
-    if not isinstance(rec, dict) or not isinstance(rec.get("regions"), list):
-        raise ValueError("dependence: expected an object with a 'regions' list")
-    if rec.get("lags") != list(LAGS):
-        raise ValueError(f"dependence: lags {rec.get('lags')!r}; synthesis reads lags {list(LAGS)}")
-    out: dict[int, Dependence] = {}
-    for k, row in enumerate(rec["regions"]):
-        try:
-            dep = Dependence(*(tuple(float(v) for v in row[name]) for name in ("corr", "dx", "dy")))
-            label = int(row["label"])
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"dependence region {k}: {exc}") from None
-        if dep.n_bands != n_bands:
-            raise ValueError(f"dependence of label {label}: {dep.n_bands} band(s), the models have {n_bands}")
-        out[label] = dep
-    return out
-
-
-def models_from_document(doc: object) -> tuple[float | None, dict[tuple[int, int], Johnson], dict]:
-    """(angle, models, the document) from one parsed MODELS.json document; ValueError says what is wrong."""
-    if not isinstance(doc, dict) or not isinstance(doc.get("models"), list):
-        raise ValueError("not a models document (expected an object with a 'models' list)")
-    out: dict[tuple[int, int], Johnson] = {}
-    for k, row in enumerate(doc["models"]):
-        try:
-            out[(int(row["label"]), int(row["band"]))] = Johnson(
-                Family(row["family"]), float(row["gamma"]), float(row["delta"]),
-                float(row["xi"]), float(row["lam"]))
-        except (KeyError, TypeError, ValueError) as exc:
-            raise ValueError(f"model {k}: {exc}") from None
-    angle = doc.get("angle")
-    if angle is not None and (type(angle) not in (int, float) or not np.isfinite(angle)):
-        raise ValueError(f"angle {angle!r} is not a finite number of degrees")
-    return (None if angle is None else float(angle)), out, doc
+        return synthesize(mask, by_angle[lo], rng, levels, deps.get(lo), independent)
+    return interpolate(by_angle[lo], by_angle[hi], w, mask, rng, levels, (deps.get(lo), deps.get(hi)), independent)

@@ -15,8 +15,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("ref")
     p.add_argument("test")
     p.add_argument("--mask", help="label mask: histogram metrics per region")
-    p.add_argument("--space", choices=("rgb", "hsv", "gray"), default="rgb",
-                   help="hsv treats H as circular; gray compares one band (e.g. a thermal image)")
+    p.add_argument("--space", choices=("rgb", "hsv", "gray"),
+                   help="hsv treats H as circular; gray compares one band (default: gray when both images have "
+                        "one band, e.g. thermal, else rgb)")
     p.add_argument("--reference-label", type=int, metavar="L",
                    help="scale TEST's bands so its mean on mask label L (the grey reference card) matches REF's: "
                         "takes out a change of light or exposure between the two (needs --mask)")
@@ -37,7 +38,7 @@ def _normalise(ref, test, mask, label: int, path: str) -> list[float]:
     if np.any(have <= 0) or np.any(want <= 0):
         raise CliError(f"image {path}: the reference region (label {label}) is black in a band; nothing to scale by")
     for image, name in ((ref, "REF"), (test, "TEST")):
-        pixels = image[mask == label]  # (n, 3): read_image gives every image three bands
+        pixels = image[mask == label]  # (n, bands)
         clipped = float(np.mean(np.any((pixels <= 0) | (pixels >= levels - 1), axis=-1)))
         if clipped > CLIPPED_REFERENCE:
             print(f"btf-host: warning: {name}'s reference region has {clipped:.0%} of its pixels at a sensor limit; "
@@ -53,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
         METRICS,
         compare_bands,
     )
-    from tools.data.images import ImageError, feature_bands, read_image, read_mask
+    from tools.data.images import ImageError, feature_bands, read_image, read_mask, three_bands
 
     try:
         ref = read_image(args.ref)
@@ -61,22 +62,25 @@ def run(args: argparse.Namespace) -> int:
         if ref.dtype != test.dtype:
             raise ImageError(f"image {args.test}: {test.dtype.itemsize * 8}-bit pixels, {args.ref} has "
                              f"{ref.dtype.itemsize * 8}-bit; compare images of one depth")
-        if ref.shape != test.shape:
+        if ref.shape[:2] != test.shape[:2]:
             raise ImageError(f"image {args.test}: size {test.shape[1]}x{test.shape[0]} differs from "
                              f"{args.ref}'s {ref.shape[1]}x{ref.shape[0]}")
         mask = read_mask(args.mask, ref.shape[:2]) if args.mask else None
+        space = args.space or ("gray" if ref.shape[2] == test.shape[2] == 1 else "rgb")
+        if ref.shape[2] != test.shape[2] and space != "gray":  # a one-band image against a colour one
+            ref, test = three_bands(ref), three_bands(test)
         factors = None if args.reference_label is None else _normalise(ref, test, mask, args.reference_label, args.test)
-        a, _ = feature_bands(ref, args.space)
+        a, _ = feature_bands(ref, space)
         del ref  # each image gives way to its bands: peak memory stays near the images themselves
-        b, _ = feature_bands(test, args.space)
+        b, _ = feature_bands(test, space)
         del test
     except (ImageError, ValueError) as exc:
         raise CliError(str(exc)) from None
-    circular = ("H",) if args.space == "hsv" else ()
+    circular = ("H",) if space == "hsv" else ()
     result = compare_bands(a.data, b.data, a.band_names, a.levels, mask, circular=circular)
     if args.json:
         doc = result.to_json()
-        doc["space"] = args.space
+        doc["space"] = space
         if factors is not None:
             doc["reference"] = {"label": args.reference_label, "factors": factors}
         print(json.dumps(doc, indent=1))

@@ -17,7 +17,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--layout", required=True, help="curet | utia | folder")
     p.add_argument("--db", required=True)
     p.add_argument("--mask", help="label mask PNG for every image, or a folder of <image stem>.png masks")
-    p.add_argument("--space", default="rgb", help=" | ".join(INGEST_SPACES))
+    p.add_argument("--space", help=" | ".join(INGEST_SPACES) + " (default: each image's own, gray for one band, rgb for colour)")
     p.add_argument("--table", help="angle table (curet: angles.txt, folder: angles.csv in DIR by default)")
     p.add_argument("--angle", type=float, default=NADIR,
                    help="view elevation for a folder without angles (default: 90, straight down)")
@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.layout not in {m.value for m in Layout}:
         raise CliError(f"layout {args.layout!r}: expected one of {', '.join(m.value for m in Layout)}")
-    if args.space not in INGEST_SPACES:
+    if args.space is not None and args.space not in INGEST_SPACES:
         raise CliError(f"feature space {args.space!r}: ingest stores one of {', '.join(INGEST_SPACES)}")
     if args.workers is not None and args.workers < 0:
         raise CliError(f"--workers must be >= 0, got {args.workers}")

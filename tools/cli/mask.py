@@ -35,6 +35,7 @@ def run(args: argparse.Namespace) -> int:
         ImageError,
         read_image,
         stretched_8bit,
+        three_bands,
         write_mask,
     )
 
@@ -46,7 +47,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"--scale {args.scale}: felzenszwalb needs a positive number")
     check_out(args.out, (args.image,), args.force)
     try:
-        image = stretched_8bit(read_image(args.image))  # 16-bit: segmented on its own range
+        # 16-bit: segmented on its own range; one band: as gray RGB (the segmenters take colour)
+        image = three_bands(stretched_8bit(read_image(args.image)))
         if image.shape[0] * image.shape[1] < args.k:
             raise CliError(f"image {args.image}: fewer pixels than --k {args.k} classes")
         write_mask(args.out, segment(image, args.method, args.k, args.seed, args.scale, args.segments))

@@ -10,7 +10,8 @@ from tools.cli.options import FEATURE_SPACES, CliError
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("image")
     p.add_argument("--mask", required=True)
-    p.add_argument("--space", choices=FEATURE_SPACES, default="rgb")
+    p.add_argument("--space", choices=FEATURE_SPACES,
+                   help="feature space (default: the image's own: gray for a one-band image, rgb for colour)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
 
@@ -29,7 +30,7 @@ def run(args: argparse.Namespace) -> int:
     t = table(feats.data, mask, feats.band_names, levels=feats.levels, seed=args.seed)
     if args.json:
         doc = t.to_json()
-        doc["space"] = args.space
+        doc["space"] = feats.space.value
         print(json.dumps(doc, indent=1))
         return 0
     print(f"{'label':>5} {'band':>4} {'count':>8} " + " ".join(f"{p:>10}" for p in PEERS))

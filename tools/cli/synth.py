@@ -12,14 +12,9 @@ import numpy as np
 
 from btf.fit.features import PcaBasis
 from tools.analysis.interpolation import models_by_direction, requested_direction, synthesize_at_direction
-from tools.analysis.radiometry import check_space, sweep_models
-from tools.analysis.synth import (
-    ExtrapolationWarning,
-    MissingModels,
-    dependence_from_document,
-    models_from_document,
-    synthesize_at,
-)
+from tools.analysis.radiometry import check_space, sweep_dependence, sweep_models
+from tools.analysis.models_doc import dependence_from_document, models_from_document
+from tools.analysis.synth import ExtrapolationWarning, MissingModels, ReachWarning, synthesize_at
 from tools.cli.options import (
     FEATURE_SPACES,
     CliError,
@@ -38,8 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     src.add_argument("--db", help="database of captures")
     src.add_argument("--model", help="MODELS.json: one document of `fit --json`, or a list of them")
     p.add_argument("--mask", required=True)
-    p.add_argument("--angle", required=True,
-                   help="view elevation, or EL,AZ[,LIGHT_EL,LIGHT_AZ] in degrees (several angles need --db)")
+    p.add_argument("--angle",
+                   help="view elevation, or EL,AZ[,LIGHT_EL,LIGHT_AZ] in degrees (needed with --db and with a "
+                        "models file of several angles; several angles at once need --db)")
     p.add_argument("--azimuth", type=float, help="view azimuth, degrees")
     p.add_argument("--light-elevation", type=float, help="light elevation, degrees (with --light-azimuth)")
     p.add_argument("--light-azimuth", type=float, help="light azimuth, degrees")
@@ -49,7 +45,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--space", choices=FEATURE_SPACES, help="which stored feature space (--db)")
     add_source_filters(p)
     p.add_argument("--independent", action="store_true",
-                   help="draw every pixel on its own even when grain and band correlation are stored")
+                   help="draw every pixel on its own even when grain and band correlation are stored "
+                        "(still within each region's observed levels)")
     p.add_argument("--exposure", type=float, metavar="US",
                    help="synthesize as if every capture had been taken at this exposure, in microseconds "
                         "(--db, rgb or gray; default: each capture's own)")
@@ -214,41 +211,49 @@ def _warn(caught) -> None:
 
 def run(args: argparse.Namespace) -> int:
     check_out(args.out, (args.db, args.model, args.mask), args.force)
+    direction = None
+    if args.angle is None and any(v is not None for v in (args.azimuth, args.light_elevation, args.light_azimuth)):
+        raise CliError("--azimuth and the light's angles need --angle (the view elevation)")
     try:
-        direction = requested_direction(args.angle, args.azimuth, args.light_elevation, args.light_azimuth)
+        if args.angle is not None:
+            direction = requested_direction(args.angle, args.azimuth, args.light_elevation, args.light_azimuth)
     except ValueError as exc:
         raise CliError(str(exc)) from None
     if direction is not None:
         return _run_direction(args, direction)
-    args.angle = elevation(float(args.angle))
-
-
+    if args.angle is not None:
+        args.angle = elevation(float(args.angle))
     pca = None
-    dependence: dict = {}
     if args.db:
+        if args.angle is None:
+            raise CliError("--db needs --angle: which view to synthesize")
         with _open_db(args.db) as store:
             source = _source(store, args)
             space = source["space"]
             by_angle = _load_models(store, source, args)
             levels = store.levels(**source)
-            if not args.independent:
-                dependence = store.dependence_by_angle(**source)
+            dependence = (sweep_dependence(store, store.latest_by_angle(**source), args.exposure,
+                                           args.normalise_reference)
+                          if _radiometry(args, space) else store.dependence_by_angle(**source))
             if space == "pca":
                 pca = _stored_basis(store.pca_by_angle(**source), args.db)
     else:
         _radiometry(args, "rgb")  # refuses --exposure and --normalise-reference without --db
-        by_angle, found, space, levels, pca_rec = _from_json(args.model)
-        if not args.independent:
-            dependence = found
+        by_angle, dependence, space, levels, pca_rec = _from_json(args.model)
         pca = PcaBasis.from_record(pca_rec) if pca_rec else None
     _check_depth(args.out, levels)
     mask = _read_mask(args.mask)
     angle = args.angle
-    if float("-inf") in by_angle:
-        by_angle, angle = {angle: by_angle[float("-inf")]}, angle
-        dependence = {angle: d for d in dependence.values()}
+    if float("-inf") in by_angle:  # one document without an angle: it serves any angle
+        angle = 0.0 if angle is None else angle
+        by_angle, dependence = {angle: by_angle[float("-inf")]}, {angle: d for d in dependence.values()}
+    elif angle is None:
+        if len(by_angle) > 1:
+            raise CliError(f"models {args.model}: several angles; choose one with --angle")
+        angle = next(iter(by_angle))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", ExtrapolationWarning)
+        warnings.simplefilter("always", ReachWarning)
         try:
             bands = synthesize_at(by_angle, mask, angle, np.random.default_rng(args.seed), levels,
                                   dependence=dependence, independent=args.independent)

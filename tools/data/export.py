@@ -25,12 +25,12 @@ import pyarrow as pa
 import pyarrow.csv as pacsv
 import pyarrow.parquet as pq
 
-from btf.dependence import LAGS
 from tools.analysis.btf_view import moments
 from tools.data.ingest import DATASET_PREFIX
 
 FORMATS = ("parquet", "csv")
 MANIFEST = "_btfscout_export.json"  # leading "_": readers of the directory skip it
+EXPORT_VERSION = "2"  # 2: observed levels, the grain on the 2-D window instead of lags along rows and columns
 BATCH_CAPTURES = 512  # captures per row group: bounded memory for any database
 _PART = re.compile(r"^part-(\d+)-(\d+)\.(parquet|csv)$")
 
@@ -46,8 +46,10 @@ SCHEMA = pa.schema([
     ("pixels", _I), ("beta1", _F), ("beta2", _F), ("mean", _F), ("sd", _F), ("skewness", _F), ("kurtosis", _F),
     ("exposure_us", _F), ("fitted_exposure_us", _F), ("gain", _F), ("wb_kelvin", _F), ("wb_red", _F),
     ("wb_blue", _F), ("sensor_c", _F), ("unlocked", _B), ("reference", _L), ("reference_clipped", _F),
-    ("brackets", _L), ("dependence_corr", _L), ("dependence_dx", _L), ("dependence_dy", _L),
-], metadata={"btfscout.dependence_lags": ",".join(map(str, LAGS)), "btfscout.export": "1"})
+    ("brackets", _L), ("level_lo", _I), ("level_hi", _I),
+    ("dependence_corr", _L), ("dependence_radius", _I), ("dependence_acf", _L),
+], metadata={"btfscout.dependence_window": "half-plane: (0, 1..R), then (dy, -R..R) for dy = 1..R",
+             "btfscout.export": EXPORT_VERSION})
 LISTS = [f.name for f in SCHEMA if pa.types.is_list(f.type)]
 # CSV has no lists: they are JSON text there
 CSV_SCHEMA = pa.schema([pa.field(f.name, _S if f.name in LISTS else f.type) for f in SCHEMA])
@@ -90,9 +92,18 @@ def capture_rows(store: Any, c: Any) -> list[dict]:
             "censored_low": r.censored_low, "censored_high": r.censored_high, "fallback": r.fallback,
             "exact_family": r.exact_family, "pixels": r.count, "beta1": r.beta1, "beta2": r.beta2,
             **mo.as_dict(), **_camera(cam, label),
-            "dependence_corr": None if d is None else list(d.corr),
-            "dependence_dx": None if d is None else list(d.dx), "dependence_dy": None if d is None else list(d.dy)})
+            **_dependence(d, band)})
     return rows
+
+
+def _dependence(d: Any, band: int) -> dict:
+    """A band's columns of its region's record: observed levels, and the grain (its own row)."""
+    if d is None:
+        return {}
+    seen = d.levels(band) if d.lo else (None, None)
+    grain = ({"dependence_corr": list(d.corr), "dependence_radius": d.radius, "dependence_acf": list(d.band_acf(band))}
+             if d.measured else {})
+    return {"level_lo": seen[0], "level_hi": seen[1], **grain}
 
 
 def _camera(s: Any, label: int) -> dict:
@@ -167,7 +178,7 @@ def exported_up_to(folder: Path) -> int:
 def _identity(store: Any, fmt: str) -> dict:
     """What ties an export to its database: the format and the first capture stored."""
     first = min(store.captures(), key=lambda c: c.id, default=None)
-    return {"format": fmt, "first_capture": None if first is None else
+    return {"format": fmt, "schema": EXPORT_VERSION, "first_capture": None if first is None else
             [first.id, first.robot, first.incarnation, first.sequence, first.time]}
 
 

@@ -1,9 +1,10 @@
 """Reading and writing images and label masks on the host, with one-line errors.
 
-Images are RGB (H, W, 3) in memory at their sensor depth: uint8 (256 levels) or uint16
-(65536 levels; 16-bit PNG and TIFF, and float images in 0..1 quantized to 16 bits). Masks
-are label arrays (H, W) uint8, stored as single-channel PNG so every label value survives
-a round trip.
+Images are (H, W, 3) RGB or (H, W, 1) for one-band files (gray, thermal, elevation) in memory,
+at their sensor depth: uint8 (256 levels) or uint16 (65536 levels; 16-bit PNG and TIFF, and
+float images in 0..1 quantized to 16 bits). A one-band image stays one band: its default
+feature space is gray, fitted, synthesized and compared as the one band it is. Masks are label
+arrays (H, W) uint8, stored as single-channel PNG so every label value survives a round trip.
 """
 from __future__ import annotations
 
@@ -14,7 +15,8 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from btf.fit.dependence import measure
+from btf.dependence import Dependence
+from btf.fit.dependence import measure, observed
 from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from btf.fit.fitter import FrameFitter
 from tools.analysis.tiles import row_tiles
@@ -61,12 +63,14 @@ def _as_levels(raw: np.ndarray, p: Path) -> np.ndarray:
 
 
 def read_image(path: str | Path) -> np.ndarray:
-    """An image file as RGB (H, W, 3), uint8 or uint16 (float images in 0..1 become uint16);
-    grayscale files are repeated to three channels."""
+    """An image file as RGB (H, W, 3), or (H, W, 1) for a one-band file, uint8 or uint16 (float
+    images in 0..1 become uint16)."""
     p = Path(path)
     raw = _as_levels(_imread(p, "image"), p)
     if raw.ndim == 2:
-        return np.repeat(raw[:, :, None], 3, axis=2)
+        return raw[:, :, None]
+    if raw.shape[2] == 1:
+        return raw
     if raw.shape[2] == 4:
         return cv2.cvtColor(raw, cv2.COLOR_BGRA2RGB)
     # In place: a copy would double the peak memory of a large image.
@@ -121,6 +125,17 @@ def _write(path: Path, array: np.ndarray, what: str) -> None:
 DEEP_SUFFIXES = (".png", ".tif", ".tiff")  # files that hold 16-bit pixels
 
 
+def three_bands(image: np.ndarray) -> np.ndarray:
+    """A one-band image repeated to RGB (what colour-only steps, segmentation, take); RGB as it is."""
+    return np.repeat(image, 3, axis=2) if image.ndim == 3 and image.shape[2] == 1 else image
+
+
+def default_space(image: np.ndarray) -> str:
+    """The feature space an image is fitted and compared in unless asked otherwise: its own
+    bands, gray for a one-band image and rgb for a colour one."""
+    return "gray" if image.ndim == 2 or image.shape[2] == 1 else "rgb"
+
+
 def write_image(path: str | Path, image: np.ndarray) -> None:
     """Writes RGB (H, W, 3) or single-band (H, W) uint8 pixels, or uint16 as 16-bit PNG or TIFF."""
     img = np.asarray(image)
@@ -154,11 +169,17 @@ SPACES = ("rgb", "hsv", "gray", "pca")
 DEEP_SPACES = ("rgb", "gray")  # the spaces of 16-bit images
 
 
-def feature_bands(image: np.ndarray, space: str, pca=None):
-    """The robot's own feature bands of an RGB image (btf.fit.features); pca fits a basis if none
-    is given. A 16-bit image keeps its depth: rgb as it is, gray by OpenCV's weights."""
+def feature_bands(image: np.ndarray, space: str | None = None, pca=None):
+    """The robot's own feature bands of an image (btf.fit.features); `space` None follows the
+    image (`default_space`); pca fits a basis if none is given. A one-band image in gray is its
+    own band at its own depth; a 16-bit image keeps its depth: rgb as it is, gray by OpenCV's
+    weights. Colour spaces of a one-band image see it repeated to RGB."""
+    space = default_space(image) if space is None else space
     if space not in SPACES:
         raise ImageError(f"feature space {space!r}: expected one of {', '.join(SPACES)}")
+    if image.ndim == 3 and image.shape[2] == 1 and space == "gray":
+        return FeatureFrame(np.ascontiguousarray(image), ("Y",), levels_of(image), FeatureSpace.GRAY), None
+    image = three_bands(image)
     if image.dtype == np.uint16:
         if space not in DEEP_SPACES:
             raise ImageError(f"feature space {space}: 16-bit images are fitted in "
@@ -180,13 +201,14 @@ class FittedImage:
     pca: "PcaBasis | None"
     labels: np.ndarray  # the mask's labels, or all 0 without a mask
     results: dict
-    dependence: dict  # {label: btf.dependence.Dependence}; {} when not measured
+    dependence: dict  # {label: btf.dependence.Dependence}: observed levels, and grain when measured
 
 
-def fit_image(image_path: str | Path, mask_path: str | Path | None, space: str,
+def fit_image(image_path: str | Path, mask_path: str | Path | None, space: str | None = None,
               dependence: bool = True) -> FittedImage:
-    """Read, convert and fit one image, and measure its dependence (btf.fit.dependence) unless
-    `dependence` is False; ImageError (a ValueError) names what is wrong."""
+    """Read, convert and fit one image, keep each region's observed levels and measure its grain
+    and band correlation (btf.fit.dependence) unless `dependence` is False; ImageError (a
+    ValueError) names what is wrong."""
     image = read_image(image_path)
     labels = read_mask(mask_path, image.shape[:2]) if mask_path else np.zeros(image.shape[:2], np.uint8)
     feats, pca = feature_bands(image, space)
@@ -194,8 +216,12 @@ def fit_image(image_path: str | Path, mask_path: str | Path | None, space: str,
     fitter = FrameFitter(int(labels.max()) + 1, feats.data.shape[2], bins=feats.levels)
     fitter.add(feats.data, labels)
     results = fitter.fit()
-    deps = (measure(feats.data, labels, {k: r.model for k, r in results.items()}, feats.levels)
-            if dependence and results else {})
+    seen = observed(fitter.counts, fitter.centre0, fitter.bin_width, feats.levels)
+    fitted = {lab for lab, _ in results}
+    if dependence and results:
+        deps = measure(feats.data, labels, {k: r.model for k, r in results.items()}, feats.levels, levels_seen=seen)
+    else:
+        deps = {lab: Dependence.observed(*seen[lab]) for lab in fitted if lab in seen}
     return FittedImage(feats, pca, labels, results, deps)
 
 

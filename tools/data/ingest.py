@@ -49,7 +49,7 @@ class Job:
     name: str
     path: str
     mask: str | None
-    space: str
+    space: str | None  # None: each image's own (gray for one band, rgb for colour)
     dependence: bool = True  # measure grain and band correlation (btf.fit.dependence)
 
 
@@ -61,6 +61,7 @@ class Fitted:
     mask: np.ndarray | None  # the labels used, when they came from a per-image mask
     dependence: dict[int, Dependence] | None = None
     levels: int = 256
+    space: str = "rgb"
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,7 +96,8 @@ def fit_job(job: Job) -> Fitted:
     except ValueError as exc:  # ImageError too
         raise IngestError(str(exc)) from None
     return Fitted(job.name, tuple(fitted.feats.band_names), fitted.results,
-                  fitted.labels if job.mask else None, fitted.dependence, fitted.feats.levels)
+                  fitted.labels if job.mask else None, fitted.dependence, fitted.feats.levels,
+                  fitted.feats.space.value)
 
 
 def fit_or_damaged(job: Job) -> Fitted | Damaged:
@@ -152,7 +154,7 @@ def _executor(workers: int, scheduler: str | None):
 
 
 def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str | Path | None = None,
-           space: str = "rgb", workers: int | None = None, scheduler: str | None = None,
+           space: str | None = None, workers: int | None = None, scheduler: str | None = None,
            table: str | Path | None = None, default_elevation: float = NADIR,
            on_total: Callable[[int], None] | None = None,
            on_image: Callable[[str], None] | None = None, keep_going: bool = False,
@@ -163,9 +165,10 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
     CPU count), or the Dask cluster at `scheduler` (e.g. tcp://host:8786). An image that
     cannot be fitted stops the run (IngestError), or with `keep_going` is skipped and
     listed in the report's `damaged`. Each region's grain and band correlation is measured
-    and stored with its models unless `dependence` is False.
+    and stored with its models unless `dependence` is False. `space` None fits each image in
+    its own bands (gray for one band, rgb for colour).
     """
-    if space not in INGEST_SPACES:
+    if space is not None and space not in INGEST_SPACES:
         raise IngestError(f"feature space {space!r}: ingest stores one of {', '.join(INGEST_SPACES)}")
     if not 0.0 <= default_elevation <= 90.0:
         raise IngestError(f"default elevation {default_elevation:g} outside 0..90 degrees")
@@ -198,7 +201,7 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
                             if isinstance(fitted, Damaged):
                                 damaged.append(fitted)
                             else:
-                                stored += _store(store, robot, by_name[fitted.name], fitted, space,
+                                stored += _store(store, robot, by_name[fitted.name], fitted,
                                                  Path(root).name, default_elevation)
                     if on_image:
                         for fitted in chunk:
@@ -240,15 +243,15 @@ def _run(jobs: list[Job], workers: int | None, scheduler: str | None,
     return _ordered(executor, fit, jobs, window=4 * n), close
 
 
-def _store(store: Store, robot: str, image: DatasetImage, fitted: Fitted, space: str,
-           scene: str, default_elevation: float) -> bool:
+def _store(store: Store, robot: str, image: DatasetImage, fitted: Fitted, scene: str,
+           default_elevation: float) -> bool:
     """Stores one fitted image; False when its capture was already there."""
     a = image.angles or Angles(default_elevation, 0.0)
     seq = store.next_sequence(robot)
     # the file's modification time, so the database does not depend on when it was built
     mtime = image.path.stat().st_mtime
     light = (a.light_elevation, a.light_azimuth) if a.has_light else None
-    if not store.add_capture(robot, seq, mtime, None, (a.elevation, a.azimuth), space, fitted.band_names,
+    if not store.add_capture(robot, seq, mtime, None, (a.elevation, a.azimuth), fitted.space, fitted.band_names,
                              fitted.results, scene=scene, illumination=light, source=image.name,
                              dependence=fitted.dependence, levels=fitted.levels):
         return False

@@ -10,6 +10,7 @@ image an ingested dataset's capture was fitted from.
 from __future__ import annotations
 
 import io
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -22,7 +23,7 @@ from hal.scene import render
 from onboard.config import load
 from tools.analysis.level_bins import Grid
 from tools.analysis.radiometry import adjusted
-from tools.analysis.synth import MissingModels, synthesize
+from tools.analysis.synth import MissingModels, ReachWarning, synthesize
 from tools.data.images import ImageError, read_image, stretched_8bit
 from tools.station.receiver import mask_key
 from tools.store.database import Store, StoredCapture
@@ -66,7 +67,7 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
     fitted = store.models(cap.id)
     out = CaptureViews(cap, fitted)
     real = measured(cap) if measured is not None else None
-    if real is not None and cap.space == "rgb":
+    if real is not None and shown(cap, real):
         out.images["measured"] = stretched_8bit(real)
     mask = capture_mask(store, cap)
     # each region at the capture's exposure (a bracketed region's models scaled back)
@@ -76,9 +77,12 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
         out.problem = "No label mask for this capture: nothing to synthesize." if mask is None else ""
         return out
     try:
-        syn = synthesize(mask, models, rng, cap.levels)
         deps = store.dependence(cap.id)
-        corr = synthesize(mask, models, rng, cap.levels, dependence=deps) if deps else None
+        with warnings.catch_warnings():  # the report shows what can be drawn; a missed correlation is no error
+            warnings.simplefilter("ignore", ReachWarning)
+            syn = synthesize(mask, models, rng, cap.levels, dependence=deps, independent=True)
+            grain = any(d.measured for d in deps.values())
+            corr = synthesize(mask, models, rng, cap.levels, dependence=deps) if grain else None
     except MissingModels as exc:
         out.problem = str(exc)
         return out
@@ -89,7 +93,7 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
         if corr is not None:
             out.images["correlated"] = stretched_8bit(corr, span)
     if histograms:
-        out.images["histograms"] = histogram_png(real if cap.space == "rgb" else None, mask, models,
+        out.images["histograms"] = histogram_png(real if real is not None and shown(cap, real) else None, mask, models,
                                                  cap.band_names, f"{cap.scene} {cap.elevation:.0f}°", cap.levels)
     return out
 

@@ -174,9 +174,8 @@ class Store:
                 [(cid, *row) for row in rows],
             )
             self._conn.executemany(
-                "INSERT INTO dependence (capture, label, corr, dx, dy) VALUES (?,?,?,?,?)",
-                [(cid, int(lab), json.dumps(list(d.corr)), json.dumps(list(d.dx)), json.dumps(list(d.dy)))
-                 for lab, d in sorted((dependence or {}).items())],
+                "INSERT INTO dependence (capture, label, corr, acf, radius, lo, hi) VALUES (?,?,?,?,?,?,?)",
+                [(cid, int(lab), *_dependence_row(d)) for lab, d in sorted((dependence or {}).items())],
             )
             if pca is not None:
                 self._conn.execute("INSERT INTO pca_bases (capture, record) VALUES (?, ?)",
@@ -337,12 +336,14 @@ class Store:
         return max((c.levels for c in self._latest(robot, space, scene).values()), default=256)
 
     def dependence(self, capture: int) -> dict[int, Dependence]:
-        """The per-region dependence stored with a capture ({} when it carried none)."""
+        """The per-region records stored with a capture: observed levels and, when measured,
+        grain and band correlation ({} when it carried none)."""
         out = {}
-        for label, corr, dx, dy in self._conn.execute(
-                "SELECT label, corr, dx, dy FROM dependence WHERE capture = ? ORDER BY label", (capture,)):
+        for label, *row in self._conn.execute(
+                "SELECT label, corr, dx, dy, acf, radius, lo, hi FROM dependence WHERE capture = ? ORDER BY label",
+                (capture,)):
             try:
-                out[int(label)] = Dependence(*(tuple(float(v) for v in json.loads(x)) for x in (corr, dx, dy)))
+                out[int(label)] = _dependence_of(*row)
             except (ValueError, TypeError) as exc:
                 raise CorruptDatabase(f"database {self.path}: bad dependence for capture {capture}: {exc}") from None
         return out
@@ -363,3 +364,19 @@ class Store:
 
     def labels(self) -> list[int]:
         return [r[0] for r in self._conn.execute("SELECT DISTINCT label FROM models ORDER BY label")]
+
+
+def _dependence_row(d: Dependence) -> tuple:
+    """(corr, acf, radius, lo, hi) columns of a record (JSON lists; NULL what it lacks)."""
+    grain = (json.dumps(list(d.corr)), json.dumps([list(r) for r in d.acf]), d.radius) if d.measured else (None,) * 3
+    return (*grain, json.dumps(list(d.lo)) if d.lo else None, json.dumps(list(d.hi)) if d.hi else None)
+
+
+def _dependence_of(corr, dx, dy, acf, radius, lo, hi) -> Dependence:
+    """A stored record: the 2-D window, or the older layout's lags along rows and columns."""
+    seen = (tuple(json.loads(lo)), tuple(json.loads(hi))) if lo is not None else ((), ())
+    if acf is not None:
+        return Dependence(tuple(json.loads(corr)), tuple(tuple(r) for r in json.loads(acf)), int(radius), *seen)
+    if dx is not None:
+        return Dependence.from_lags(*(tuple(json.loads(x)) for x in (corr, dx, dy)), *seen)
+    return Dependence.observed(*seen)

@@ -9,13 +9,22 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
 
-# Per region: band correlations and autocorrelation at btf.fit.dependence.LAGS (JSON lists).
-_DEPENDENCE = """
+# Per region (btf.dependence, JSON lists): the observed levels per band (lo, hi), and when
+# measured the band correlations (corr) and the autocorrelation on the window of `radius` (acf,
+# rows); rows of the older layout have corr with dx and dy (autocorrelation at LAGS) instead.
+_DEPENDENCE_COLUMNS = """
+    capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
+    label INTEGER NOT NULL,
+    corr TEXT, dx TEXT, dy TEXT, acf TEXT, radius INTEGER, lo TEXT, hi TEXT,
+    PRIMARY KEY (capture, label)
+"""
+_DEPENDENCE = f"CREATE TABLE dependence ({_DEPENDENCE_COLUMNS});"
+_DEPENDENCE_V2 = """
 CREATE TABLE dependence (
     capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
     label INTEGER NOT NULL,
@@ -99,7 +108,7 @@ _MIGRATIONS: dict[int, str] = {
        "ALTER TABLE captures ADD COLUMN source TEXT;"
        "CREATE INDEX captures_by_source ON captures (robot, source);",
     # grain and band correlation per region (btf.fit.dependence)
-    2: _DEPENDENCE,
+    2: _DEPENDENCE_V2,
     # the PCA basis of a scene, to turn pca captures back into RGB
     3: _PCA,
     # the rest of a model's read (btf.record), so a stored record rebuilds its model
@@ -117,6 +126,10 @@ _MIGRATIONS: dict[int, str] = {
        + f"INSERT INTO captures_new ({_BEFORE_INCARNATIONS}) SELECT {_BEFORE_INCARNATIONS} FROM captures;"
        "DROP TABLE captures; ALTER TABLE captures_new RENAME TO captures;"
        "CREATE INDEX captures_by_source ON captures (robot, source);",
+    # a region's observed levels and its grain on the 2-D window; the older rows kept as they are
+    8: f"CREATE TABLE dependence_new ({_DEPENDENCE_COLUMNS});"
+       "INSERT INTO dependence_new (capture, label, corr, dx, dy) SELECT capture, label, corr, dx, dy FROM dependence;"
+       "DROP TABLE dependence; ALTER TABLE dependence_new RENAME TO dependence;",
 }
 
 

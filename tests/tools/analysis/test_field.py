@@ -1,89 +1,113 @@
-"""Correlated Gaussian fields: valid spectra, the asked-for lags and copula, nearest correlation."""
+"""Correlated fields: the latent targets, the grain's spectrum and the fields drawn from it."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from threadpoolctl import threadpool_limits
 
-from btf.dependence import LAGS, Dependence
+from btf.dependence import Dependence, window
 from btf.johnson import Family, Johnson
-from tools.analysis.fields import (
-    blend,
-    empirical_autocorrelation,
-    gaussian_fields,
-    latent,
-    latent_rho,
-    nearest_correlation,
-    spectrum,
-)
+from tools.analysis.fields import blend, draw, grain_of
+from tools.analysis.latent import GRID, curve, grain_curve, latent_acf, latent_bands
+from tools.analysis.levelmap import level_map, pixel_corr
+from tools.analysis.spectrum import RING, amplitude, full_window, ring_spectrum
+
+NORMALS = tuple(level_map(Johnson.normal(128.0, 20.0), 256) for _ in range(3))
 
 
-def test_fields_reproduce_lags_and_copula():
-    dep = Dependence((0.8, 0.3, -0.2), (0.7, 0.45, 0.2, 0.05), (0.5, 0.2, 0.05, 0.0))
-    f = gaussian_fields((300, 360), dep, np.random.default_rng(1))
-    assert f.shape == (3, 300, 360) and f.dtype == np.float32
-    assert np.all(np.abs(f.std(axis=(1, 2)) - 1.0) < 0.05)
-    inside = np.ones((300, 360), dtype=bool)
-    for k, lag in enumerate(LAGS):
-        assert empirical_autocorrelation(f[0], inside, lag, 1) == pytest.approx(dep.dx[k], abs=0.05)
-        assert empirical_autocorrelation(f[2], inside, lag, 0) == pytest.approx(dep.dy[k], abs=0.05)
-    c = np.corrcoef(f.reshape(3, -1))
-    assert c[np.triu_indices(3, 1)] == pytest.approx(dep.corr, abs=0.03)
+def _grain(decay, aspect: float = 1.0, shear: float = 0.0) -> tuple[float, ...]:
+    """An exponential grain on the window: longer along x by `aspect`, sheared along a diagonal."""
+    return tuple(float(decay ** np.hypot(dy, (dx - shear * dy) / aspect)) for dy, dx in window(6))
 
 
-lag_values = st.lists(st.floats(-1.0, 1.0), min_size=4, max_size=4).map(tuple)
+def _acf(x: np.ndarray, dy: int, dx: int) -> float:
+    a = x[dy:, max(dx, 0):x.shape[1] + min(dx, 0)]
+    b = x[:x.shape[0] - dy, max(-dx, 0):x.shape[1] - max(dx, 0)]
+    return float(np.corrcoef(a.ravel(), b.ravel())[0, 1])
 
 
-@settings(max_examples=40, deadline=None)
-@given(lag_values, st.integers(18, 300))
-def test_any_lags_give_a_finite_nonnegative_unit_variance_spectrum(lags, n):
-    s = spectrum(lags, n)
+@pytest.mark.parametrize("inside", [None, "half"])
+def test_fields_have_the_grain_and_exactly_the_band_correlation(inside):
+    dep = Dependence((0.8, 0.3, -0.2), (_grain(0.8, aspect=2.0, shear=1.0),), 6)
+    fields = draw(grain_of(dep, NORMALS), (240, 300), np.random.default_rng(1),
+                  inside=None if inside is None else np.arange(300)[None, :].repeat(240, 0) < 180)
+    assert len(fields) == 3 and all(f.shape == (240, 300) and f.dtype == np.float32 for f in fields)
+    sel = slice(None) if inside is None else (slice(None), slice(0, 180))
+    v = np.stack([f[sel].ravel() for f in fields]).astype(np.float64)
+    assert np.allclose(v.mean(axis=1), 0, atol=1e-3) and np.allclose(v.std(axis=1), 1, atol=1e-3)
+    assert np.corrcoef(v)[np.triu_indices(3, 1)] == pytest.approx([0.8, 0.3, -0.2], abs=0.005)
+    for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1), (2, 2), (3, 0)):
+        want = 0.8 ** np.hypot(dy, (dx - dy) / 2.0)  # a sheared, stretched grain: no product of axes
+        assert _acf(fields[0], dy, dx) == pytest.approx(want, abs=0.04), (dy, dx)
+
+
+def test_each_band_keeps_its_own_grain_and_the_bands_their_correlation():
+    dep = Dependence((0.7, 0.0, 0.0), (_grain(0.9), _grain(0.5), _grain(0.7, aspect=3.0)), 6)
+    fields = draw(grain_of(dep, NORMALS), (256, 256), np.random.default_rng(2))
+    assert _acf(fields[0], 0, 2) == pytest.approx(0.81, abs=0.06)
+    assert _acf(fields[1], 0, 2) == pytest.approx(0.25, abs=0.05)
+    assert _acf(fields[2], 1, 0) == pytest.approx(0.7, abs=0.05)
+    assert np.corrcoef(fields[0].ravel(), fields[1].ravel())[0, 1] == pytest.approx(0.7, abs=0.005)
+
+
+def test_the_fields_are_the_target_in_table_units():
+    dep = Dependence((0.5,), (_grain(0.6),), 6)
+    maps = NORMALS[:2]
+    z = [f.copy() for f in draw(grain_of(dep, maps), (128, 128), np.random.default_rng(3))]  # a workspace
+    idx = draw(grain_of(dep, maps), (128, 128), np.random.default_rng(3), scale=1000.0, offset=8500.0)
+    assert np.allclose(idx[0], 1000.0 * z[0] + 8500.0, atol=0.05)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.lists(st.floats(-1.0, 1.0), min_size=12, max_size=12))
+def test_any_window_gives_a_finite_nonnegative_unit_variance_spectrum(values):
+    with threadpool_limits(1, "blas"):  # as grain_of runs it
+        s = ring_spectrum(2, tuple(values), grain_curve(list(NORMALS[:1])), 32, 32)
     assert np.all(np.isfinite(s)) and np.all(s >= 0)
-    r = np.fft.irfft(s, n)
-    assert r[0] == pytest.approx(1.0, abs=1e-9)
+    assert np.fft.ifft2(s).real[0, 0] == pytest.approx(1.0, abs=1e-9)
 
 
-@settings(max_examples=40, deadline=None)
-@given(st.lists(st.floats(-1.0, 1.0), min_size=6, max_size=6))
-def test_nearest_correlation_is_valid_for_any_triangle(tri):
-    m = np.eye(4)
-    iu = np.triu_indices(4, 1)
-    m[iu] = tri
-    m[(iu[1], iu[0])] = tri
-    c = nearest_correlation(m)
-    assert np.allclose(np.diag(c), 1.0) and np.allclose(c, c.T)
-    assert np.linalg.eigvalsh(c).min() > 0
-    np.linalg.cholesky(c)
+def test_a_reachable_window_is_met_by_the_spectrum_and_the_interpolated_grid_keeps_it():
+    target = np.array(_grain(0.85, aspect=1.5, shear=0.5))
+    s = ring_spectrum(6, tuple(target), grain_curve(list(NORMALS)), RING, RING)
+    lags, _ = full_window(6, target)
+    r = np.fft.ifft2(s).real[lags[1:85, 0] % RING, lags[1:85, 1] % RING]
+    assert np.abs(r - target).max() < 0.02
+    a = amplitude(s, 500, 300) ** 2
+    full = np.concatenate([a, a[:, 1:150][:, ::-1]], axis=1)  # the mirrored half of the grid
+    assert full.mean() == pytest.approx(1.0, rel=1e-3) and a.min() >= 0
 
 
-def test_nearest_correlation_keeps_a_valid_matrix():
-    m = np.array([[1.0, 0.5], [0.5, 1.0]])
-    assert np.allclose(nearest_correlation(m), m)
+def test_the_latent_band_matrix_reproduces_reachable_pixel_correlations():
+    heavy = level_map(Johnson(Family.SU, -1.2, 0.9, 30.0, 6.0), 256, 12, 87)
+    maps = [heavy, NORMALS[0], level_map(Johnson.normal(60.0, 8.0), 256)]
+    want = np.array([[1.0, 0.6, 0.3], [0.6, 1.0, 0.5], [0.3, 0.5, 1.0]])
+    latent, reached = latent_bands(want, maps)
+    assert np.allclose(reached, want, atol=0.005)
+    assert np.linalg.eigvalsh(latent).min() > 0
+    assert reached[0, 1] == pytest.approx(float(pixel_corr(maps[0], maps[1], latent[0, 1])))
 
 
-def test_blend_is_linear_and_stays_a_correlation_matrix():
-    a = Dependence((0.9, 0.9, 0.9), (0.8,) * 4, (0.6,) * 4)
-    b = Dependence((-0.4, 0.4, -0.4), (0.0,) * 4, (0.2,) * 4)
+def test_a_correlation_beyond_the_marginals_is_reached_as_near_as_they_allow():
+    skewed = level_map(Johnson(Family.SL, 0.0, 0.6, 0.0, 1.0), 256)  # piled near 0, a long tail
+    maps = [NORMALS[0], skewed]
+    bound = float(curve(maps[0], maps[1])[-1])  # the comonotone pixel correlation
+    _, reached = latent_bands(np.array([[1.0, 0.99], [0.99, 1.0]]), maps)
+    assert bound < 0.9 and reached[0, 1] == pytest.approx(bound, abs=0.01)
+
+
+def test_the_grain_curve_inverts_to_the_latent_grain():
+    assert latent_acf(np.array([0.0, 0.5, 1.0]), grain_curve(list(NORMALS))) == pytest.approx([0, 0.5, GRID[-1]], abs=0.01)
+
+
+def test_blending_mixes_spectra_and_matrices_linearly():
+    a = grain_of(Dependence((0.9, 0.9, 0.9), (_grain(0.9),), 6), NORMALS)
+    b = grain_of(Dependence((-0.4, 0.4, -0.4), (_grain(0.3),), 6), NORMALS)
     m = blend(a, b, 0.25)
-    assert m.dx == pytest.approx((0.6,) * 4) and m.dy == pytest.approx((0.5,) * 4)
-    assert np.linalg.eigvalsh(m.matrix()).min() >= -1e-12
+    assert np.allclose(m.latent, 0.75 * a.latent + 0.25 * b.latent)
+    assert np.allclose(m.rings[0], 0.75 * a.rings[0] + 0.25 * b.rings[0])
+    assert np.linalg.eigvalsh(m.latent).min() >= -1e-12
     with pytest.raises(ValueError, match="weight"):
         blend(a, b, 1.5)
-
-
-def test_latent_inverts_the_pixel_correlation_through_the_models():
-    normal = Johnson.normal(128.0, 20.0)
-    assert latent_rho(normal, normal, 0.5) == pytest.approx(0.5, abs=0.01)
-    heavy = Johnson(Family.SU, -0.7, 0.8, 10.0, 2.5)  # a dark plate: heavy bright tail
-    rho = latent_rho(heavy, heavy, 0.3)
-    z = np.random.default_rng(2).standard_normal((2, 200_000))
-    z2 = rho * z[0] + np.sqrt(1 - rho**2) * z[1]
-    x1, x2 = (np.clip(np.rint(heavy.x_of_z(v)), 0, 255) for v in (z[0], z2))
-    assert np.corrcoef(x1, x2)[0, 1] == pytest.approx(0.3, abs=0.02)
-    assert latent_rho(Johnson.constant(4.0), normal, 0.9) == 0.0
-
-
-def test_latent_needs_one_model_per_band():
-    with pytest.raises(ValueError, match="bands"):
-        latent(Dependence.independent(3), (Johnson.normal(0, 1),))

@@ -7,11 +7,12 @@ from benchmarks.scenes import field, voronoi_labels
 from btf.dependence import Dependence
 from btf.fit.fitter import FrameFitter, fit_histogram
 from tools.analysis import metrics, pdfs, synth, tiles
-from tools.analysis.fields import gaussian_fields, latent
+from tools.analysis.fields import grain_of, index_units
+from tools.analysis.levelmap import uniform_table, z_bits, z_table
 from tools.analysis.interpolation import synthesize_blend
 from tools.data import masks
 
-DEP = Dependence((0.5, 0.3, 0.6), (0.8, 0.6, 0.4, 0.2), (0.7, 0.5, 0.3, 0.1))
+DEP = Dependence.from_lags((0.5, 0.3, 0.6), (0.8, 0.6, 0.4, 0.2), (0.7, 0.5, 0.3, 0.1))
 
 
 @pytest.fixture
@@ -66,20 +67,28 @@ def test_compare_in_tiles_equals_the_whole_image_metrics(tiny_tiles):
 
 
 def _whole_synthesize(mask, models, rng, dependence=None, levels=256):
-    """Synthesis the way it ran before tiling: whole regions, one draw per region and band."""
+    """Synthesis the way it runs without tiles: whole regions, one draw per region and band."""
     out = np.zeros(mask.shape + (3,), np.uint8 if levels <= 256 else np.uint16)
+    bits = z_bits(levels)
+    scale, offset = index_units(bits)
     for label in np.unique(mask):
         sel = mask == label
+        maps = synth.band_maps(models, label, 3, levels, None)
         if dependence and label in dependence:
-            dep = latent(dependence[label], tuple(models[(label, b)] for b in range(3)), levels)
             rows, cols = np.flatnonzero(sel.any(axis=1)), np.flatnonzero(sel.any(axis=0))
             box = sel[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
-            z = gaussian_fields(box.shape, dep, rng)[:, box]
+            fields = synth.region_fields(grain_of(dependence[label], maps), maps, dependence[label].matrix(),
+                                         box.shape, None if box.all() else box, rng, levels)
             for b in range(3):
-                out[sel, b] = np.clip(np.rint(models[(label, b)].x_of_z(z[b])), 0, levels - 1)
+                out[sel, b] = z_table(maps[b], bits).take(fields[b][box].astype(np.int32), mode="clip")
             continue
         for b in range(3):
-            out[sel, b] = models[(label, b)].sample_pixels(int(sel.sum()), rng, levels)
+            n = int(sel.sum())
+            if levels <= 256:
+                out[sel, b] = uniform_table(maps[b]).take(np.frombuffer(rng.bytes(2 * n), np.uint16))
+            else:
+                z = rng.standard_normal(n, dtype=np.float32) * np.float32(scale) + np.float32(offset)
+                out[sel, b] = z_table(maps[b], bits).take(z.astype(np.int32), mode="clip")
     return out
 
 

@@ -63,7 +63,11 @@ def test_every_reader_gets_one_row_per_stored_model_with_its_parameters(host, db
         assert as_rows(records) == truth, name
     row = pa_ds.dataset(tmp_path / "x", partitioning="hive").to_table().to_pylist()[0]
     assert row["exposure_us"] == 5000.0 and row["gain"] == 2.0 and row["commanded_elevation"] in ELEVATIONS
-    assert row["dependence_dx"] == [0.9, 0.8, 0.6, 0.3] or row["label"] != 1
+    if row["label"] == 1:  # its record of the older layout: the separable window of radius 8
+        assert row["dependence_radius"] == 8 and row["dependence_acf"][:2] == pytest.approx([0.9, 0.8])
+        assert (row["level_lo"], row["level_hi"]) == ((10, 200), (20, 210), (30, 220))[row["band"]]
+    else:
+        assert row["dependence_acf"] is None and row["level_lo"] is None
     assert row["mean"] > row["sd"] > 0 and row["skewness"] is not None
     datasets = {r["dataset"]: r["robot"] for r in pa_ds.dataset(tmp_path / "x", partitioning="hive").to_table().to_pylist()}
     assert datasets == {None: "7", "/data/a b": "dataset:/data/a b"}

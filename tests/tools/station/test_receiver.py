@@ -156,7 +156,8 @@ def test_dependence_in_a_models_packet_is_stored_and_reused_by_unchanged_markers
     got = store.dependence(a.id)
     assert set(got) == set(deps)
     for lab, d in deps.items():  # int8 on the wire: within one step of 1/127
-        assert np.allclose(got[lab].corr, d.corr, atol=1 / 127) and np.allclose(got[lab].dx, d.dx, atol=1 / 127)
+        assert np.allclose(got[lab].corr, d.corr, atol=1 / 127) and np.allclose(got[lab].acf, d.acf, atol=1 / 127)
+        assert (got[lab].lo, got[lab].hi) == (d.lo, d.hi)
     assert store.dependence(b.id) == got
     assert rx.rejected_extras == 0
 

@@ -1,0 +1,126 @@
+"""Figures that judge a synthesized texture beside its photograph, region by region.
+
+acf2d       the Pearson autocorrelation of one band at every lag of a half-plane window,
+            over the pairs of pixels both inside the region (pair means and variances), all lags
+            at once from zero-padded FFTs of the masked values
+acf_gap     the worst |acf(synthesis) - acf(photograph)| over the window's lags and the bands
+plaid       the share of a region's spectral power on the kx = 0 and ky = 0 axes after a Hann
+            window, over the largest square inside the region (the mask's own edges would
+            otherwise put power on the axes); a separable field piles power there
+outside     the share of synthesized pixels outside the region's observed levels per band
+band_gap    the worst |corr(synthesis) - corr(photograph)| of the bands' correlation matrix
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.fft as sfft
+from scipy import ndimage
+
+from btf.dependence import window
+
+MIN_PAIRS = 32
+
+
+def _correlate(a: np.ndarray, b: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """sum_p a(p) b(p + h) for every lag h, a circular array of `shape` (zero-padded inputs)."""
+    fa, fb = sfft.rfft2(a, shape), sfft.rfft2(b, shape)
+    return sfft.irfft2(np.conj(fa) * fb, shape)
+
+
+def acf2d(values: np.ndarray, inside: np.ndarray, radius: int = 8) -> np.ndarray:
+    """Pearson autocorrelation of `values` (H x W) at window(radius), pairs inside `inside`."""
+    m = inside.astype(np.float64)
+    v = np.where(inside, values.astype(np.float64), 0.0)
+    v -= v[inside].mean() if inside.any() else 0.0
+    v *= m
+    shape = tuple(sfft.next_fast_len(n + radius + 1) for n in values.shape)
+    n = _correlate(m, m, shape)
+    sa, sb = _correlate(v, m, shape), _correlate(m, v, shape)
+    saa, sbb = _correlate(v * v, m, shape), _correlate(m, v * v, shape)
+    sab = _correlate(v, v, shape)
+    lags = np.array(window(radius))
+    idx = (lags[:, 0] % shape[0], lags[:, 1] % shape[1])
+    n, sa, sb, saa, sbb, sab = (x[idx] for x in (n, sa, sb, saa, sbb, sab))
+    with np.errstate(all="ignore"):
+        n = np.rint(n)
+        ma, mb = sa / n, sb / n
+        cov = sab / n - ma * mb
+        den = np.sqrt(np.maximum(saa / n - ma * ma, 0) * np.maximum(sbb / n - mb * mb, 0))
+        r = np.where((n >= MIN_PAIRS) & (den > 1e-12), cov / den, 0.0)
+    return np.clip(np.nan_to_num(r), -1.0, 1.0)
+
+
+def acf_gap(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray, radius: int = 8) -> float:
+    """Worst gap of the 2-D autocorrelation over |dy|, |dx| <= radius and the bands."""
+    return max(float(np.abs(acf2d(synth[..., b], inside, radius) - acf2d(photo[..., b], inside, radius)).max())
+               for b in range(photo.shape[2]))
+
+
+def largest_square(inside: np.ndarray) -> tuple[slice, slice] | None:
+    """The largest axis-aligned square of pixels all inside (None for an empty region)."""
+    if not inside.any():
+        return None
+    # chessboard distance to the nearest outside pixel (the frame's edge counts as outside)
+    d = ndimage.distance_transform_cdt(np.pad(inside, 1), metric="chessboard")[1:-1, 1:-1]
+    y, x = np.unravel_index(int(np.argmax(d)), d.shape)
+    k = int(d[y, x]) - 1
+    return slice(y - k, y + k + 1), slice(x - k, x + k + 1)
+
+
+def axis_share(values: np.ndarray, square: tuple[slice, slice]) -> float:
+    """Share of the Hann-windowed spectral power (zero frequency left out) on the two axes,
+    averaged over the bands."""
+    shares = []
+    for b in range(values.shape[2]):
+        v = values[square + (b,)].astype(np.float64)
+        v -= v.mean()
+        h, w = v.shape
+        p = np.abs(np.fft.fft2(v * np.hanning(h)[:, None] * np.hanning(w)[None, :])) ** 2
+        p[0, 0] = 0.0
+        total = p.sum()
+        shares.append((p[0, :].sum() + p[:, 0].sum()) / total if total > 0 else 0.0)
+    return float(np.mean(shares))
+
+
+def plaid(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray, min_side: int = 32) -> float | None:
+    """Plaid index: the synthesis's axis share over the photograph's, on the largest square
+    inside the region; None when that square is under `min_side` pixels a side."""
+    square = largest_square(inside)
+    if square is None or square[0].stop - square[0].start < min_side:
+        return None
+    base = axis_share(photo, square)
+    return axis_share(synth, square) / base if base > 0 else None
+
+
+def outside(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray) -> float:
+    """Share of the region's synthesized pixel values outside the photograph's levels there."""
+    bad = total = 0
+    for b in range(photo.shape[2]):
+        p, s = photo[..., b][inside], synth[..., b][inside]
+        bad += int(np.count_nonzero((s < p.min()) | (s > p.max())))
+        total += s.size
+    return bad / total if total else 0.0
+
+
+def band_gap(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray) -> float:
+    """Worst gap of the bands' pixel correlation matrix over the region (0 for one band)."""
+    if photo.shape[2] < 2:
+        return 0.0
+    c = [np.nan_to_num(np.corrcoef(x[inside].T.astype(np.float64))) for x in (photo, synth)]
+    return float(np.abs(c[0] - c[1]).max())
+
+
+def empirical_autocorrelation(values: np.ndarray, mask: np.ndarray, lag: int, axis: int) -> float:
+    """Pearson correlation of values at pixel pairs `lag` apart along `axis`, both inside `mask`."""
+    v = np.asarray(values, dtype=np.float64)
+    if axis == 1:
+        a, b, ma, mb = v[:, :-lag], v[:, lag:], mask[:, :-lag], mask[:, lag:]
+    elif axis == 0:
+        a, b, ma, mb = v[:-lag], v[lag:], mask[:-lag], mask[lag:]
+    else:
+        raise ValueError(f"axis must be 0 or 1, got {axis}")
+    both = ma & mb
+    x, y = a[both], b[both]
+    if x.size < 2 or x.std() == 0 or y.std() == 0:
+        return 0.0
+    return float(np.corrcoef(x, y)[0, 1])

@@ -1,0 +1,145 @@
+"""A region's grain, measured as the pixel autocorrelation on the half-plane window W(R), as a
+non-negative power spectrum: what synthesis draws each field from (tools.analysis.fields).
+
+1. The window's latent values (the measured pixel values through the grain curve,
+   tools.analysis.latent) on both halves, r(-h) = r(h), and r(0) = 1.
+2. Beyond the window the autocorrelation is unknown. A model fitted to the window continues it:
+   two anisotropic exponentials a_i exp(-sqrt(h' M_i h)), a short and a long scale each with its
+   own orientation and aspect, plus the nugget 1 - a_1 - a_2 at h = 0. It is positive definite
+   and continues a diagonal grain diagonally, with no plaid and no ringing.
+3. On a ring of at most RING x RING lags: alternating projections, the spectrum clipped at zero
+   <-> the window reset to its values; then the spectrum itself refined (L-BFGS-B, S >= 0)
+   so that the pixel autocorrelation it implies (the latent one through the grain curve) comes
+   nearest the measured window in least squares, lag 0 held at 1 (S = a^2, so S >= 0 by
+   construction). Projections alone cannot get
+   there where a marginal fits its region poorly (the latent window is then not extendable);
+   the refit takes brick's window from 0.16 to under 0.04.
+4. On the synthesis grid the spectrum is interpolated linearly along each axis, periodically
+   in frequency (`amplitude`): non-negative by construction; it multiplies the autocorrelation
+   by about sinc^2(lag / RING), 0.996 at lag 8.
+
+So the spectrum is non-negative by clipping (the projections) and by construction (a square in
+the refit, linear interpolation of non-negative values); it is scaled to unit variance.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.fft as sfft
+from scipy.optimize import least_squares, minimize
+
+from btf.dependence import window
+from tools.analysis.latent import GRID, latent_acf
+
+RING = 128
+PROJECTIONS = 15
+REFIT_ITERATIONS = 150
+
+
+def full_window(radius: int, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lags (M, 2), values (M,)) over the whole square |dy|, |dx| <= R, origin first."""
+    half = np.array(window(radius), dtype=np.int64)
+    return np.concatenate(([[0, 0]], half, -half)), np.concatenate(([1.0], values, values))
+
+
+def _model(p: np.ndarray, lags: np.ndarray) -> np.ndarray:
+    share, split = 1 / (1 + np.exp(-p[0])), 1 / (1 + np.exp(-p[1]))
+    out = np.zeros(len(lags))
+    for i, weight in enumerate((share * split, share * (1 - split))):
+        c = p[2 + 3 * i:5 + 3 * i]
+        m = np.array([[np.exp(c[0]), 0.0], [c[1], np.exp(c[2])]])
+        d = np.sqrt(np.maximum(np.einsum("ni,ij,kj,nk->n", lags, m, m, lags), 0.0))
+        out += weight * np.exp(-d)
+    return out
+
+
+def _fit_model(radius: int, latent: np.ndarray) -> np.ndarray:
+    """The two-exponential model's parameters fitted to the window (lag 0 left out)."""
+    lags = np.array(window(radius), dtype=np.float64)
+    r1 = float(np.clip(np.max(latent[:2]), 0.05, 0.95))
+    fast, slow = np.log(-np.log(r1) + 1e-3), np.log(-np.log(0.999) * 4)
+    p0 = np.array([2.0, 0.0, fast, 0.0, fast, slow, 0.0, slow])
+    return least_squares(lambda p: _model(p, lags) - latent, p0, method="trf", max_nfev=400).x
+
+
+def _ring_lags(ny: int, nx: int) -> np.ndarray:
+    y = np.where(np.arange(ny) <= ny // 2, np.arange(ny), np.arange(ny) - ny)
+    x = np.where(np.arange(nx) <= nx // 2, np.arange(nx), np.arange(nx) - nx)
+    yy, xx = np.meshgrid(y, x, indexing="ij")
+    return np.stack([yy.ravel(), xx.ravel()], axis=1).astype(np.float64)
+
+
+def _projected(radius: int, latent: np.ndarray, ny: int, nx: int) -> np.ndarray:
+    """Full ny x nx non-negative spectrum (mean 1) on a ring: window kept, the rest extended."""
+    lags, vals = full_window(radius, latent)
+    iy, ix = lags[:, 0] % ny, lags[:, 1] % nx
+    r = _model(_fit_model(radius, latent), _ring_lags(ny, nx)).reshape(ny, nx)
+    r[iy, ix] = vals
+    for _ in range(PROJECTIONS):
+        r = sfft.ifft2(np.maximum(sfft.fft2(r).real, 0.0)).real
+        r[iy, ix] = vals
+    s = np.maximum(sfft.fft2(r).real, 0.0)
+    total = s.mean()  # r(0) of the result
+    return s / total if total > 0 else np.ones_like(s)
+
+
+def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray) -> np.ndarray:
+    """The spectrum S = a^2 (so S >= 0 without bounds, which slow L-BFGS-B down by orders of
+    magnitude where many frequencies sit at zero) whose pixel autocorrelation over the window
+    comes nearest `target`."""
+    ny, nx = start.shape
+    lags, vals = full_window(radius, target)
+    iy, ix = lags[:, 0] % ny, lags[:, 1] % nx
+    slope = np.gradient(curve, GRID)
+    weight = np.ones(len(lags))
+    weight[0] = 100.0  # unit variance
+    n = ny * nx
+
+    def loss(root: np.ndarray) -> tuple[float, np.ndarray]:
+        r = sfft.ifft2((root * root).reshape(ny, nx)).real[iy, ix]
+        p, dp = np.interp(r, GRID, curve), np.interp(r, GRID, slope)
+        p[0], dp[0] = r[0], 1.0  # lag 0 stays latent
+        res = p - vals
+        grad = np.zeros((ny, nx))
+        np.add.at(grad, (iy, ix), 2 * weight * res * dp)
+        # d r(h) / d S_k = cos(2 pi k h) / n, d S_k / d a_k = 2 a_k
+        return float(weight @ res ** 2), 2.0 * root * sfft.fft2(grad).real.ravel() / n
+
+    # a floor under the start: a frequency at exactly zero would have no gradient to grow by
+    fit = minimize(loss, np.sqrt(start + 1e-3).ravel(), jac=True, method="L-BFGS-B", options={"maxiter": REFIT_ITERATIONS})
+    s = (fit.x * fit.x).reshape(ny, nx)
+    s = 0.5 * (s + s[(-np.arange(ny)) % ny][:, (-np.arange(nx)) % nx])  # r real: S(k) = S(-k)
+    mean = s.mean()
+    return s / mean if mean > 0 else np.ones_like(s)
+
+
+def ring_spectrum(radius: int, pixel_acf: tuple[float, ...], curve: np.ndarray, ny: int, nx: int) -> np.ndarray:
+    """The spectrum on a ring of ny x nx (at most RING each) for a measured pixel
+    autocorrelation row, through the bands' grain `curve`."""
+    acf = np.asarray(pixel_acf, dtype=np.float64)
+    return _refit(radius, acf, _projected(radius, latent_acf(acf, curve), ny, nx), curve)
+
+
+def _axis_weights(n: int, g: int) -> np.ndarray:
+    """(n, g): periodic linear interpolation from g frequencies to n."""
+    if n == g:
+        return np.eye(n, dtype=np.float32)
+    pos = np.arange(n) * (g / n)
+    i0 = np.floor(pos).astype(np.int64)
+    f = (pos - i0).astype(np.float32)
+    w = np.zeros((n, g), np.float32)
+    w[np.arange(n), i0 % g] += 1 - f
+    w[np.arange(n), (i0 + 1) % g] += f
+    return w
+
+
+def amplitude(small: np.ndarray, ny: int, nx: int) -> np.ndarray:
+    """sqrt(S) on the rfft half of the ny x nx grid (nx // 2 + 1 columns), float32, S of mean 1
+    over the whole grid: the ring's spectrum interpolated along each axis."""
+    wy, wx = _axis_weights(ny, small.shape[0]), _axis_weights(nx, small.shape[1])[:nx // 2 + 1]
+    s = wy @ small.astype(np.float32) @ wx.T
+    weights = np.full(s.shape[1], 2.0)  # the other half of the grid mirrors these columns
+    weights[0] = 1.0
+    if nx % 2 == 0:
+        weights[-1] = 1.0
+    mean = float(s.sum(axis=0, dtype=np.float64) @ weights) / (ny * nx)
+    return np.sqrt(np.maximum(s / np.float32(mean), 0.0), dtype=np.float32)
