@@ -22,7 +22,6 @@ from onboard.capture.pipeline import PoseSkipped
 from onboard.config import ConfigError
 from onboard.link.outbox import OutboxFull, Reply
 from onboard.state import Interrupted
-from onboard.link.status import flat
 from onboard.sweep.plan import SweepPlan
 from radio import FrameError
 from radio import packets as pk
@@ -60,7 +59,7 @@ class Effect:
     undo: Callable[[], None] = lambda: None
 
 
-Result = dict | Refusal
+Result = dict | pk.StatusReport | Refusal
 
 
 # What the operator can do about each refusal, said in the NACK itself.
@@ -190,7 +189,7 @@ class Dispatcher:
         return {"time": self.rt.wall()}
 
     def status(self, args: dict, effect: Effect) -> Result:
-        return flat(self.rt.status.report())
+        return self.rt.status.report()
 
     def goto(self, args: dict, effect: Effect) -> Result:
         view = ViewAngles(float(args["elevation"]), float(args.get("azimuth", 0.0)))

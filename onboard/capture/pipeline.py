@@ -34,6 +34,7 @@ from btf.fit import dependence
 from onboard.capture import skip
 from onboard.capture.camera_lock import CameraLock, reference_level
 from onboard.config import Config
+from radio.packets.schema import Recent
 from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from btf.fit.fitter import FrameFitter
 
@@ -100,7 +101,7 @@ class Pipeline:
         self.pca_pending = False  # fitted, not yet attached to a capture
         self._fitter: FrameFitter | None = None
         self._previous: dict[tuple[int, int], dict[tuple[int, int], FittedModel]] = {}
-        self.faults: list[str] = []  # every retried fault, for STATUS
+        self.faults: Recent = Recent(32)  # every retried fault, for STATUS
         self.lock = CameraLock(hal.camera, cfg.camera) if hal is not None else None
 
     # -- device steps ------------------------------------------------------------------
@@ -145,7 +146,6 @@ class Pipeline:
             except (HalError, OSError, TimeoutError, ValueError) as exc:
                 last = f"{type(exc).__name__}: {exc}"
                 self.faults.append(f"{step}: {last}")
-                del self.faults[:-32]
                 self.pump()
         raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}")
 
