@@ -13,7 +13,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
-from tools.station.snapshot import iso
+from onboard.link.bodies import iso_time
 
 CACHED = 128  # rendered captures kept (thumbnails and sections)
 SHOWN_FIRST = "correlated", "independent", "measured"  # a card's picture: the likest to the surface
@@ -32,7 +32,7 @@ def card(c: Any) -> dict:
     return {"id": c.id, "key": pose_key(c), "robot": c.robot, "seq": c.sequence, "scene": c.scene,
             "elevation": round(c.measured[0], 2), "azimuth": round(c.measured[1], 2),
             "commanded": None if c.commanded[0] is None else [c.commanded[0], c.commanded[1]],
-            "time": iso(c.time), "space": c.space, "camera": describe(c.camera),
+            "time": iso_time(c.time), "space": c.space, "camera": describe(c.camera),
             "unlocked": bool(c.camera is not None and c.camera.unlocked)}
 
 

@@ -119,7 +119,7 @@ class PageServer:
         sub = self.station.bus.subscribe(4096)
         try:
             while True:
-                ev = await sub.get()
+                ev = (await sub.get()).to_json()  # as its declaration renders it (tools.station.events)
                 kind = ev.get("kind")
                 if kind in ("capture", "unchanged") and ev.get("stored") or kind == "lost":
                     cards = await self.data.refresh()

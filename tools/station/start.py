@@ -17,7 +17,8 @@ from typing import Callable, TextIO
 from onboard.cli.runner import CliError, RetryLater
 from tools.station.station import Station
 from tools.station.control import ControlServer, check_path, socket_path
-from tools.station.log import StationLog, event
+from tools.station.events import StationEvent
+from tools.station.log import StationLog
 
 
 class StationBusy(CliError):
@@ -117,7 +118,7 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
                           StationLog(Path(log) if log else Path(str(db) + ".log"), echo),
                           port=port_url, db=str(db), status_every=status_every, on_item=on_item)
         if counters.note:  # the counters file was lost (or this base's first run with a key not from keygen)
-            station.emit(event("station", counters.note, time.time()))
+            station.emit(StationEvent(time.time(), counters.note))
     except BaseException:
         for step in reversed(undo):
             step()
@@ -167,7 +168,6 @@ async def serve(parts: StationParts, until: Callable[[], bool] | None = None, pa
 async def _start_page(parts: StationParts, options, echo: TextIO | None):
     """The page server, started (None when its address cannot be had)."""
     from tools.page.server import PageServer
-    from tools.station.log import event
 
     web = PageServer(parts.station, parts.station.snapshot.db, options)
     try:
@@ -176,7 +176,7 @@ async def _start_page(parts: StationParts, options, echo: TextIO | None):
         await web.close()
         return None
     who = "anyone who can reach it watches; commands need the token" if options.public else "it needs the token"
-    parts.station.emit(event("station", f"page at {url} ({who})", parts.station.wall()))
+    parts.station.emit(StationEvent(parts.station.wall(), f"page at {url} ({who})"))
     if echo is not None:  # the token goes to the operator's terminal only, never to the log file
         print(f"page: {url}?token={options.token}", file=echo, flush=True)
     return web

@@ -38,7 +38,7 @@ def test_a_slow_subscriber_loses_the_oldest_events_and_is_told_how_many():
 
     got_fast, lost, got_slow, subscribers, last = asyncio.run(go())
     assert got_fast == list(range(10)) and last["i"] == 10
-    assert lost["kind"] == "lost" and lost["count"] == 7 and got_slow == [7, 8, 9]
+    assert lost.KIND == "lost" and lost.count == 7 and got_slow == [7, 8, 9]
     assert subscribers == 1
 
 
@@ -58,7 +58,7 @@ class Robot:
                 cmd = pk.decode(ev.payload)
                 self.commands.append(cmd)
                 if [c.command_id for c in self.commands].count(cmd.command_id) == 1:  # as the robot: once
-                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, {"n": len(self.commands)})))
+                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, {"time": len(self.commands) * 1.0})))
 
 
 def station_on_cable(tmp_path, store=None, host_key=KEY, robot_key=KEY):
@@ -123,8 +123,8 @@ def test_a_wrong_key_ends_the_station_saying_so(tmp_path):
 def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path):
     station, robot, _ = station_on_cable(tmp_path)
     status = pk.StatusPacket(1, 1_700_000_000.0, pk.RobotState.SWEEPING, (60.0, 0.0), 3, 900, 6,
-                             "skipped pose: settle failed", {"sweep": 2, "skipped_index": 4,
-                                                             "skipped_elevation": 50.0, "skipped_azimuth": 0.0})
+                             "skipped pose: settle failed", report=pk.StatusReport(sweep=pk.SweepReport(
+                                 2, skipped=pk.Kept((pk.SkippedPose(4, 50.0, 0.0, "settle failed"),)))))
     robot.pump.send(pk.encode(status))
     answers = []
 
@@ -137,7 +137,7 @@ def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path)
         await drive_task
         kinds = []
         while (e := sub.get_nowait()) is not None:
-            kinds.append(e["kind"])
+            kinds.append(e.KIND)
         return kinds
 
     kinds = asyncio.run(go())
