@@ -37,7 +37,10 @@ def build_parser(prog: str, package: str, commands: tuple[str, ...], description
 BROKEN_PIPE = 141
 
 
-def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None) -> int:
+def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None,
+            bad_input: tuple[type[Exception], ...] = ()) -> int:
+    """Run the parsed subcommand; `bad_input`: more exceptions that are one line and status 2
+    wherever a subcommand meets them (the host's damaged database)."""
     try:
         try:
             args = parser.parse_args(argv)
@@ -47,7 +50,7 @@ def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None) -> int:
         code = int(args._run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
         return code
-    except CliError as exc:
+    except (CliError, *bad_input) as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         return 2
     except RetryLater as exc:

@@ -36,8 +36,9 @@ def move(conn: sqlite3.Connection, msg_id: int, queued: tuple | None, refused: f
          counted: bool) -> None:
     """Inside a transaction: message `msg_id` (its queued (kind, created, body), or None) out of
     the outbox into the dead letters; counted unless it was set aside before."""
+    kind, created, body = queued or (None, None, None)
     conn.execute("INSERT OR REPLACE INTO dead_letters (msg_id, kind, created, refused, reason, body)"
-                 " VALUES (?, ?, ?, ?, ?, ?)", (msg_id, *(queued or (None, None, None)), refused, reason))
+                 " VALUES (?, ?, ?, ?, ?, ?)", (msg_id, kind, created, refused, reason, body))
     conn.execute("DELETE FROM outbox WHERE id = ?", (msg_id,))
     conn.execute("DELETE FROM dead_letters WHERE msg_id NOT IN (SELECT msg_id FROM dead_letters"
                  " ORDER BY refused DESC, msg_id DESC LIMIT ?)", (KEPT,))

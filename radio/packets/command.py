@@ -29,6 +29,8 @@ class Arguments(FieldType):
 
 @dataclass(frozen=True, slots=True)
 class CommandPacket(Declared):
+    """A remote-control command; `command_id` makes retries idempotent."""
+
     KIND: ClassVar[Kind] = Kind.COMMAND
     command_id: int = wire(Int(0, UINT32), "the command's id: a retry of it has the same", label="command id")
     name: CommandName = wire(Choice(CommandName), "which command", label="command")

@@ -20,6 +20,8 @@ class LogLevel(enum.IntEnum):  # the values of the stdlib logging levels
 
 @dataclass(frozen=True, slots=True)
 class LogPacket(Declared):
+    """A line of the robot's log."""
+
     KIND: ClassVar[Kind] = Kind.LOG
     robot_id: int = wire(Int(0, 0xFFFF), "the robot", label="robot id")
     time: float = wire(TIME, "the robot's clock, seconds since 1970")

@@ -21,6 +21,9 @@ MAX_SIDE = MAX_MASK_SIDE
 
 @dataclass(frozen=True, slots=True)
 class MaskPacket(Declared):
+    """A capture's label map, mode-pooled to at most 64 x 64, as runs: row-major, adjacent runs of
+    different labels, their lengths summing to the map's cells."""
+
     KIND: ClassVar[Kind] = Kind.MASK
     WIRE: ClassVar[tuple[Field, ...]] = (
         Field("robot_id", Int(0, 0xFFFF), "the robot", label="robot id"),

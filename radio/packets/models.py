@@ -116,6 +116,8 @@ NAME = Text(MAX_NAME, empty=False)
 
 @dataclass(frozen=True, slots=True)
 class ModelsPacket(Declared):
+    """One capture's models: the header fields, then one blob (`radio/packets/models.py` gives its layout)."""
+
     KIND: ClassVar[Kind] = Kind.MODELS
     WIRE: ClassVar[tuple[Field, ...]] = (
         Field("robot_id", ROBOT, "the robot", label="robot id"),

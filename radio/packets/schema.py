@@ -28,7 +28,6 @@ from radio.packets.base import (
     UINT32,
     angles_from_wire,
     angles_to_wire,
-    check_extras,
     want_bin,
     want_enum,
     want_float,
@@ -92,7 +91,9 @@ class Float(FieldType):
         return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) else v
 
     def describe(self) -> str:
-        return f"float {self.lo:g}..{self.hi:g}"
+        hi = f"2^{int(self.hi).bit_length() - 1}" if self.hi > 1e6 and float(self.hi).is_integer() and \
+            int(self.hi) & (int(self.hi) - 1) == 0 else f"{self.hi:g}"
+        return f"float {self.lo:g}..{hi}"
 
 
 @dataclass(frozen=True)
@@ -104,11 +105,15 @@ class Text(FieldType):
         return want_str(v, name, self.most, self.empty)
 
     def fit(self, v: Any) -> str:
+        """Printable, at most `most` characters and the unpacker's MAX_STR bytes of UTF-8."""
         text = "".join(c if c.isprintable() else " " for c in str(v))
-        return text if len(text) <= self.most else text[:self.most - 1] + CUT
+        if len(text) <= self.most and len(text.encode()) <= MAX_STR:
+            return text
+        room = MAX_STR - len(CUT.encode())
+        return text[:self.most - 1].encode()[:room].decode("utf-8", "ignore") + CUT
 
     def describe(self) -> str:
-        return f"text ≤ {self.most}" + ("" if self.empty else ", not empty")
+        return f"text ≤ {self.most} characters" + ("" if self.empty else ", not empty")
 
 
 @dataclass(frozen=True)
@@ -332,14 +337,6 @@ class Record(FieldType):
 
     def describe(self) -> str:
         return f"record {self.cls.__name__}"
-
-
-class ExtrasMap(FieldType):
-    def check(self, v: Any, name: str) -> dict:
-        return check_extras(v, name)
-
-    def describe(self) -> str:
-        return "map of ≤ 16 short keys to scalars or short lists"
 
 
 def _big(n: int) -> str:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 
 from onboard.cli import runner
+from tools.store.schema import CorruptDatabase
 
 PROG = "btf-host"
 # Subcommand modules, in the order --help lists them.
@@ -38,4 +39,5 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return runner.run_cli(build_parser(), argv)
+    # A damaged row met by any reader (synth, report, ...) is one line and status 2, as at opening.
+    return runner.run_cli(build_parser(), argv, bad_input=(CorruptDatabase,))

@@ -20,16 +20,19 @@ The interface for code inside the station (the control socket, the operator's pa
   `link` (up, changed, last_heard, last_heard_s, and `radio.events.LinkStats`: frames_sent,
   frames_accepted, retransmissions, delivered, duplicates, rejected {reason: n}, ...;
   delivered_bytes, goodput_bps), `robot` (id, mode, state, pose, commanded, outbox, paused,
-  torque, faults, errors, failsafe, failsafe_s, failsafe_assumed, disk, disk_free, rejected,
-  last_status), `sweep` (id, plan, next, poses, active, measured, skipped [{index, elevation,
-  azimuth, reason}], grid: `tools.station.sweep_grid.grid_json`) and `captures` (stored, duplicates,
-  masks, bad, latest [...]).
+  torque, faults, errors, left_out (how many older faults and errors the robot's report left
+  out), dead_letters (its messages this station refused: count, latest), failsafe, failsafe_s,
+  failsafe_assumed, disk, disk_free, rejected, last_status), `sweep` (id, plan, next, poses,
+  active, measured, skipped [{index, elevation, azimuth, reason}], grid:
+  `tools.station.sweep_grid.grid_json`) and `captures` (stored, duplicates, masks, bad: the
+  messages refused, latest [...]).
 - `sub = station.bus.subscribe(maxsize)`, then `await sub.get()`: every event in order; a
   subscriber that falls behind loses the oldest and is told how many (`tools.station.bus`).
   `sub.close()` when done.
 - `cid, answer = station.submit(name, args, command_id)`: the command goes to the robot at
   the next turn; `await answer` gives its ACK or NACK as a dict (`{"command_id", "ok",
-  "type": "ACK"|"NACK", "text", "reason"?, "extras"?}`), once, however often the robot says it.
+  "type": "ACK"|"NACK", "text", "reason"?, "extras"?, "status"?}`), once, however often the robot
+  says it.
   A command id the robot saw before is answered from its memory, never run twice, so a client
   that lost its station re-submits the same id to the next one.
 - `station.stop()` ends `run` after the current turn; `station.failure` says why it ended on

@@ -57,6 +57,8 @@ class Robot:
             elif hasattr(ev, "payload"):
                 cmd = pk.decode(ev.payload)
                 self.commands.append(cmd)
+                if not isinstance(cmd, pk.CommandPacket):
+                    continue  # the station's refusal of a message (a NACK): kept in `commands` for the tests
                 if [c.command_id for c in self.commands].count(cmd.command_id) == 1:  # as the robot: once
                     self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, {"time": len(self.commands) * 1.0})))
 
