@@ -7,7 +7,6 @@ outbox database so a restart never reuses one.
 from __future__ import annotations
 
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -16,13 +15,8 @@ import numpy as np
 from hal.interfaces import ViewAngles
 from onboard.capture.pipeline import FittedView
 from radio import packets as pk
+from radio.packets.base import iso_time  # noqa: F401  (the robot's log lines show times with it)
 from radio.packets.commands import fit_answer
-
-
-def iso_time(t: float | None) -> str | None:
-    """A wall-clock time as a person reads it (the robot's log, the station's events and page):
-    ISO 8601 in UTC, to the second; None stays None."""
-    return None if t is None else datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 class SeqCounter:

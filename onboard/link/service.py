@@ -15,8 +15,8 @@ from __future__ import annotations
 from typing import Callable
 
 from onboard.link.outbox import Outbox, OutboxError, OutboxFull
-from onboard.state import RuntimeState
 from onboard.link.transport import Transport
+from onboard.state import RuntimeState
 from radio import FrameError
 from radio import packets as pk
 from radio.link import Acked, Delivered, Event, LinkStats, QueueFull

@@ -10,12 +10,12 @@ from __future__ import annotations
 import dataclasses
 from typing import Callable
 
-from onboard.link import bodies as wire
-from onboard.capture.pipeline import Pipeline
 from onboard.capture.filing import Captures
+from onboard.capture.pipeline import Pipeline
 from onboard.failsafe import Failsafe
-from onboard.link.service import LinkService
+from onboard.link import bodies as wire
 from onboard.link.outbox import Outbox
+from onboard.link.service import LinkService
 from onboard.state import Mode, RuntimeState
 from onboard.sweep.plan import SweepProgress
 from onboard.watchdog import Notifier

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import enum
 import math
+from datetime import datetime, timezone
 from collections.abc import Mapping
 from typing import Any
 
@@ -33,6 +34,12 @@ INT64 = 2**63 - 1
 # A wall-clock time in seconds since 1970: no robot's clock reads past 2106, and a time that
 # cannot be shown as a date is refused with the packet, before anything is stored.
 MAX_TIME = float(2**32)
+
+
+def iso_time(t: float | None) -> str | None:
+    """A wall-clock time as a person reads it (the robot's log, the station's events, `cmd`, the
+    page): ISO 8601 in UTC, to the second; None stays None. Every time a packet decodes to has one."""
+    return None if t is None else datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 # -- sizes a real sensor cannot exceed ------------------------------------------------------
 # Every size a decoded field gives (a frame, a label map, a pixel count, label and band

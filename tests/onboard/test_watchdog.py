@@ -3,7 +3,6 @@ example unit that relies on it (Type=notify, WatchdogSec, Restart=on-failure).""
 import configparser
 import os
 import socket
-from pathlib import Path
 
 import pytest
 
@@ -11,10 +10,10 @@ from onboard import cli
 from onboard.runtime import Mode
 from onboard.watchdog import Notifier
 from tests.support import ROOT
+from tests.support.robots import robot_toml
 
 UNIT = ROOT / "examples" / "btf-robot.service"
-ROBOT = ('[hal]\nbody = "fake"\nscene = "black"\nsize = [40, 60]\n[segment]\nmethod = "scene"\n'
-         '[sweep]\nstart = 90\nstop = 60\nstep = 10\n[skip]\nmin_pixels = 20\n')
+ROBOT = robot_toml({"hal": {"scene": "black"}, "sweep": {"start": 90, "stop": 60, "step": 10}})
 
 
 @pytest.fixture
@@ -110,6 +109,6 @@ def test_example_unit_matches_the_runtime():
     # ExecStart names a command line btf-robot accepts.
     exe, *argv = service["ExecStart"].split()
     assert exe.endswith("/btf-robot")
-    parser = cli.build_parser(cli.PROG, "onboard.cli", cli.COMMANDS, "")
+    parser = cli.build_parser()
     args = parser.parse_args(argv)
     assert args.command == "run" and args.config and not args.new_sweep

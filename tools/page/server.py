@@ -33,11 +33,12 @@ from typing import Any
 
 from aiohttp import web
 
-from tools.report.look import CSS
 from tools.page.data import PageData, static_dir
 from tools.page.forms import forms_html, parse_form
-from tools.station.station import Station
+from tools.report.look import CSS
 from tools.station.bus import EventBus
+from tools.station.events import LostEvent
+from tools.station.station import Station
 
 ANSWER_WAIT_S = 2.0  # a command's POST waits this long for the robot's answer
 SNAPSHOT_EVERY_S = 1.0
@@ -92,7 +93,8 @@ class PageServer:
             web.get("/", self._index), web.get("/static/{name}", self._static), web.get("/events", self._events),
             web.get("/api/state", self._state), web.post("/api/command", self._command),
             web.get("/capture/{id:\\d+}/section", self._section),
-            web.get("/capture/{id:\\d+}/{name:[a-z]+}.png", self._image)])
+            web.get("/capture/{id:\\d+}/{name:[a-z]+}.png", self._image),
+            web.get("/api/btf", self._btf)])
         self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.options.host, self.options.port)
@@ -219,7 +221,7 @@ class PageServer:
             await _send(resp, self.hello(request))
             while True:
                 msg = await sub.get()
-                await _send(resp, self.hello(request) if msg["kind"] == "lost" else msg)
+                await _send(resp, self.hello(request) if isinstance(msg, LostEvent) else msg)  # fell behind
         except (ConnectionError, EOFError):
             pass
         finally:
@@ -262,6 +264,11 @@ class PageServer:
         if data is None:
             raise web.HTTPNotFound(text=f"capture {request.match_info['id']} has no {name} image")
         return web.Response(body=data, content_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+    async def _btf(self, request: web.Request) -> web.Response:
+        """The BTF panel's points, curve and leave-one-out figures (`tools.page.btf_panel`)."""
+        status, body = await self.data.btf(request.query)
+        return web.json_response(body, status=status)
 
 
 async def _send(resp: web.StreamResponse, msg: dict) -> None:

@@ -14,7 +14,7 @@ import enum
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from onboard.link.bodies import iso_time
+from radio.packets.base import iso_time
 
 
 class Tone(enum.StrEnum):

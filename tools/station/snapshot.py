@@ -12,10 +12,10 @@ from collections import deque
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from onboard.link.bodies import iso_time
 from onboard.sweep.plan import SweepPlan
 from radio import packets as pk
 from radio.events import LinkStats
+from radio.packets.base import iso_time
 from tools.station import sweep_grid
 
 LATEST = 10  # captures the snapshot lists

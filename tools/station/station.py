@@ -58,14 +58,14 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
 from radio import packets as pk
-from radio.packets.commands import CommandName, check_args
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale
+from radio.packets.commands import CommandName, check_args
 from radio.pump import LinkPump
 from radio.link import QueueFull
 from tools.station import events as ev_
-from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json, refusal_body
 from tools.station.bus import EventBus
 from tools.station.log import StationLog, likely_cause
+from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json, refusal_body
 from tools.station.snapshot import StationSnapshot
 
 WRONG_KEY_FRAMES = 8  # frames failing authentication, none passing: the key is wrong

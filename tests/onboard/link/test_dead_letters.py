@@ -7,9 +7,9 @@ from onboard.link import dead_letters
 from onboard.link.outbox import Outbox
 from onboard.link.transport import MemoryTransport
 from radio import packets as pk
+from tests.support.robots import IDLE, SMALL, robot_toml
 
-ROBOT = ('[hal]\nbody = "fake"\nsize = [24, 32]\n[segment]\nmethod = "scene"\n'
-         '[sweep]\nautostart = false\n')
+ROBOT = robot_toml(SMALL, IDLE)
 
 
 def test_a_message_set_aside_leaves_the_queue_with_its_body_and_is_counted_once(tmp_path):

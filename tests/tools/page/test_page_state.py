@@ -7,12 +7,12 @@ from hal.interfaces import ViewAngles
 from onboard.link.status import sweep_report
 from onboard.sweep.plan import SkippedPose, SweepPlan, SweepProgress
 from radio import packets as pk
-from tests.tools.station.test_receiver import models_body
+from tests.support.packets import models_body
 from tools.page.data import CaptureIndex
 from tools.station.receiver import Item, ItemKind, Receiver
 from tools.station.snapshot import StationSnapshot
-from tools.store.database import Store
 from tools.station.sweep_grid import grid_json, plan_of_command
+from tools.store.database import Store
 
 
 def report(plan, next_index=0, skipped=(), mode="sweeping"):

@@ -12,16 +12,15 @@ from radio.channel import ChannelConfig
 from radio.channel_port import Cable
 from radio.link import Link
 from radio.pump import LinkPump
-from tests.tools.station.test_receiver import models_body
-from tests.tools.station.test_station_core import drive, station_log, station_on_cable
+from tests.support.packets import models_body
+from tests.support.robots import IDLE, SMALL, robot_toml
+from tests.support.station_cable import KEY, drive, station_log, station_on_cable
 from tools.station.log import StationLog
 from tools.station.receiver import Receiver
 from tools.station.station import Station
 from tools.store.database import Store
 
-KEY = bytes(range(32))
-ROBOT = ('[hal]\nbody = "fake"\nsize = [24, 32]\n[segment]\nmethod = "scene"\n'
-         '[sweep]\nautostart = false\n[link]\nheartbeat_s = 0.1\n')
+ROBOT = robot_toml(SMALL, IDLE, {"link": {"heartbeat_s": 0.1}})
 
 
 def old_status(extras: dict) -> bytes:

@@ -6,19 +6,10 @@ import time
 import pytest
 
 from radio import packets as pk
-from radio.auth import MemoryCounterStore
-from radio.channel import ChannelConfig
-from radio.channel_port import Cable
-from radio.link import Acked, Link
-from radio.pump import LinkPump
-from tests.tools.station.test_receiver import models_body
-from tools.station.receiver import Receiver
-from tools.station.station import Station
+from tests.support.packets import models_body
+from tests.support.station_cable import drive, station_log, station_on_cable
 from tools.station.bus import EventBus
-from tools.station.log import StationLog
 from tools.store.database import Store
-
-KEY = bytes(range(32))
 
 
 def test_a_slow_subscriber_loses_the_oldest_events_and_is_told_how_many():
@@ -42,47 +33,6 @@ def test_a_slow_subscriber_loses_the_oldest_events_and_is_told_how_many():
     assert subscribers == 1
 
 
-class Robot:
-    """The robot's end of the cable: a link that sends packets and answers commands."""
-
-    def __init__(self, end, key=KEY):
-        self.pump = LinkPump(Link(1, 2, 1, key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), end)
-        self.acked: set[int] = set()
-        self.commands: list[pk.CommandPacket] = []
-
-    def turn(self):
-        for ev in self.pump.step():
-            if isinstance(ev, Acked):
-                self.acked.add(ev.msg_id)
-            elif hasattr(ev, "payload"):
-                cmd = pk.decode(ev.payload)
-                self.commands.append(cmd)
-                if not isinstance(cmd, pk.CommandPacket):
-                    continue  # the station's refusal of a message (a NACK): kept in `commands` for the tests
-                if [c.command_id for c in self.commands].count(cmd.command_id) == 1:  # as the robot: once
-                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, {"time": len(self.commands) * 1.0})))
-
-
-def station_on_cable(tmp_path, store=None, host_key=KEY, robot_key=KEY):
-    cable = Cable(ChannelConfig(latency=0.0, bandwidth=1e7, buffer=1 << 20))
-    store = store or Store.open(tmp_path / "host.db")
-    pump = LinkPump(Link(2, 1, 1, host_key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), cable.ends[1])
-    station = Station(pump, Receiver(store), StationLog(tmp_path / "host.db.log", echo=None),
-                      port="sim", db=str(tmp_path / "host.db"), status_every=0)
-    return station, Robot(cable.ends[0], robot_key), store
-
-
-async def drive(station, robot, until, limit_s=20.0):
-    """Run the station, turning the robot beside it, until `until()`."""
-    task = asyncio.ensure_future(station.run())
-    end = time.monotonic() + limit_s
-    while not until() and not task.done() and time.monotonic() < end:
-        robot.turn()
-        await asyncio.sleep(0.002)
-    station.stop()
-    await task
-
-
 def test_a_packet_is_acknowledged_only_once_it_is_stored(tmp_path):
     station, robot, store = station_on_cable(tmp_path)
     mid = robot.pump.send(models_body(7)[0], msg_id=41)
@@ -90,11 +40,6 @@ def test_a_packet_is_acknowledged_only_once_it_is_stored(tmp_path):
     assert mid in robot.acked and [c.sequence for c in store.captures()] == [7]
     events = [e for e in station_log(tmp_path) if e["kind"] == "capture"]
     assert events[0]["stored"] and events[0]["seq"] == 7 and events[0]["capture"]["regions"] == 2
-
-
-def station_log(tmp_path):
-    import json
-    return [json.loads(line) for line in (tmp_path / "host.db.log").read_text().splitlines()]
 
 
 def test_a_store_that_fails_ends_the_station_and_nothing_is_acknowledged(tmp_path):

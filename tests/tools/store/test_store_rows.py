@@ -5,9 +5,9 @@ import sqlite3
 import numpy as np
 import pytest
 
-from tests.tools.report.test_report import filled
+from btf.fit.png import encode_png
+from tests.support.packets import filled_database
 from tools.cli import main
-from tools.data.images import encode_png
 from tools.station.receiver import mask_key
 from tools.store.database import CorruptDatabase, Store
 
@@ -30,7 +30,7 @@ BAD_ROWS = {
 
 
 def _spoiled(tmp_path, sql):
-    db = filled(tmp_path / "scene.db")
+    db = filled_database(tmp_path / "scene.db")
     conn = sqlite3.connect(db)
     conn.execute(sql)
     conn.commit()
@@ -74,7 +74,7 @@ def test_the_store_names_the_capture_and_model_of_a_nan_row(tmp_path):
 
 
 def test_a_mask_row_is_checked_before_its_png_is_decoded(tmp_path):
-    db = filled(tmp_path / "scene.db")
+    db = filled_database(tmp_path / "scene.db")
     with Store.open(db) as s:
         good = s.mask(mask_key(1), "3")
     conn = sqlite3.connect(db)
