@@ -5,6 +5,7 @@ returned to the caller, who commits packets and state in one outbox transaction.
 from __future__ import annotations
 
 import json
+import logging
 from pathlib import Path
 from typing import Any, Callable
 
@@ -16,7 +17,9 @@ from onboard.capture.pipeline import FittedView, remember
 from onboard.link import bodies as wire
 from onboard.link.outbox import Outbox
 from onboard.state import RuntimeState
+from radio import packets as pk
 
+log = logging.getLogger("btf.robot")
 PCA_KEY = "pca"  # the scene's basis, in the outbox state with the packet that carries it
 
 
@@ -45,8 +48,21 @@ class Captures:
         if cap.unchanged and ref is not None:
             packets.append(wire.unchanged_body(cfg.robot_id, seq, ref, self.wall(), cap))
         else:
-            packets.append(wire.models_body(cfg.robot_id, seq, self.wall(), cfg.features.space, cap))
+            body, left_out = wire.fitting_models_body(cfg.robot_id, seq, self.wall(), cfg.features.space, cap)
+            packets.append(body)
+            if left_out:
+                self._left_out(seq, cap, left_out)
         return seq, packets, state
+
+    def _left_out(self, seq: int, cap: FittedView, labels: tuple[int, ...]) -> None:
+        """Say which regions a capture's MODELS left out to fit the link's largest message."""
+        n = len({label for label, _ in cap.results})
+        shown = ", ".join(str(x) for x in labels[:12]) + (", ..." if len(labels) > 12 else "")
+        text = (f"capture {seq}: the {len(labels)} smallest of its {n} regions left out (labels {shown}): all "
+                f"{n} regions' models exceed the link's largest message, {pk.MAX_BODY} bytes; fewer "
+                "segment.n_labels or features.bands keep every region")
+        self.state.errors.append(text)
+        log.warning("%s", text)
 
     def filed(self, cap: FittedView, seq: int) -> None:
         """`cap` was committed under `seq`."""
