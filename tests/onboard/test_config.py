@@ -63,12 +63,12 @@ def test_good_file_loads_into_frozen_records_with_paths_relative_to_the_file(tmp
         ("[sweep]\nautostart = 1", "sweep.autostart must be true or false"),
         ("[hal]\nsize = [10]", "hal.size must have 2 items"),
         ("[hal]\nbody = 'magic'", "hal.body must be one of"),
-        ("[sweep]\nstep = -5", "sweep.step must be positive"),
-        ("[sweep]\nstart = 120", "sweep.start must lie in [0, 90]"),
+        ("[sweep]\nstep = -5", "sweep.step must lie in 0.01..180, got -5"),
+        ("[sweep]\nstart = 120", "sweep.start must lie in 0..90, got 120"),
         ("[sweep]\nstart = nan", "must be finite"),
         ("[segment]\nmethod = 'mask'\nmask = 'nowhere.png'", "no such file"),
         ("hal = 3", "[hal] must be a table"),
-        ("[sweep]\nstep = 0.001", "exceeds 4096"),
+        ("[sweep]\nstop = 0\nstep = 0.02", "exceeds 4096"),
     ],
 )
 def test_each_bad_config_raises_one_line_naming_the_problem(tmp_path, text, words):
