@@ -76,6 +76,7 @@ class SweepConfig:
     settle_timeout_s: float = 10.0
     retries: int = 2  # extra attempts per device step before the pose is skipped
     pose_tolerance_deg: float = 1.0  # measured pose already in this sweep: not measured again
+    retry_skipped: int = 2  # after the plan: more tries of each pose a device fault skipped
 
 
 @dataclass(frozen=True, slots=True)
@@ -208,7 +209,7 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "link.window": (1, 1024),
     "sweep.start": (0.0, 90.0), "sweep.stop": (0.0, 90.0), "sweep.step": (0.01, 180.0),
     "sweep.azimuths": (-3600.0, 3600.0), "sweep.settle_timeout_s": (0.001, DAY), "sweep.retries": (0, 100),
-    "sweep.pose_tolerance_deg": (0.0, 90.0),
+    "sweep.pose_tolerance_deg": (0.0, 90.0), "sweep.retry_skipped": (0, 10),
     "features.bins_16bit": (2, 65536),
     "segment.n_labels": (1, 256), "segment.k": (1, 128), "segment.min_samples": (1, MAX_FRAME_PIXELS),
     "segment.split_std": (1e-6, 1e9), "segment.merge_distance": (0.0, 1e9), "segment.max_merges": (0, 256),

@@ -44,11 +44,12 @@ PUMP_S = 0.01  # how often the link is serviced while a step runs in the worker
 
 
 class PoseSkipped(Exception):
-    """A pose could not be measured after its retries; `reason` says which step failed."""
+    """A pose could not be measured after its retries; `reason` says which step failed, `fault`
+    whether a device did (then the sweep tries the pose again after its plan)."""
 
-    def __init__(self, reason: str) -> None:
+    def __init__(self, reason: str, fault: bool = False) -> None:
         super().__init__(reason)
-        self.reason = reason
+        self.reason, self.fault = reason, fault
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,7 +154,7 @@ class Pipeline:
                 last = f"{type(exc).__name__}: {exc}"
                 self.faults.append(f"{step}: {last}")
                 self.pump()
-        raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}")
+        raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}", fault=True)
 
     def move(self, view: ViewAngles) -> None:
         """Send the goals, then poll until settled; each bus call has its own retries."""
@@ -168,14 +169,15 @@ class Pipeline:
         while self.retry("settle", lambda: bus.is_moving(ids)):
             if time.monotonic() > deadline:
                 raise PoseSkipped(f"settle failed: servos {ids} still moving after "
-                                  f"{self.cfg.sweep.settle_timeout_s:.1f} s")
+                                  f"{self.cfg.sweep.settle_timeout_s:.1f} s", fault=True)
             self.pump()
             self.sleep(0.005)
         reached = self.retry("positions", lambda: bus.positions(ids))
         tol = arm.joints.tolerance_deg
         for sid, goal in goals.items():
             if abs(reached[sid] - goal) > tol:
-                raise PoseSkipped(f"move: servo {sid} stopped at {reached[sid]:.1f}°, short of {goal:.1f}°")
+                raise PoseSkipped(f"move: servo {sid} stopped at {reached[sid]:.1f}°, short of {goal:.1f}°",
+                                  fault=True)
 
     def measure_view(self) -> ViewAngles:
         v = self.retry("tracker", lambda: view_from_orientation(self.hal.tracker.orientation()))

@@ -80,7 +80,7 @@ class Status:
 
 def sweep_report(p: SweepProgress, whole: bool = False, **said) -> pk.SweepReport:
     """A sweep as STATUS says it: its number and what `said` names; `whole`: its progress, plan
-    and skipped poses too."""
+    and skipped poses too, and once it is done the poses missing."""
     if not whole:
         return pk.SweepReport(p.sweep_id, **said)
     plan = p.plan
@@ -88,11 +88,13 @@ def sweep_report(p: SweepProgress, whole: bool = False, **said) -> pk.SweepRepor
     return pk.SweepReport(
         p.sweep_id, next=p.next_index, poses=plan.count, active=p.active,
         plan=pk.Plan(plan.start, plan.stop, plan.step, plan.azimuths, plan.elevations) if fits else None,
-        plan_left_out=not fits, skipped=pk.Kept(tuple(skipped_pose(k) for k in p.skipped)), **said)
+        plan_left_out=not fits, skipped=pk.Kept(tuple(skipped_pose(k) for k in p.skipped)),
+        **({"missing": pk.Kept(tuple(skipped_pose(k) for k in p.skipped))} if p.done else {}), **said)
 
 
 def skipped_pose(k) -> pk.SkippedPose:
-    return pk.SkippedPose(k.index, float(k.commanded.elevation), float(k.commanded.azimuth) % 360.0, k.reason)
+    return pk.SkippedPose(k.index, float(k.commanded.elevation), float(k.commanded.azimuth) % 360.0, k.reason,
+                          k.tries if k.tries > 1 else None)
 
 
 def fit(report: pk.StatusReport) -> pk.StatusReport:

@@ -3,7 +3,9 @@
 Exactly once: a pose's packets, the sweep progress that marks it done and the next capture
 sequence are one outbox transaction (`Outbox.commit`), so a kill at any instant leaves the
 pose queued and done, or neither; the host drops re-sent rows by (robot, incarnation, seq).
-Faults become retries, then a skipped pose with its reason; the sweep goes on. A full outbox
+Faults become retries, then a skipped pose with its reason; the sweep goes on, and after its
+last planned pose measures again each pose a device fault skipped (`[sweep] retry_skipped`
+more tries each). Its last STATUS lists the poses still missing, each with why. A full outbox
 or a disk short of room pauses it; the pose is measured again when there is room.
 """
 from __future__ import annotations
@@ -37,19 +39,25 @@ class SweepControl:
         s = self.state.cfg.sweep
         return SweepPlan(s.start, s.stop, s.step, s.azimuths)
 
+    def _in_force(self, progress: SweepProgress) -> SweepProgress:
+        """`progress` with the configuration's tries of a skipped pose (a SET changes them)."""
+        progress.retry_skipped = self.state.cfg.sweep.retry_skipped
+        return progress
+
     def start(self, plan: SweepPlan | None = None) -> SweepProgress:
         """A new sweep (of the config's plan unless one is given), saved before it begins."""
-        self.state.progress = self.sweeps.start(self.plan() if plan is None else plan)
+        self.state.progress = self._in_force(self.sweeps.start(self.plan() if plan is None else plan))
         self.state.mode = Mode.SWEEPING
         return self.state.progress
 
     def begin(self, progress: SweepProgress) -> None:
         """`progress` (a new sweep already committed) is the sweep now."""
-        self.state.progress, self.state.mode = progress, Mode.SWEEPING
+        self.state.progress, self.state.mode = self._in_force(progress), Mode.SWEEPING
 
     def autostart(self) -> Boot:
         """At boot: resume an interrupted sweep; never restart a finished one on its own."""
-        self.state.progress, boot = self.sweeps.autostart(self.plan(), new=self.new_sweep)
+        progress, boot = self.sweeps.autostart(self.plan(), new=self.new_sweep)
+        self.state.progress = self._in_force(progress)
         self.new_sweep = False
         if boot in (Boot.STARTED, Boot.RESUMED):
             self.state.mode = Mode.SWEEPING
@@ -70,6 +78,8 @@ class SweepControl:
         The pose's packets and the progress past it are committed together; when the
         outbox cannot take them, nothing changes and the pose is measured again later."""
         p = self.state.progress
+        if p is not None:
+            self._in_force(p)
         if p is None or p.done:
             return "done"
         if self.outbox.full_for(self.reserve) or self.full_until_ack:
@@ -85,11 +95,12 @@ class SweepControl:
                 cap = self._measure(p)
         except Interrupted:  # the command or failsafe that interrupted has set the state
             return "interrupted"
+        except PoseSkipped as exc:
+            return self._file(p, nxt, None, exc.reason, exc.fault)
         except Exception as exc:
             # A fault the pipeline did not foresee skips the pose with its reason
             # instead of failing the same pose forever.
-            reason = exc.reason if isinstance(exc, PoseSkipped) else f"internal: {type(exc).__name__}: {exc}"
-            return self._file(p, nxt, None, reason)
+            return self._file(p, nxt, None, f"internal: {type(exc).__name__}: {exc}")
         return self._file(p, nxt, cap, "")
 
     def _measure(self, p: SweepProgress) -> FittedView:
@@ -102,11 +113,14 @@ class SweepControl:
                               f"{measured.azimuth:.1f}°)")
         return self.pipeline.shoot(commanded, measured)
 
-    def _file(self, p: SweepProgress, nxt: SweepProgress, cap: FittedView | None, reason: str) -> str:
+    def _file(self, p: SweepProgress, nxt: SweepProgress, cap: FittedView | None, reason: str,
+              fault: bool = False) -> str:
         """Commit the pose's packets (or its skip) with the progress past it."""
+        index, again = p.current_index(), p.retrying
         if cap is None:
-            skipped = nxt.record_skipped(reason)
-            packets = [self.status.packet(f"skipped pose: {skipped.reason}", pk.StatusReport(
+            skipped = nxt.record_skipped(reason, fault)
+            said = f"skipped pose again (try {skipped.tries} of {p.retry_skipped + 1})" if again else "skipped pose"
+            packets = [self.status.packet(f"{said}: {skipped.reason}", pk.StatusReport(
                 sweep=sweep_report(p, skipped=pk.Kept((skipped_pose(skipped),)))))]
             state: dict[str, str] = {}
             result = "skipped"
@@ -117,9 +131,7 @@ class SweepControl:
             result = "measured"
         if nxt.done:
             nxt.active = False
-            packets.append(self.status.packet("sweep done", pk.StatusReport(sweep=sweep_report(
-                p, active=False, measured=len(nxt.measured), skipped=pk.Kept((), len(nxt.skipped)))),
-                pk.RobotState.IDLE))
+            packets.append(self._done_packet(p, nxt))
         try:
             self.outbox.commit(packets, {**state, **self.sweeps.entry(nxt)}, reserve=self.reserve)
         except OutboxFull as exc:
@@ -132,9 +144,27 @@ class SweepControl:
         self.state.progress = nxt
         if cap is not None:
             self.captures.filed(cap, seq)
-        self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {nxt.next_index} of {nxt.plan.count}")
+        self._said(p, nxt, index, again, cap, seq if cap is not None else None, reason, result)
+        return result
+
+    def _done_packet(self, p: SweepProgress, nxt: SweepProgress) -> tuple[int, bytes]:
+        """The STATUS that ends a sweep: how many poses were measured, and the ones missing with why."""
+        missing = tuple(skipped_pose(k) for k in nxt.skipped)
+        return self.status.packet(
+            "sweep done",
+            pk.StatusReport(sweep=sweep_report(p, active=False, measured=len(nxt.measured),
+                                               skipped=pk.Kept((), len(nxt.skipped)), missing=pk.Kept(missing))),
+            pk.RobotState.IDLE)
+
+    def _said(self, p: SweepProgress, nxt: SweepProgress, index: int | None, again: bool, cap: FittedView | None,
+              seq: int | None, reason: str, result: str) -> None:
+        """The pose's line in the log and the service status; the sweep's when it is done."""
+        n = p.plan.count
+        self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {(index or 0) + 1} of {n}"
+                             + (" (again)" if again else ""))
         where = p.current()
-        pose = f"sweep {p.sweep_id} pose {nxt.next_index}/{nxt.plan.count} at {where.elevation:.1f}°/{where.azimuth:.1f}°"
+        pose = (f"sweep {p.sweep_id} pose {(index or 0) + 1}/{n}{' again' if again else ''} at "
+                f"{where.elevation:.1f}°/{where.azimuth:.1f}°")
         if cap is None:
             log.info("%s: skipped: %s", pose, reason)
         else:
@@ -142,7 +172,7 @@ class SweepControl:
                      cap.measured.azimuth, len(cap.results), " (unchanged)" if cap.unchanged else "")
         if nxt.done:
             self.state.mode = Mode.IDLE
-            done = f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, {len(nxt.skipped)} skipped"
+            done = f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, {len(nxt.skipped)} missing"
             self.notifier.status(done)
-            log.info("%s", done)
-        return result
+            log.info("%s%s", done, "".join(f"; {k.commanded.elevation:.1f}°/{k.commanded.azimuth:.1f}°: {k.reason}"
+                                           for k in nxt.skipped[:8]) + ("; ..." if len(nxt.skipped) > 8 else ""))

@@ -35,7 +35,8 @@ def test_sweep_of_each_plate_sends_every_pose_label_band_model(fake_robot, scene
 
 def test_faults_at_ten_percent_still_finish_and_report_every_skipped_pose(fake_robot):
     # A stalled servo moves on only at the settle timeout (real seconds): 2 s, not the default 10.
-    rt, tr = make(fake_robot, "black", rate=0.1, extra={"sweep": {"settle_timeout_s": 2}})
+    # Skipped poses stay skipped here (retry_skipped = 0); tests/onboard/sweep/test_retry_skipped.py tries them again.
+    rt, tr = make(fake_robot, "black", rate=0.1, extra={"sweep": {"settle_timeout_s": 2, "retry_skipped": 0}})
     sweep(rt)
     packets = decoded(tr)
     measured = [p for p in packets if isinstance(p, pk.ModelsPacket)]

@@ -10,6 +10,9 @@ from tools.station.control import StationClient, StationGone, socket_path
 from tools.station.events import line
 
 
+MISSING_SHOWN = 10  # a sweep's missing poses listed one a line; the rest counted
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--db", help="the station's database (its control socket is DB.sock)")
     p.add_argument("--socket", help="the station's control socket, if not DB.sock")
@@ -57,7 +60,16 @@ def summary(s: dict) -> str:
              f"robot {r['id']}: {r['mode'] or '?'} at {pose}, outbox {r['outbox']}, "
              f"faults {_count(r, 'faults')}, errors {_count(r, 'errors')}"
              + (f", {r['dead_letters']['count']} messages refused" if (r.get("dead_letters") or {}).get("count") else "")]
-    if sw["id"] is not None:
+    if sw["id"] is not None and sw.get("missing") is not None:  # it ended: what it could not measure
+        missing = sw["missing"]
+        lines.append(f"sweep {sw['id']} done: {sw['measured']} measured, "
+                     f"{len(missing) + sw.get('missing_left_out', 0)} missing")
+        lines += [f"  missing {k['elevation']:.1f}°/{k['azimuth']:.1f}°"
+                  f"{' after ' + str(k['tries']) + ' tries' if k.get('tries', 1) > 1 else ''}: {k['reason']}"
+                  for k in missing[:MISSING_SHOWN]]
+        if len(missing) > MISSING_SHOWN or sw.get("missing_left_out"):
+            lines.append(f"  ... and {max(0, len(missing) - MISSING_SHOWN) + sw.get('missing_left_out', 0)} more")
+    elif sw["id"] is not None:
         lines.append(f"sweep {sw['id']}: pose {sw['next']} of {sw['poses']}, {len(sw['skipped'])} skipped"
                      + ("" if sw["active"] else " (not running)"))
     c = s["captures"]

@@ -8,6 +8,7 @@ from onboard.link.status import sweep_report
 from onboard.sweep.plan import SkippedPose, SweepPlan, SweepProgress
 from radio import packets as pk
 from tests.support.packets import models_body
+from tools.cli.watch import summary
 from tools.page.data import CaptureIndex
 from tools.station.receiver import Item, ItemKind, Receiver
 from tools.station.snapshot import StationSnapshot
@@ -116,3 +117,28 @@ def test_the_page_lists_the_latest_capture_at_each_pose(tmp_path):
     assert [c["seq"] for c in index.refresh()] == [4]
     assert sorted(c["seq"] for c in index.latest.values()) == [3, 4]
     index.close()
+
+
+def test_a_pose_measured_again_after_the_plan_is_done_and_the_sweeps_missing_poses_are_listed_with_why():
+    plan = SweepPlan(80.0, 60.0, 10.0, (0.0,))  # 80, 70, 60
+    progress = SweepProgress(4, plan, 3, retry_skipped=2, skipped=[
+        SkippedPose(0, ViewAngles(80.0, 0.0), "move failed after 3 attempts", True),
+        SkippedPose(2, ViewAngles(60.0, 0.0), "settle failed", True)])
+    snap = StationSnapshot("pty", "db", 0.0)
+    snap.note_status_answer(answer_report(dataclasses.replace(report(plan), sweep=sweep_report(progress, whole=True))),
+                            10.0)
+    assert snap.to_json(10.0)["sweep"]["grid"]["cells"] == "sds" and snap.to_json(10.0)["sweep"]["missing"] is None
+    snap.note_capture(capture_item(5, 80.0, 0.0), 11.0)  # the robot tried pose 80 again: measured
+    js = snap.to_json(11.0)["sweep"]
+    assert js["grid"]["cells"] == "dds" and [k["index"] for k in js["skipped"]] == [2]
+    gone = pk.SkippedPose(2, 60.0, 0.0, "settle failed: servos [1, 2] still moving after 10.0 s", 3)
+    done = pk.StatusPacket(1, 1.7e9, pk.RobotState.IDLE, None, 0, 0, 5, "sweep done", report=pk.StatusReport(
+        sweep=pk.SweepReport(4, active=False, measured=2, skipped=pk.Kept((), 1), missing=pk.Kept((gone,)))))
+    snap.note_status(pk.decode(pk.encode(done)), 12.0)
+    js = snap.to_json(12.0)["sweep"]
+    assert js["missing"] == [{"index": 2, "elevation": 60.0, "azimuth": 0.0, "tries": 3,
+                              "reason": "settle failed: servos [1, 2] still moving after 10.0 s"}]
+    assert js["grid"]["cells"] == "dds" and js["grid"]["reasons"] == {"2,0": gone.reason}
+    lines = summary(snap.to_json(12.0)).splitlines()
+    assert "sweep 4 done: 2 measured, 1 missing" in lines
+    assert "  missing 60.0°/0.0° after 3 tries: settle failed: servos [1, 2] still moving after 10.0 s" in lines

@@ -96,4 +96,4 @@ def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path)
     assert snap["link"]["up"] and snap["link"]["frames_accepted"] > 0 and snap["link"]["last_heard"]
     assert snap["robot"]["state"] == "sweeping" and snap["robot"]["pose"] == {"elevation": 60.0, "azimuth": 0.0}
     assert snap["sweep"]["id"] == 2 and snap["sweep"]["skipped"] == [
-        {"index": 4, "elevation": 50.0, "azimuth": 0.0, "reason": "settle failed"}]
+        {"index": 4, "elevation": 50.0, "azimuth": 0.0, "reason": "settle failed", "tries": 1}]

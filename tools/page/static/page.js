@@ -109,7 +109,8 @@ function drawSweep(s) {
   const pct = total ? (100 * (done + skipped)) / total : 0;
   $("progress-bar").style.width = `${pct}%`;
   $("progress-text").textContent = total ? `sweep ${w.id ?? "?"}: ${done + skipped} of ${total} poses` +
-    (skipped ? ` (${skipped} skipped)` : "") : "no sweep";
+    (skipped ? ` (${skipped} ${w.missing ? "missing" : "skipped"})` : "") : "no sweep";
+  drawMissing(w);
   if (!g) return;
   const key = JSON.stringify([g.elevations, g.azimuths]);
   const box = $("grid");
@@ -127,6 +128,15 @@ function drawSweep(s) {
     td.textContent = mark[st] ?? "";
     td.title = `${e}° / ${a}°: ${word[st] ?? st}` + (st === "s" ? `: ${g.reasons[`${r},${c}`] ?? ""}` : "");
   });
+}
+
+// The poses an ended sweep could not measure, each with why (after its tries).
+function drawMissing(w) {
+  const m = w.missing || [], more = w.missing_left_out || 0, box = $("missing");
+  box.hidden = !(m.length || more);
+  box.innerHTML = box.hidden ? "" : `<h3>Missing: ${m.length + more} pose${m.length + more === 1 ? "" : "s"} not measured</h3><ul>` +
+    m.map((k) => `<li>${deg(k.elevation)} / ${deg(k.azimuth)}${k.tries > 1 ? ` (${k.tries} tries)` : ""}: ${esc(k.reason)}</li>`).join("") +
+    (more ? `<li>… and ${more} more</li>` : "") + "</ul>";
 }
 
 // -- captures ------------------------------------------------------------------------------
