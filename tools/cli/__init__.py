@@ -27,7 +27,7 @@ COMMANDS: tuple[Subcommand, ...] = (
     Subcommand("pdfs", "the paper's Table 2: histogram error of Johnson against its peers per region",
                "pdfs photo.png --mask mask.png"),
     Subcommand("ingest", "fit every image of a dataset folder into a database (resumable)",
-               "ingest DATASET_DIR --layout plain --db dataset.db"),
+               "ingest DATASET_DIR --layout folder --db dataset.db"),
     Subcommand("resolve", "facet-based or statistical modelling for a grain size",
                "resolve --grain-mm 0.5"),
     Subcommand("report", "an HTML report of a database: results first, then images, plots and tables",
