@@ -35,7 +35,6 @@ class Shading:
     """Light-dependent state of a surface, per flat cell."""
 
     radiance: np.ndarray  # (T*T, 5) float32, reflected light per spectral band, 0..1
-    rgb: np.ndarray  # (T*T, 3) float32, the red, green and blue bands of `radiance`, for gathering
     direct: np.ndarray  # (T*T,) float64, direct light on each facet, 0 in shadow
 
 
@@ -78,7 +77,7 @@ def shade(surface: Surface, light: LightAngles = SUN) -> Shading:
     direct = np.clip(surface.normal @ light_vector(light), 0.0, None) * shadowless
     irradiance = AMBIENT + (1.0 - AMBIENT) * direct
     radiance = (surface.albedo * irradiance[:, None]).astype(np.float32)
-    return Shading(radiance, np.ascontiguousarray(radiance[:, (2, 1, 0)]), direct)
+    return Shading(radiance, direct)
 
 
 @lru_cache(maxsize=4)
