@@ -62,11 +62,18 @@ def lit(height: np.ndarray, light: LightAngles = SUN) -> np.ndarray:
     az, el = math.radians(light.azimuth), math.radians(light.elevation)
     rise = math.tan(el)
     steps = int(math.ceil(float(height.max() - height.min()) / rise)) + 1
+    rows, cols = height.shape
+    # the plate and its wrap-around `steps` cells deep: each step's cells are a view of it, not a copy
+    wrapped = np.pad(height, steps, mode="wrap")
     out = np.ones(height.shape, bool)
+    raised = np.empty_like(height)
+    below = np.empty(height.shape, bool)
     for k in range(1, steps + 1):
         sx, sy = round(k * math.sin(az)), round(k * math.cos(az))
-        ahead = np.roll(height, (-sy, -sx), axis=(0, 1))  # the cell k steps toward the light
-        out &= ahead <= height + k * rise
+        ahead = wrapped[steps + sy:steps + sy + rows, steps + sx:steps + sx + cols]  # k steps toward the light
+        np.add(height, k * rise, out=raised)
+        np.less_equal(ahead, raised, out=below)
+        out &= below
     return out
 
 

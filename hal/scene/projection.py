@@ -108,6 +108,6 @@ def seen_cells(plate: PaddedPlate, view: ViewAngles, h: int, w: int) -> np.ndarr
     below = np.bincount(first.ravel(), minlength=(h + 1) * w)[:h * w].reshape(h, w)
     _running_sum(below)
     np.minimum(below, ny - 1, out=below)
-    below *= w
-    below += np.arange(w)
-    return gather(samples.ravel(), below[::-1])  # image rows top to bottom
+    seen = below[::-1] * w  # image rows top to bottom
+    seen += np.arange(w)
+    return gather(samples.ravel(), seen)
