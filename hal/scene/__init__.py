@@ -98,9 +98,14 @@ def _colour_table(surface: Surface, light: LightAngles) -> np.ndarray:
 
 
 def _block_mean(image: np.ndarray, ss: int) -> np.ndarray:
-    """The mean of each ss x ss block of an (H ss, W ss, ...) image."""
-    h, w = image.shape[0] // ss, image.shape[1] // ss
-    return image.reshape(h, ss, w, ss, *image.shape[2:]).mean(axis=(1, 3), dtype=np.float32)
+    """The mean of each ss x ss block of an (H ss, W ss, ...) image: ss^2 whole-image sums,
+    several times faster than numpy's mean over the block axes."""
+    total = np.zeros((image.shape[0] // ss, image.shape[1] // ss, *image.shape[2:]), np.float32)
+    for dy in range(ss):
+        for dx in range(ss):
+            total += image[dy::ss, dx::ss]
+    total *= np.float32(1.0 / (ss * ss))
+    return total
 
 
 @dataclass(frozen=True, slots=True)
