@@ -92,7 +92,7 @@ def _colour_table(surface: Surface, light: LightAngles) -> np.ndarray:
     pixel needs, read in one gather (once per surface and light)."""
     plate = _padded(surface)
     table = np.empty((plate.cell.size, 4), np.float32)
-    table[:, :3] = gather(shade(surface, light).radiance[:, (2, 1, 0)], plate.cell)
+    table[:, :3] = gather(np.ascontiguousarray(shade(surface, light).radiance[:, (2, 1, 0)]), plate.cell)
     table[:, 3] = gather(surface.label, plate.cell)
     return table
 
