@@ -60,7 +60,11 @@ def run_sweep(fake_robot, text: str) -> tuple[list, dict[float, str]]:
         return process(frame, commanded, measured, settings)
 
     rt.pipeline.process = noting
-    rt.run(lambda r: r.progress is not None and r.idle())
+    try:
+        rt.run(lambda r: r.progress is not None and r.idle())
+    finally:
+        rt.outbox.close()
+        rt.hal.close()  # the emulated body's servo chain runs in a thread of its own
     return [pk.decode(body) for _, body in tr.sent], sources
 
 
