@@ -1,7 +1,6 @@
 """The station's parts in one process, over a simulated cable: the event bus, the store before
 the acknowledgement, the wrong key, the snapshot, and a command answered once."""
 import asyncio
-import time
 
 import pytest
 
