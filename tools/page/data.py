@@ -102,6 +102,15 @@ def end_with_parent() -> None:
         pass  # not Linux: the station's own exit path ends them
 
 
+def _worker_start() -> None:
+    """The drawing worker's start: it ends with the station, and leaves Ctrl-C (which the terminal
+    sends its whole process group) to the station, which shuts it down."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    end_with_parent()
+
+
 def _warm() -> None:
     """Load the worker's libraries before the first request needs them."""
 
@@ -130,7 +139,7 @@ class PageData:
     def start_worker(self) -> None:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=end_with_parent)
+                                             initializer=_worker_start)
             self._pool.submit(_warm)
 
     async def drawn(self, capture_id: int, what: str) -> dict:

@@ -12,7 +12,7 @@ import time
 from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, TextIO
+from typing import Awaitable, Callable, TextIO
 
 from onboard.cli.runner import CliError, RetryLater
 from radio.auth import FileCounterStore
@@ -125,10 +125,11 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
 
 
 async def serve(parts: StationParts, until: Callable[[], bool] | None = None, page=None,
-                echo: TextIO | None = sys.stderr) -> None:
+                echo: TextIO | None = sys.stderr, beside: Callable[[Station], Awaitable[None]] | None = None) -> None:
     """Run the station and its control socket (and, given `page`, a `tools.page.server.PageOptions`,
     the operator's page) until stopped (SIGTERM, SIGINT, `until()`), or until it fails
-    (`parts.station.failure`). The page's address with its token goes to `echo` only."""
+    (`parts.station.failure`). The page's address with its token goes to `echo` only. `beside(station)`
+    runs alongside for as long as the station does (the demo's watch on its robot)."""
     station = parts.station
     server = ControlServer(station, parts.socket)
     try:
@@ -148,6 +149,7 @@ async def serve(parts: StationParts, until: Callable[[], bool] | None = None, pa
             loop.add_signal_handler(sig, station.stop)
             handled.append(sig)
     pump = asyncio.ensure_future(station.run())
+    companion = None if beside is None else asyncio.ensure_future(beside(station))
     try:
         while until is not None and not pump.done():
             if until():
@@ -156,6 +158,9 @@ async def serve(parts: StationParts, until: Callable[[], bool] | None = None, pa
             await asyncio.sleep(0.02)
         await pump
     finally:
+        if companion is not None:
+            companion.cancel()
+            await asyncio.gather(companion, return_exceptions=True)
         for sig in handled:
             loop.remove_signal_handler(sig)
         if web is not None:
@@ -180,11 +185,11 @@ async def _start_page(parts: StationParts, options, echo: TextIO | None):
     return web
 
 
-def serve_to_exit(parts: StationParts, page=None) -> int:
+def serve_to_exit(parts: StationParts, page=None, beside=None) -> int:
     """Serve until stopped, close, and turn how the station ended into the CLI's exit status
     (a failure that needs the setup fixed is a CliError: one line, exit 2)."""
     try:
-        asyncio.run(serve(parts, page=page))
+        asyncio.run(serve(parts, page=page, beside=beside))
     finally:
         parts.close()
     failure = parts.station.failure
