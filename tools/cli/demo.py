@@ -5,6 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
+from onboard.cli.runner import SEED, bounded
 from tools.cli.options import CliError
 
 
@@ -12,9 +13,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="demo-out",
                    help="output directory (created if missing; its scene.db, work/ and report/ are rebuilt)")
     p.add_argument("--force", action="store_true", help="use an --out directory that holds other files too")
-    p.add_argument("--size", type=int, nargs=2, default=(120, 160), metavar=("H", "W"),
-                   help="camera frame height and width (default 120 160)")
-    p.add_argument("--seed", type=int, default=1, help="seed of the channel and the synthesis")
+    p.add_argument("--size", type=bounded(int, 16, 1024, "pixels"), nargs=2, default=(120, 160), metavar=("H", "W"),
+                   help="camera frame height and width, each 16..1024 (default 120 160)")
+    p.add_argument("--seed", type=SEED, default=1, help="seed of the channel and the synthesis")
     p.add_argument("--json", action="store_true", help="print the results as one JSON document")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -64,8 +65,6 @@ def run(args: argparse.Namespace) -> int:
     from tools.demo.end_to_end import DemoConfig, run_demo
 
     h, w = args.size
-    if not (16 <= h <= 1024 and 16 <= w <= 1024):
-        raise CliError(f"--size {h} {w}: each side must lie in 16..1024")
     out = Path(args.out)
     _check_out(out, args.force)
     try:

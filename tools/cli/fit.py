@@ -13,9 +13,10 @@ ROBOT_ID = "host"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = "Fit Johnson models per (label, band); without --mask the whole image is label 0."
-    p.add_argument("image")
+    p.add_argument("image", help="the photograph to fit (8- or 16-bit PNG, TIFF, JPEG)")
     p.add_argument("--mask", help="label mask PNG, same size as the image")
-    p.add_argument("--space", choices=FEATURE_SPACES, default="rgb")
+    p.add_argument("--space", choices=FEATURE_SPACES, default="rgb",
+                   help="the bands fitted: rgb, hsv, gray, or pca (decorrelated colour) (default rgb)")
     p.add_argument("--angle", type=float, help="view elevation in degrees (needed with --db)")
     p.add_argument("--db", help="store the models as a capture of robot 'host' in this database")
     p.add_argument("--json", action="store_true", help="print the models document (MODELS.json)")

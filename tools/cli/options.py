@@ -7,10 +7,11 @@ import os
 from collections import Counter
 from pathlib import Path
 
-from onboard.cli.runner import CliError  # noqa: F401  (subcommands raise it)
+from onboard.cli.runner import CliError, bounded
 
 # The feature spaces of tools.data.images.SPACES, named here so that building the parser needs no OpenCV.
 FEATURE_SPACES = ("rgb", "hsv", "gray", "pca")
+BAUD = bounded(int, 50, 4_000_000, "bits/s")  # a serial port's speed
 
 
 def add_force(parser: argparse.ArgumentParser) -> None:

@@ -25,7 +25,7 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise CliError(f"control socket {path}: {exc.strerror or exc}") from None
     if client is None:
-        raise CliError(f"no station serves {args.db or path} (start one with `btf-host station`)")
+        raise CliError(f"no station serves {args.db or path} (start one with 'btf-host station')")
     try:
         client.send({"op": "snapshot" if args.snapshot else "subscribe"})
         first = client.receive(timeout=10.0)

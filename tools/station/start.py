@@ -66,7 +66,7 @@ def take_lock(db: str | os.PathLike) -> int:
         held = os.read(fd, 32).decode(errors="replace").strip()
         os.close(fd)
         raise StationBusy(f"a station already runs on {db} (pid {held or '?'}); "
-                          f"`btf-host cmd --db {db} ...` talks to it") from None
+                          f"'btf-host cmd --db {db} ...' talks to it") from None
     try:  # the pid only tells a second station who holds the lock: a full disk may refuse it
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
@@ -100,7 +100,7 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
             port = open_url(port_url, baud, timeout=0.02, exclusive=True)
         except PortBusy:
             raise StationBusy(f"port {port_url} is held by another process (a station? "
-                              "`btf-host cmd --db ITS_DATABASE ...` talks to it)", port=True) from None
+                              "'btf-host cmd --db ITS_DATABASE ...' talks to it)", port=True) from None
         except Exception as exc:
             raise CliError(f"port {port_url}: cannot open: {exc}") from None
         undo.append(port.close)
