@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 
 from onboard.cli.runner import SEED, bounded
-from tools.cli.options import CliError
+from tools.cli.options import CliError, writable_place
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -48,6 +48,7 @@ DEMO_ENTRIES = {"scene.db", "scene.db-wal", "scene.db-shm", "work", "report"}
 def _check_out(out: Path, force: bool) -> None:
     if out.exists() and not out.is_dir():
         raise CliError(f"--out {out} is not a directory")
+    writable_place(out, f"--out {out}")
     if force or not out.is_dir():
         return
     others = sorted(p.name for p in out.iterdir() if p.name not in DEMO_ENTRIES)

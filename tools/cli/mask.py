@@ -42,7 +42,7 @@ def run(args: argparse.Namespace) -> int:
         write_mask,
     )
 
-    check_out(args.out, (args.image,), args.force)
+    check_out(args.out, (args.image,), args.force, suffixes=(".png",))  # labels stay exact in PNG only
     try:
         image = stretched_8bit(read_image(args.image))  # 16-bit: segmented on its own range
         if image.shape[0] * image.shape[1] < args.k:

@@ -5,7 +5,7 @@ import argparse
 from pathlib import Path
 
 from onboard.cli.runner import SEED
-from tools.cli.options import CliError, add_source_filters, choose_source
+from tools.cli.options import CliError, add_source_filters, choose_source, writable_place
 from tools.store.database import CorruptDatabase, Store
 
 
@@ -22,6 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _check_out(out: Path, force: bool) -> None:
     if out.exists() and not out.is_dir():
         raise CliError(f"--out {out} is not a directory")
+    writable_place(out, f"--out {out}")
     if (out / "index.html").exists() and not force:
         raise CliError(f"--out {out}: {out / 'index.html'} exists; pass --force to replace the report")
 

@@ -87,6 +87,10 @@ def _from_json(path: str) -> tuple[dict, dict, str, int, dict | None]:
         deps[0.0 if angle is None else angle] = dep
     first = parsed[0][2]
     levels = first.get("levels") or 256
+    depths = sorted({d.get("levels") or 256 for _, _, d in parsed}, key=str)
+    if len(depths) > 1:
+        raise CliError(f"models {path}: documents of images of {' and '.join(map(str, depths))} levels, which are "
+                       "never blended; keep one depth per models file")
     if type(levels) is not int or not 2 <= levels <= 65536:
         raise CliError(f"models {path}: levels {levels!r} is not an integer in 2..65536")
     if levels > 256 and first.get("space") not in ("rgb", "gray"):
@@ -107,7 +111,25 @@ def _source(store, args: argparse.Namespace) -> dict:
         space = spaces[0]
     if space not in spaces:
         raise CliError(f"database {args.db}: no captures in feature space {space} (it holds {', '.join(spaces)})")
+    _one_depth(store.captures(robot=robot, scene=scene, space=space), args.db, robot, scene)
     return {"robot": robot, "scene": scene, "space": space}
+
+
+def _one_depth(captures, db: str, robot: str, scene: str) -> None:
+    """Refuses captures of different sensor depths: their levels are not one scale to blend."""
+    by_depth: dict[int, list[float]] = {}
+    for c in captures:
+        by_depth.setdefault(c.levels, []).append(c.elevation)
+    if len(by_depth) > 1:
+        said = " and ".join(f"{_bits(levels)} ({', '.join(f'{e:g}°' for e in sorted(set(els))[:4])}"
+                            + (", ...)" if len(set(els)) > 4 else ")") for levels, els in sorted(by_depth.items()))
+        who = f"robot {robot}" + (f" scene {scene}" if scene else "")
+        raise CliError(f"database {db}: the captures of {who} mix {said} images, which are never blended; "
+                       "store each depth under its own --robot or --scene (fit --db takes both) and choose one")
+
+
+def _bits(levels: int) -> str:
+    return f"{levels.bit_length() - 1}-bit" if levels & (levels - 1) == 0 else f"{levels}-level"
 
 
 def _radiometry(args: argparse.Namespace, space: str) -> bool:
