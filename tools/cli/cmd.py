@@ -15,6 +15,7 @@ from radio.packets.commands import COMMANDS, Arg, Command, CommandName
 from tools.cli.options import BAUD, CliError
 from tools.station.command_route import ask
 from tools.station.snapshot import iso
+from tools.station.station import empty
 
 
 def _cli_type(arg: Arg):
@@ -129,7 +130,8 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps({"command": args.what, **answer}))
     else:
         verdict = "ACK" if ok else f"NACK {answer.get('reason')}"
-        extras = ", ".join(f"{k}={_shown(k, v)}" for k, v in (answer.get("extras") or {}).items())
+        extras = ", ".join(f"{k}={_shown(k, v)}" for k, v in (answer.get("extras") or {}).items()
+                           if not empty(v))  # "paused=" says nothing
         print(f"{verdict}: {answer.get('text', '')}" + (f" ({extras})" if extras else ""))
     return 0 if ok else 1
 

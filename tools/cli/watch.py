@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 from tools.cli.options import CliError
+from tools.report.look import azimuth_shown
 from tools.station.control import StationClient, StationGone, socket_path
 
 
@@ -44,17 +45,28 @@ def run(args: argparse.Namespace) -> int:
 def summary(s: dict) -> str:
     """The snapshot in a few lines, for a person."""
     ln, r, sw = s["link"], s["robot"], s["sweep"]
-    pose = "?" if r["pose"] is None else f"{r['pose']['elevation']:.1f}°/{r['pose']['azimuth']:.1f}°"
+    pose = ("an unknown pose" if r["pose"] is None
+            else f"{r['pose']['elevation']:.1f}°/{azimuth_shown(r['pose']['azimuth']):.1f}°")
     heard = "never" if ln["last_heard_s"] is None else f"{ln['last_heard_s']:g} s ago"
     rejected = ", ".join(f"{k} {v}" for k, v in ln["rejected"].items()) or "none"
     lines = [f"station on {s['station']['port']} -> {s['station']['db']} since {s['station']['started']}",
              f"link {'up' if ln['up'] else 'down'}, heard {heard}; frames sent {ln['frames_sent']}, "
              f"accepted {ln['frames_accepted']}, retransmitted {ln['retransmissions']}, rejected: {rejected}",
-             f"robot {r['id']}: {r['mode'] or '?'} at {pose}, outbox {r['outbox']}, "
-             f"faults {len(r['faults'])}, errors {len(r['errors'])}"]
+             _robot_line(r, pose)]
     if sw["id"] is not None:
         lines.append(f"sweep {sw['id']}: pose {sw['next']} of {sw['poses']}, {len(sw['skipped'])} skipped"
                      + ("" if sw["active"] else " (not running)"))
     c = s["captures"]
     lines.append(f"captures stored {c['stored']}, duplicates {c['duplicates']}, masks {c['masks']}")
     return "\n".join(lines)
+
+
+def _robot_line(r: dict, pose: str) -> str:
+    """What the station knows of the robot; a station just started may know nothing yet, or only
+    what an answer to its STATUS said (answers do not carry the robot's id)."""
+    if r["id"] is None and r["mode"] is None and r["last_status"] is None:
+        return "robot not heard yet"
+    who = "robot (id not heard yet)" if r["id"] is None else f"robot {r['id']}"
+    outbox = "?" if r["outbox"] is None else r["outbox"]
+    return (f"{who}: {r['mode'] or 'mode unknown'} at {pose}, outbox {outbox}, faults {len(r['faults'])}, "
+            f"errors {len(r['errors'])}")

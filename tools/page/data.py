@@ -6,16 +6,22 @@ worker process so that synthesis and plotting never hold the station's interpret
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import heapq
+import itertools
 import multiprocessing
+import warnings
 from collections import OrderedDict
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
-from tools.analysis.radiometry import describe
-from tools.report.capture_views import Frames, png, views
-from tools.report.look import capture_section
+import numpy as np
+
+from tools.analysis.radiometry import adjusted, describe
+from tools.report.capture_views import Frames, capture_mask, histogram_png, png, views
+from tools.report.look import azimuth_shown, capture_section
 from tools.station.snapshot import iso
 from tools.store.database import Store
 
@@ -32,7 +38,7 @@ def pose_key(c: Any) -> str:
 def card(c: Any) -> dict:
     """A capture as the page lists it."""
     return {"id": c.id, "key": pose_key(c), "robot": c.robot, "seq": c.sequence, "scene": c.scene,
-            "elevation": round(c.measured[0], 2), "azimuth": round(c.measured[1], 2),
+            "elevation": round(c.measured[0], 2), "azimuth": azimuth_shown(c.measured[1]),
             "commanded": None if c.commanded[0] is None else [c.commanded[0], c.commanded[1]],
             "time": iso(c.time), "space": c.space, "camera": describe(c.camera),
             "unlocked": bool(c.camera is not None and c.camera.unlocked)}
@@ -67,10 +73,9 @@ _worker_store: dict[str, Any] = {}
 
 
 def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
-    """In the worker: `what` "thumb" ({"png"}: the card's picture) or "section" ({"html",
-    "images": {name: png}}) of one capture; {"missing": text} when there is nothing to draw."""
-    import numpy as np
-
+    """In the worker: `what` "thumb" ({"png"}: the card's picture), "section" ({"html", "images":
+    {name: png}}: its pictures, the histograms' place kept) or "histograms" ({"png"}: the plot, a
+    drawing of its own as it takes longest) of one capture; {"missing": text} when there is nothing."""
 
     store = _worker_store.get(db)
     if store is None:
@@ -85,9 +90,26 @@ def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
             v = views(store, cap, rng, Frames(fake), histograms=False)
         name = next((k for k in SHOWN_FIRST if k in v.images), None)
         return {"png": png(v.images[name])} if name else {"missing": v.problem or "nothing to draw"}
-    v = views(store, cap, rng, Frames(fake))
+    if what == "histograms":
+        return _histograms(store, cap, fake)
+    v = views(store, cap, rng, Frames(fake), histograms=False)
+    images = {k: png(img) for k, img in v.images.items()}
+    if v.fitted and not (v.no_mask or v.problem):  # what views() draws histograms for
+        v.images["histograms"] = b""  # its place in the section; drawn when the page asks for it
     html = capture_section(v, lambda k: f"capture/{capture_id}/{k}.png?r={rev}")
-    return {"html": html, "images": {k: png(img) for k, img in v.images.items()}}
+    return {"html": html, "images": images}
+
+
+def _histograms(store: Store, cap: Any, fake: Any) -> dict:
+    """The histograms with the Johnson curves (as `views` draws them), without synthesizing again."""
+    fitted = store.models(cap.id)
+    models = dict(adjusted({k: m.model for k, m in fitted.items()}, cap.camera))
+    mask = capture_mask(store, cap)
+    if mask is None or not models:
+        return {"missing": f"capture {cap.id} has no histograms"}
+    real = Frames(fake)(cap) if cap.space == "rgb" else None
+    return {"png": histogram_png(real, mask, models, cap.band_names, f"{cap.scene} {cap.elevation:.0f}°",
+                                 cap.levels)}
 
 
 def end_with_parent() -> None:
@@ -112,7 +134,12 @@ def _worker_start() -> None:
 
 
 def _warm() -> None:
-    """Load the worker's libraries before the first request needs them."""
+    """Load the worker's libraries and draw one plot before the first request needs them (matplotlib's
+    first figure costs a second)."""
+    with warnings.catch_warnings():  # an empty plot's "no artists for the legend"
+        warnings.simplefilter("ignore")
+        histogram_png(None, np.zeros((2, 2), np.uint8), {}, ("Y",), "")
+
 
 class PageData:
     """The page's reads and drawings, off the station's loop: `cards()`, `refresh()` and
@@ -124,6 +151,11 @@ class PageData:
         self._reader = ThreadPoolExecutor(1, thread_name_prefix="page-reader")
         self._pool: ProcessPoolExecutor | None = None
         self._cache: OrderedDict[tuple[int, str, int], dict] = OrderedDict()
+        self._pending: dict[tuple[int, str, int], asyncio.Future] = {}  # asked for, not drawn yet
+        self._queue: list[tuple[int, int, tuple[int, str, int]]] = []  # (urgency, order, key): a heap
+        self._order = itertools.count()
+        self._drawing: asyncio.Task | None = None
+        self._warmed: Future | None = None
         self.rev = 0  # bumped when a mask arrives: drawings made before it may lack it
 
     async def refresh(self) -> list[dict]:
@@ -140,24 +172,60 @@ class PageData:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
                                              initializer=_worker_start)
-            self._pool.submit(_warm)
+            self._warmed = self._pool.submit(_warm)
+
+    async def warm(self) -> None:
+        """Returns once the drawing worker has loaded its libraries (at once if it failed to)."""
+        self.start_worker()
+        with contextlib.suppress(Exception):  # a worker that cannot start says so at its first drawing
+            await asyncio.wrap_future(self._warmed)
 
     async def drawn(self, capture_id: int, what: str) -> dict:
+        """A drawing (`render`): from the cache, or queued for the worker one at a time, a capture's
+        section and histograms before any thumbnail (what the operator chose first, the cards after)."""
         key = (capture_id, what, self.rev)
         if key in self._cache:
             self._cache.move_to_end(key)
             return self._cache[key]
-        self.start_worker()
+        if key not in self._pending:  # asked twice: drawn once
+            self._pending[key] = asyncio.get_running_loop().create_future()
+            # a page that went away leaves no failure unretrieved (asyncio would log it)
+            self._pending[key].add_done_callback(lambda f: f.cancelled() or f.exception())
+            heapq.heappush(self._queue, (1 if what == "thumb" else 0, next(self._order), key))
+            if self._drawing is None or self._drawing.done():
+                self._drawing = asyncio.ensure_future(self._draw_queued())
+        return await asyncio.shield(self._pending[key])
+
+    async def _draw_queued(self) -> None:
+        """Draws what is queued, each at the revision in force when its turn comes: a drawing asked
+        for before a mask arrived is made once, new, for every request of it under any revision."""
         loop = asyncio.get_running_loop()
-        try:
-            out = await loop.run_in_executor(self._pool, render, self.db, capture_id, self.fake, what, self.rev)
-        except BrokenProcessPool:  # the worker died (killed, out of memory): a new one next time
-            self._pool = None
-            raise RuntimeError("the drawing worker stopped; reload to try again") from None
-        self._cache[key] = out
-        while len(self._cache) > CACHED:
-            self._cache.popitem(last=False)
-        return out
+        while self._queue:
+            key = heapq.heappop(self._queue)[2]
+            if key not in self._pending:  # drawn already, when asked for under a later revision
+                continue
+            now = (key[0], key[1], self.rev)
+            waiting = [self._pending.pop(k) for k in {key, now} if k in self._pending]
+            self.start_worker()
+            try:
+                out = self._cache.get(now) or await loop.run_in_executor(
+                    self._pool, render, self.db, now[0], self.fake, now[1], now[2])
+            except BrokenProcessPool:  # the worker died (killed, out of memory): a new one next time
+                self._pool = None
+                failed = RuntimeError("the drawing worker stopped; reload to try again")
+            except Exception as exc:  # noqa: BLE001 - a drawing that fails is said by the page's request, in one line
+                failed = exc
+            else:
+                failed = None
+                if now[2] == self.rev:  # not if a mask arrived meanwhile: asked for again, drawn again
+                    self._cache[now] = out
+                while len(self._cache) > CACHED:
+                    self._cache.popitem(last=False)
+            for done in waiting:
+                if failed is None:
+                    done.set_result(out)
+                else:
+                    done.set_exception(failed)
 
     def close(self) -> None:
         self._reader.submit(self.index.close).result()

@@ -172,16 +172,18 @@ async def _start_page(parts: StationParts, options, echo: TextIO | None):
     """The page server, started (None when its address cannot be had)."""
     from tools.page.server import PageServer  # aiohttp and the drawing code: only with --http
 
+    def announce(url: str) -> None:  # once it can draw: the station's radio runs meanwhile
+        who = "anyone who can reach it watches; commands need the token" if options.public else "it needs the token"
+        parts.station.emit(event("station", f"page at {url} ({who})", parts.station.wall()))
+        if echo is not None:  # the token goes to the operator's terminal only, never to the log file
+            print(f"page: {url}?token={options.token}", file=echo, flush=True)
+
     web = PageServer(parts.station, parts.station.snapshot.db, options)
     try:
-        url = await web.start()
+        await web.start(on_ready=announce)
     except OSError:
         await web.close()
         return None
-    who = "anyone who can reach it watches; commands need the token" if options.public else "it needs the token"
-    parts.station.emit(event("station", f"page at {url} ({who})", parts.station.wall()))
-    if echo is not None:  # the token goes to the operator's terminal only, never to the log file
-        print(f"page: {url}?token={options.token}", file=echo, flush=True)
     return web
 
 

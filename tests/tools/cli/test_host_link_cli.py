@@ -196,3 +196,13 @@ def test_ping_and_reboot_servo_have_command_line_forms_the_robot_answers(robot_p
     assert code == 0 and ans["type"] == "ACK" and ans["text"] == "PING" and ans["extras"]["time"] > 0
     code, ans = _cmd(port, key, capsys, "reboot-servo", "--servo-id", "1")
     assert code == 0 and ans["type"] == "ACK" and ans["extras"]["rebooted"] == 1
+
+
+def test_cmd_prints_an_answer_without_the_fields_left_empty(monkeypatch, capsys, tmp_path):
+    import tools.cli.cmd as cmd_cli
+
+    answer = {"command_id": 5, "ok": True, "type": "ACK", "text": "status",
+              "extras": {"mode": "idle", "paused": "", "outbox": 0, "faults": [], "rejected": {}, "torque": False}}
+    monkeypatch.setattr(cmd_cli, "ask", lambda *a: answer)
+    assert main(["cmd", "--db", str(tmp_path / "s.db"), "status"]) == 0
+    assert capsys.readouterr().out == "ACK: status (mode=idle, outbox=0, torque=False)\n"

@@ -49,6 +49,7 @@ class Robot:
         self.pump = LinkPump(Link(1, 2, 1, key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), end)
         self.acked: set[int] = set()
         self.commands: list[pk.CommandPacket] = []
+        self.extras: dict | None = None  # what its answers carry (default: how many commands it saw)
 
     def turn(self):
         for ev in self.pump.step():
@@ -58,7 +59,8 @@ class Robot:
                 cmd = pk.decode(ev.payload)
                 self.commands.append(cmd)
                 if [c.command_id for c in self.commands].count(cmd.command_id) == 1:  # as the robot: once
-                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, {"n": len(self.commands)})))
+                    extras = {"n": len(self.commands)} if self.extras is None else self.extras
+                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, extras)))
 
 
 def station_on_cable(tmp_path, store=None, host_key=KEY, robot_key=KEY):
@@ -150,3 +152,18 @@ def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path)
     assert snap["robot"]["state"] == "sweeping" and snap["robot"]["pose"] == {"elevation": 60.0, "azimuth": 0.0}
     assert snap["sweep"]["id"] == 2 and snap["sweep"]["skipped"] == [
         {"index": 4, "elevation": 50.0, "azimuth": 0.0, "reason": "settle failed"}]
+
+
+def test_an_answer_is_logged_without_the_fields_the_robot_left_empty(tmp_path):
+    station, robot, _ = station_on_cable(tmp_path)
+    robot.extras = {"mode": "idle", "outbox": 0, "paused": "", "disk": "ok", "rejected": [], "faults": [],
+                    "torque": False}
+
+    async def go():
+        _, fut = station.submit(pk.CommandName.STATUS, {}, command_id=78)
+        await drive(station, robot, fut.done)
+        return await fut
+
+    assert asyncio.run(go())["extras"]["paused"] == ""  # the answer itself as the robot sent it
+    said = [e["text"] for e in station_log(tmp_path) if e["kind"] == "answer"]
+    assert said == ["STATUS (command 78): ACK mode=idle outbox=0 disk=ok torque=False"], said
