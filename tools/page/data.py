@@ -1,7 +1,10 @@
 """The operator page's view of the database: the latest capture at each pose (read on a thread
 of its own, with its own connection, so the station's loop never waits on a query), and each
 capture's section and images (`tools.report.look`, `tools.report.capture_views`: the report's own), drawn in a
-worker process so that synthesis and plotting never hold the station's interpreter.
+worker process so that synthesis and plotting never hold the station's interpreter. The worker
+draws one thing at a time, what the operator chose (a section, its histograms) before the cards'
+pictures; a capture's first drawing with grain and band correlation costs most (a few tenths of a
+second: the correlations of its normal scores are solved for), later ones reuse that.
 """
 from __future__ import annotations
 
@@ -152,6 +155,7 @@ class PageData:
         self._pool: ProcessPoolExecutor | None = None
         self._cache: OrderedDict[tuple[int, str, int], dict] = OrderedDict()
         self._pending: dict[tuple[int, str, int], asyncio.Future] = {}  # asked for, not drawn yet
+        self._waiters: dict[tuple[int, str, int], int] = {}  # requests still waiting for each
         self._queue: list[tuple[int, int, tuple[int, str, int]]] = []  # (urgency, order, key): a heap
         self._order = itertools.count()
         self._drawing: asyncio.Task | None = None
@@ -194,11 +198,18 @@ class PageData:
             heapq.heappush(self._queue, (1 if what == "thumb" else 0, next(self._order), key))
             if self._drawing is None or self._drawing.done():
                 self._drawing = asyncio.ensure_future(self._draw_queued())
-        return await asyncio.shield(self._pending[key])
+        self._waiters[key] = self._waiters.get(key, 0) + 1
+        try:
+            return await asyncio.shield(self._pending[key])
+        finally:  # a page that went away (or chose another capture) no longer waits
+            self._waiters[key] -= 1
+            if not self._waiters[key]:
+                del self._waiters[key]
 
     async def _draw_queued(self) -> None:
         """Draws what is queued, each at the revision in force when its turn comes: a drawing asked
-        for before a mask arrived is made once, new, for every request of it under any revision."""
+        for before a mask arrived is made once, new, for every request of it under any revision; one
+        that no request waits for any more (the page went on to a newer capture) is not made."""
         loop = asyncio.get_running_loop()
         while self._queue:
             key = heapq.heappop(self._queue)[2]
@@ -206,6 +217,10 @@ class PageData:
                 continue
             now = (key[0], key[1], self.rev)
             waiting = [self._pending.pop(k) for k in {key, now} if k in self._pending]
+            if not (self._waiters.get(key) or self._waiters.get(now)):  # nobody waits for it any more
+                for done in waiting:
+                    done.cancel()
+                continue
             self.start_worker()
             try:
                 out = self._cache.get(now) or await loop.run_in_executor(

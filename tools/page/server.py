@@ -96,7 +96,8 @@ class PageServer:
             web.get("/api/state", self._state), web.post("/api/command", self._command),
             web.get("/capture/{id:\\d+}/section", self._section),
             web.get("/capture/{id:\\d+}/{name:[a-z]+}.png", self._image)])
-        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0)
+        # a request whose page went away is cancelled: its drawing, if not begun, is not made
+        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0, handler_cancellation=True)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.options.host, self.options.port)
         await site.start()

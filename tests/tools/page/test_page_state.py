@@ -152,7 +152,7 @@ def test_the_page_draws_the_chosen_capture_before_the_cards_and_each_drawing_onc
 
     def render(db, capture_id, fake, what, rev):
         drawn.append((capture_id, what, rev))
-        time.sleep(0.005)
+        time.sleep(0.2 if capture_id == 99 else 0.005)
         return {"png": b"%d" % capture_id}
 
     monkeypatch.setattr(page_data, "render", render)
@@ -168,10 +168,19 @@ def test_the_page_draws_the_chosen_capture_before_the_cards_and_each_drawing_onc
         data.mask_arrived()  # before it was drawn: asked again under the new revision
         late = asyncio.ensure_future(data.drawn(9, "thumb"))
         again = asyncio.ensure_future(data.drawn(9, "thumb"))
-        return await asyncio.gather(early, late, again)
+        nines = await asyncio.gather(early, late, again)
+        busy = asyncio.ensure_future(data.drawn(99, "thumb"))  # the worker busy meanwhile
+        await asyncio.sleep(0.05)
+        left = asyncio.ensure_future(data.drawn(20, "section"))
+        chosen = asyncio.ensure_future(data.drawn(21, "section"))
+        await asyncio.sleep(0.01)
+        left.cancel()  # the page went on to another capture before this one's turn
+        await asyncio.gather(busy, chosen)
+        return nines
 
     assert asyncio.run(go()) == [{"png": b"9"}] * 3
     assert drawn[:2] == [(3, "section", 0), (3, "histograms", 0)]
     assert sorted(drawn[2:7]) == [(i, "thumb", 0) for i in range(1, 6)]
-    assert drawn[7:] == [(9, "thumb", 1)]  # once, at the revision in force
+    assert drawn[7:] == [(9, "thumb", 1), (99, "thumb", 1), (21, "section", 1)]  # 9 once, at the revision
+    # in force; 20, left before its turn, not at all
     data.close()

@@ -5,7 +5,8 @@
 
 const $ = (id) => document.getElementById(id);
 const state = {snap: null, cards: new Map(), rev: 0, authorized: false, token: "", selected: null,
-  follow: true, received: 0, answers: new Map(), waiting: new Map(), newest: null, thumbsHeld: true};
+  follow: true, received: 0, answers: new Map(), waiting: new Map(), newest: null, thumbsHeld: true,
+  asked: null};  // asked: the chosen capture's request, aborted when another is chosen
 const THUMBS_HELD_MS = 2000;  // the cards' pictures wait at most this long for the chosen capture's
 window.btfPage = {shown: {}, hello: 0};  // when each capture ("robot:seq") was first drawn (benchmarks)
 
@@ -206,12 +207,15 @@ async function select(key, following) {
     $("detail").innerHTML = `<p class=note>${esc(c.scene || "robot " + c.robot)} seq ${c.seq}: drawing…</p>`;
   }
   $("detail").dataset.want = want;
+  if (state.asked) state.asked.abort();  // the capture chosen before: the station need not draw it now
+  const asked = state.asked = new AbortController();
   try {
-    const resp = await fetch(`capture/${c.id}/section?r=${state.rev}`);
+    const resp = await fetch(`capture/${c.id}/section?r=${state.rev}`, {signal: asked.signal});
     const text = await resp.text();
     if ($("detail").dataset.want !== want) return;  // another capture was chosen meanwhile
     $("detail").innerHTML = resp.ok ? text : `<p class=note>capture ${c.seq}: ${esc(text)}</p>`;
   } catch (e) {
+    if (e.name === "AbortError") return;  // another capture was chosen
     $("detail").innerHTML = `<p class=bad>capture ${c.seq}: ${esc(e)}</p>`;
   }
   afterPictures($("detail"), () => {
