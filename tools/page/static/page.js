@@ -156,8 +156,8 @@ function releaseThumbs() {
 function once(mark) {  // the first time something was on the page, for the benchmarks
   if (!performance.getEntriesByName(mark).length) performance.mark(mark);
 }
-function afterPictures(box, then) {
-  const waits = [...box.querySelectorAll("img")].filter((i) => !i.complete)
+function afterPictures(box, then, which = "img") {
+  const waits = [...box.querySelectorAll(which)].filter((i) => !i.complete)
     .map((i) => new Promise((done) => { i.addEventListener("load", done); i.addEventListener("error", done); }));
   Promise.all(waits).then(then);
 }
@@ -218,6 +218,7 @@ async function select(key, following) {
     if (e.name === "AbortError") return;  // another capture was chosen
     $("detail").innerHTML = `<p class=bad>capture ${c.seq}: ${esc(e)}</p>`;
   }
+  if ($("detail").querySelector("img.view")) afterPictures($("detail"), () => once("btf-selected-views"), "img.view");
   afterPictures($("detail"), () => {
     if ($("detail").querySelector("img")) once("btf-selected-pictures");
     releaseThumbs();
