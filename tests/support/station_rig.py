@@ -2,6 +2,7 @@
 station's tests (tests/test_station*.py)."""
 from __future__ import annotations
 
+import http.client
 import json
 import os
 import signal
@@ -10,19 +11,20 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from radio.keys import write_key
 from tests.support import ROOT
+from tests.support.browser import page_address
+from tests.support.robots import EVERY_POSE, IDLE, LINKED, robot_toml
 from tools.demo.pty_cable import PtyCable
 from tools.station.control import StationClient, socket_path
 from tools.store.database import Store
 
-ROBOT = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n'
-         '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
-         '[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\nskip_measured_pose = false\n')
+# The rig's robot: on a real link, measuring every pose.
+ROBOT = (LINKED, EVERY_POSE)
 # The robot's own sweep of the 60 poses, at boot (the others wait for a SWEEP command).
-AUTONOMOUS = '[sweep]\nstart = 90\nstop = 32\nstep = 2\nazimuths = [0, 90]\n'
-IDLE = '[sweep]\nautostart = false\n'
+AUTONOMOUS = {"sweep": {"start": 90, "stop": 32, "step": 2, "azimuths": [0, 90]}}
 
 # 60 poses: 30 elevations at two azimuths
 PLAN = ["--start", "90", "--stop", "32", "--step", "2", "--azimuths", "0,90"]
@@ -34,12 +36,14 @@ def python(module: str) -> list[str]:
 
 
 class Rig:
-    def __init__(self, where: Path, robot_config: str = ROBOT + IDLE) -> None:
+    def __init__(self, where: Path, *changes: dict, **top: object) -> None:
+        """A rig in `where`: the robot is ROBOT with `changes` (IDLE when none are given) and
+        the top-level keys `top`."""
         self.where = where
         self.cable = PtyCable()
         self.key = write_key(where / "robot.key")
         self.db = where / "host.db"
-        (where / "robot.toml").write_text(robot_config)
+        (where / "robot.toml").write_text(robot_toml(*ROBOT, *(changes or (IDLE,)), **top))
         self.procs: list[subprocess.Popen] = []
         self.stations = 0
 
@@ -130,3 +134,21 @@ def robot_log(where: Path) -> list[str]:
 def kill9(p: subprocess.Popen) -> None:
     os.kill(p.pid, signal.SIGKILL)
     p.wait(timeout=30)
+
+def served(rig, *argv):
+    """A station serving the page on a free port: (process, host, port, token)."""
+    station = rig.station("--http", "127.0.0.1:0", *argv)
+    url = urlsplit(page_address(rig.where / f"station-{rig.stations}.err"))
+    token = url.query.removeprefix("token=")
+    return station, url.hostname, url.port, token
+
+
+def request(host, port, method, path, body=None, headers=None):
+    """One HTTP request: (status, headers, body)."""
+    conn = http.client.HTTPConnection(host, port, timeout=30)
+    try:
+        conn.request(method, path, body=body, headers=headers or {})
+        resp = conn.getresponse()
+        return resp.status, dict(resp.getheaders()), resp.read()
+    finally:
+        conn.close()

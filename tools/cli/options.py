@@ -22,25 +22,26 @@ def add_force(parser: argparse.ArgumentParser) -> None:
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm")
 
 
-def check_out(out: str | os.PathLike, inputs: tuple, force: bool, suffixes: tuple[str, ...] = IMAGE_SUFFIXES) -> Path:
+def check_out(out: str | os.PathLike, inputs: tuple, force: bool, suffixes: tuple[str, ...] = IMAGE_SUFFIXES,
+              option: str = "--out") -> Path:
     """The output file, checked before any work: refused when it is one of the command's inputs
     (even with --force), when its name ends in none of `suffixes`, when its directory is
     missing or not writable, or, without `force`, when it exists."""
     path = Path(out)
     for given in inputs:
         if given is not None and _same_file(path, Path(given)):
-            raise CliError(f"--out {out} is an input of this command ({given}); write somewhere else")
+            raise CliError(f"{option} {out} is an input of this command ({given}); write somewhere else")
     if path.is_dir():
-        raise CliError(f"--out {out} is a directory; give a file name")
+        raise CliError(f"{option} {out} is a directory; give a file name")
     if path.suffix.lower() not in suffixes:
         what = f"{path.suffix} is not a file type this command writes" if path.suffix else "the name has no file type"
-        raise CliError(f"--out {out}: {what}; end it in {', '.join(suffixes)}")
+        raise CliError(f"{option} {out}: {what}; end it in {', '.join(suffixes)}")
     parent = path.parent if str(path.parent) else Path(".")
     if not parent.is_dir():
-        raise CliError(f"--out {out}: directory {parent} does not exist; create it first")
-    writable_place(parent, f"--out {out}")
+        raise CliError(f"{option} {out}: directory {parent} does not exist; create it first")
+    writable_place(parent, f"{option} {out}")
     if path.exists() and not force:
-        raise CliError(f"--out {out} exists; pass --force to replace it")
+        raise CliError(f"{option} {out} exists; pass --force to replace it")
     return path
 
 
@@ -108,3 +109,14 @@ def choose_source(captures, db, robot: str | None, scene: str | None) -> tuple[s
         raise CliError(f"database {db} holds several robots and scenes: {holdings(chosen)}; "
                        "choose one with --robot or --scene")
     return pairs[0]
+
+
+def sources_of(captures, db, robot: str | None, scene: str | None) -> list[tuple[str, str]]:
+    """Every (robot, scene) the filters leave (several allowed); an error when there is none."""
+    if not captures:
+        raise CliError(f"database {db}: no captures")
+    chosen = sorted({(c.robot, c.scene) for c in captures if robot in (None, c.robot) and scene in (None, c.scene)})
+    if not chosen:
+        choose_source(captures, db, robot, scene)  # names what the database holds
+    return chosen
+

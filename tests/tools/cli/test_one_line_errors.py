@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from tests.tools.cli.test_host_cli import plate
+from tests.support.images import plate
 from tools.cli import main
 from tools.data.images import read_image, write_image, write_mask
 from tools.store.database import Store

@@ -8,11 +8,12 @@ import shutil
 
 import pytest
 
-from tests.support.browser import chromium, need_chromium, page_address
-from tests.support.station_rig import ROBOT, Rig
+from tests.support.browser import answer_of, chromium, need_chromium, page_address
+from tests.support.robots import IDLE
+from tests.support.station_rig import Rig
 
 # The robot holds the arm after 1.5 s without the base (the station calls the link down after 5 s).
-CONFIG = ROBOT.replace("failsafe_s = 30", "failsafe_s = 1.5") + "[sweep]\nautostart = false\n"
+QUICK_FAILSAFE = {"link": {"failsafe_s": 1.5}}
 PLAN = "90,70,50,30,10"  # 20° apart (a sixth of a second for the fake servos), at azimuths 0 and 90
 
 # What the capture detail said as the page built itself: (cards on the page, its text) at each change.
@@ -43,16 +44,9 @@ WATCH = """() => {
 @pytest.fixture
 def rig(tmp_path):
     need_chromium()
-    r = Rig(tmp_path, CONFIG)
+    r = Rig(tmp_path, QUICK_FAILSAFE, IDLE)
     yield r
     r.close()
-
-
-def answer_of(page, command):
-    out = page.locator(f"form[data-command={command}] output.answer")
-    page.wait_for_function(f"() => /^(ACK|NACK)/.test(document.querySelector("
-                           f"'form[data-command={command}] output.answer').textContent)", timeout=60_000)
-    return out.text_content()
 
 
 def test_the_page_follows_a_sweep_commands_the_robot_and_shows_the_link_lost_and_recovered(rig, tmp_path):

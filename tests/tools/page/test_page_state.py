@@ -8,7 +8,7 @@ import json
 from onboard.link.status import flat
 from onboard.sweep.plan import SweepPlan
 from radio import packets as pk
-from tests.tools.station.test_receiver import models_body
+from tests.support.packets import models_body
 from tools.cli.watch import summary
 from tools.page.data import CaptureIndex
 from tools.report.look import capture_title
@@ -158,6 +158,7 @@ def test_the_page_draws_the_chosen_capture_before_the_cards_and_each_drawing_onc
     monkeypatch.setattr(page_data, "render", render)
     data = page_data.PageData(str(tmp_path / "scene.db"))
     data._pool = ThreadPoolExecutor(1)  # the drawings in a thread here: the queue is what is tested
+    data._btf_pool = ThreadPoolExecutor(1)
 
     async def go():
         thumbs = [asyncio.ensure_future(data.drawn(i, "thumb")) for i in range(1, 6)]

@@ -9,6 +9,7 @@ from collections import Counter
 
 import pytest
 
+from tests.support.robots import robot_toml
 from tests.support.station_rig import PLAN, POSES, ROBOT, ROOT, Rig, python, robot_log
 
 
@@ -146,7 +147,8 @@ def test_a_wrong_key_is_said_in_one_line_and_exits_non_zero(rig, tmp_path):
 
 def test_cmd_without_a_station_stores_what_arrives_and_acknowledges_nothing_it_drops(rig):
     """Issue 15, item 1: `cmd capture` used to ACK the robot's captures and discard them."""
-    (rig.where / "robot.toml").write_text(ROBOT + "[sweep]\nstart = 90\nstop = 60\nstep = 10\n")  # autonomous
+    autonomous = {"sweep": {"start": 90, "stop": 60, "step": 10}}
+    (rig.where / "robot.toml").write_text(robot_toml(*ROBOT, autonomous))
     robot = rig.robot("--exit-when-idle")
     acked = []
     for _ in range(2):
