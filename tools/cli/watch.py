@@ -8,6 +8,7 @@ from pathlib import Path
 from tools.cli.options import CliError
 from tools.report.look import azimuth_shown
 from tools.station.control import StationClient, StationGone, socket_path
+from tools.station.events import line
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -35,7 +36,10 @@ def run(args: argparse.Namespace) -> int:
             return 0
         while True:
             ev = client.receive()["event"]
-            print(json.dumps(ev) if args.json else f"{ev['time']} {ev['kind']}: {ev['text']}", flush=True)
+            if args.json:
+                print(json.dumps(ev), flush=True)
+            elif ev.get("shown", True):  # as its declaration says (tools.station.events)
+                print(line(ev, timed=True), flush=True)
     except StationGone:
         raise CliError("the station stopped") from None
     finally:
@@ -57,7 +61,8 @@ def summary(s: dict) -> str:
         lines.append(f"sweep {sw['id']}: pose {sw['next']} of {sw['poses']}, {len(sw['skipped'])} skipped"
                      + ("" if sw["active"] else " (not running)"))
     c = s["captures"]
-    lines.append(f"captures stored {c['stored']}, duplicates {c['duplicates']}, masks {c['masks']}")
+    lines.append(f"captures stored {c['stored']}, duplicates {c['duplicates']}, masks {c['masks']}"
+                 + (f", refused {c['bad']}" if c.get("bad") else ""))
     return "\n".join(lines)
 
 
@@ -68,5 +73,12 @@ def _robot_line(r: dict, pose: str) -> str:
         return "robot not heard yet"
     who = "robot (id not heard yet)" if r["id"] is None else f"robot {r['id']}"
     outbox = "?" if r["outbox"] is None else r["outbox"]
-    return (f"{who}: {r['mode'] or 'mode unknown'} at {pose}, outbox {outbox}, faults {len(r['faults'])}, "
-            f"errors {len(r['errors'])}")
+    refused = (r.get("dead_letters") or {}).get("count")
+    return (f"{who}: {r['mode'] or 'mode unknown'} at {pose}, outbox {outbox}, faults {_count(r, 'faults')}, "
+            f"errors {_count(r, 'errors')}" + (f", {refused} messages refused" if refused else ""))
+
+
+def _count(robot: dict, name: str) -> str:
+    """How many the robot listed, and how many older ones it left out."""
+    older = (robot.get("left_out") or {}).get(name, 0)
+    return f"{len(robot[name])}" + (f" (+{older} older)" if older else "")

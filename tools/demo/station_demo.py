@@ -18,7 +18,7 @@ from radio.keys import write_key
 from tools.demo.pty_cable import PtyCable
 from tools.page.data import end_with_parent
 from tools.report.capture_views import Frames
-from tools.station.log import event
+from tools.station.events import StationEvent
 from tools.station.start import open_station, serve_to_exit
 
 ROBOT_CONFIG = """\
@@ -91,8 +91,9 @@ def watch_robot(robot: subprocess.Popen, log: Path, every: float = 0.2):
         while robot.poll() is None:
             await asyncio.sleep(every)
         said = last_line(log)
-        station.emit(event("station", f"demo robot failed: its process exited with status {robot.returncode}"
-                           + (f" ({said})" if said else "") + f"; its log: {log}", station.wall()))
+        station.emit(StationEvent(station.wall(), f"demo robot failed: its process exited with status "
+                                  f"{robot.returncode}" + (f" ({said})" if said else "") + f"; its log: {log}",
+                                  failed=True))
 
     return watch
 

@@ -22,11 +22,11 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from radio.packets.base import iso_time
 from tools.analysis.radiometry import adjusted, describe
 from tools.page.btf_panel import panel
 from tools.report.capture_views import Frames, capture_mask, histogram_png, png, views
 from tools.report.look import azimuth_shown, capture_section
-from tools.station.snapshot import iso
 from tools.store.database import Store
 
 CACHED = 128  # rendered captures kept (thumbnails and sections)
@@ -44,7 +44,7 @@ def card(c: Any) -> dict:
     return {"id": c.id, "key": pose_key(c), "robot": c.robot, "seq": c.sequence, "scene": c.scene,
             "elevation": round(c.measured[0], 2), "azimuth": azimuth_shown(c.measured[1]),
             "commanded": None if c.commanded[0] is None else [c.commanded[0], c.commanded[1]],
-            "time": iso(c.time), "space": c.space, "camera": describe(c.camera),
+            "time": iso_time(c.time), "space": c.space, "camera": describe(c.camera),
             "unlocked": bool(c.camera is not None and c.camera.unlocked)}
 
 

@@ -38,6 +38,7 @@ from tools.page.data import PageData, static_dir
 from tools.page.forms import forms_html, parse_form
 from tools.report.look import CSS
 from tools.station.bus import EventBus
+from tools.station.events import LostEvent
 from tools.station.station import Station
 
 ANSWER_WAIT_S = 2.0  # a command's POST waits this long for the robot's answer
@@ -130,7 +131,7 @@ class PageServer:
         sub = self.station.bus.subscribe(4096)
         try:
             while True:
-                ev = await sub.get()
+                ev = (await sub.get()).to_json()  # as its declaration renders it (tools.station.events)
                 kind = ev.get("kind")
                 if kind in ("capture", "unchanged") and ev.get("stored") or kind == "lost":
                     cards = await self.data.refresh()
@@ -230,7 +231,7 @@ class PageServer:
             await _send(resp, self.hello(request))
             while True:
                 msg = await sub.get()
-                await _send(resp, self.hello(request) if msg["kind"] == "lost" else msg)
+                await _send(resp, self.hello(request) if isinstance(msg, LostEvent) else msg)  # fell behind
         except (ConnectionError, EOFError):
             pass
         finally:
