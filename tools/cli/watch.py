@@ -69,11 +69,12 @@ def summary(s: dict) -> str:
 def _robot_line(r: dict, pose: str) -> str:
     """What the station knows of the robot; a station just started may know nothing yet, or only
     what an answer to its STATUS said (answers do not carry the robot's id)."""
-    if r["id"] is None and r["mode"] is None and r["last_status"] is None:
+    refused = (r.get("dead_letters") or {}).get("count")
+    if all(r[k] is None for k in ("id", "mode", "last_status", "outbox", "pose")) and not (
+            r["faults"] or r["errors"] or refused):
         return "robot not heard yet"
     who = "robot (id not heard yet)" if r["id"] is None else f"robot {r['id']}"
     outbox = "?" if r["outbox"] is None else r["outbox"]
-    refused = (r.get("dead_letters") or {}).get("count")
     return (f"{who}: {r['mode'] or 'mode unknown'} at {pose}, outbox {outbox}, faults {_count(r, 'faults')}, "
             f"errors {_count(r, 'errors')}" + (f", {refused} messages refused" if refused else ""))
 
