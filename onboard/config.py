@@ -42,10 +42,14 @@ class HalConfig:
     servo_port: str = ""
     servo_baud: int = 1_000_000
     tracker_bus: int = 1
-    camera: str = ""  # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0
+    # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0.
+    # Fake and emulated bodies: "replay:DIR_OR_GLOB" plays PNG/JPEG files as the frames (hal.replay),
+    # at their own size (hal.size must match them); a relative path is against the config file
+    camera: str = ""
     seed: int = 0
     tracker_remap: str = ""  # BNO055 axis remap, P0..P7 or "0x24/0x03"; `btf-robot calibrate tracker` names it
     reference: bool = False  # fake and emulated scenes: lay the grey reference card (label 7) in the plate
+    replay_loop: bool = False  # replay camera: start over after the last file; false: the poses after it are skipped
 
 
 @dataclass(frozen=True, slots=True)
@@ -189,13 +193,11 @@ def keys() -> dict[str, Any]:
     """Every key a config file may hold, dotted ("robot_id", "hal.size"), with how it is read: a
     type, or (item type, length or None) for a list."""
     return {**_TOP, **{f"{name}.{k}": kind for name, cls in _SECTIONS.items() for k, kind in _TYPES[cls].items()}}
-CHOICES = {
-    "hal.body": ("", "fake", "emulated", "real"),
-    "hal.scene": ("black", "white", "mixed", "field"),
-    "features.space": ("rgb", "hsv", "gray", "pca", "raw"),
-    "segment.method": ("isodata", "mask", "scene"),
-    "link.clock": ("rtc", "none"),
-}
+
+
+CHOICES = {"hal.body": ("", "fake", "emulated", "real"), "hal.scene": ("black", "white", "mixed", "field"),
+           "features.space": ("rgb", "hsv", "gray", "pca", "raw"), "segment.method": ("isodata", "mask", "scene"),
+           "link.clock": ("rtc", "none")}
 # The numbers a key may hold, both ends included (each item of a list key): what the robot, its
 # packets and its devices can use. A value outside is refused as the file is read.
 DAY = 86400.0
@@ -265,19 +267,11 @@ def _within(name: str, value: float) -> Any:
     return value
 
 
-def _shown(value: Any) -> str:
-    """A value as a person reads it in one line: a table or a long list by its kind and size."""
-    if isinstance(value, dict):
-        return f"a table of {len(value)} keys"
-    if isinstance(value, list):
-        return f"a list of {len(value)} items"
-    text = repr(value)
-    return text if len(text) <= 60 else f"{text[:57]}..."
-
-
-def _said(key: str) -> str:
-    """A key from the file as one short printable line (a quoted TOML key may hold anything)."""
-    text = key if key.isprintable() else repr(key)
+def _shown(value: Any, key: bool = False) -> str:
+    """A value (`key`: a key, unquoted) as one short printable line; a table or a list by its size."""
+    if isinstance(value, (dict, list)):
+        return f"a table of {len(value)} keys" if isinstance(value, dict) else f"a list of {len(value)} items"
+    text = value if key and value.isprintable() else repr(value)
     return text if len(text) <= 60 else f"{text[:57]}..."
 
 
@@ -289,7 +283,7 @@ def _section(cls: type, table: Any, prefix: str, base: Path) -> Any:
     for key, raw in table.items():
         name = f"{prefix}.{key}"
         if key not in types:
-            raise ConfigError(f"unknown key {_said(name)} (known: {', '.join(types)})")
+            raise ConfigError(f"unknown key {_shown(name, True)} (known: {', '.join(types)})")
         value = _convert(name, raw, types[key], base)
         if name in CHOICES and value not in CHOICES[name]:
             raise ConfigError(f"{name} must be one of {', '.join(CHOICES[name])}, got {value!r}")
@@ -304,6 +298,14 @@ def _section(cls: type, table: Any, prefix: str, base: Path) -> Any:
     return obj
 
 
+def _replay_against(hal: HalConfig, base: Path) -> HalConfig:
+    """A replay camera's relative folder or glob, resolved against the config file's directory."""
+    kind, colon, where = hal.camera.partition(":")
+    if kind != "replay" or not colon or not where.strip() or Path(where.strip()).expanduser().is_absolute():
+        return hal
+    return replace(hal, camera=f"replay:{os.path.normpath(base / where.strip())}")
+
+
 def from_mapping(data: Mapping[str, Any], base: Path = Path(".")) -> Config:
     """Build and check a `Config` from parsed TOML; raises ConfigError on any problem."""
     top: dict[str, Any] = {}
@@ -314,10 +316,11 @@ def from_mapping(data: Mapping[str, Any], base: Path = Path(".")) -> Config:
             top[key] = _convert(key, raw, _TOP[key], base)
         else:
             known = ", ".join([*_TOP, *(f"[{s}]" for s in _SECTIONS)])
-            raise ConfigError(f"unknown key {_said(key)} (known: {known})")
+            raise ConfigError(f"unknown key {_shown(key, True)} (known: {known})")
     for key, cls in _SECTIONS.items():
         if key not in top:  # absent sections still resolve their default paths against base
             top[key] = _section(cls, {}, key, base)
+    top["hal"] = _replay_against(top["hal"], base)
     top.setdefault("state_dir", base / "state")
     cfg = Config(**top)
     check(cfg)
@@ -359,6 +362,9 @@ def check(cfg: Config) -> None:
             raise ConfigError(f"segment.mask: no such file {sg.mask}")
     if sg.method == "scene" and (cfg.hal.body or os.environ.get("BTF_HAL", "")) != "fake":
         raise ConfigError("segment.method = 'scene' needs hal.body = 'fake' (ground truth)")
+    if sg.method == "scene" and cfg.hal.camera.startswith("replay:"):
+        raise ConfigError("segment.method = 'scene' needs the fake scene camera; a replay camera has no "
+                          "ground truth (use isodata or mask)")
     check_camera(cfg)
 
 
@@ -391,7 +397,7 @@ def with_value(cfg: Config, dotted: str, value: Any) -> Config:
     section, _, key = dotted.partition(".")
     cls = _SECTIONS.get(section)
     if cls is None or key not in _TYPES[cls]:
-        raise ConfigError(f"unknown key {_said(dotted)}")
+        raise ConfigError(f"unknown key {_shown(dotted, True)}")
     new = _convert(dotted, value, _TYPES[cls][key], cfg.state_dir)
     if dotted in CHOICES and new not in CHOICES[dotted]:
         raise ConfigError(f"{dotted} must be one of {', '.join(CHOICES[dotted])}, got {new!r}")

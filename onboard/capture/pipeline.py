@@ -32,7 +32,7 @@ from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, 
 from btf.fit.fitter import FrameFitter
 from btf.record import FittedModel
 from hal.devices import Hal
-from hal.interfaces import CameraSettings, HalError, ViewAngles, view_from_orientation
+from hal.interfaces import CameraSettings, DeviceSpent, HalError, ViewAngles, view_from_orientation
 from onboard.capture import skip
 from onboard.capture.camera_lock import CameraLock, reference_level
 from onboard.config import Config
@@ -146,15 +146,15 @@ class Pipeline:
     def retry(self, step: str, fn: Callable[[], T]) -> T:
         """`fn()`, tried `sweep.retries` more times on a device fault; PoseSkipped with the last one."""
         attempts = self.cfg.sweep.retries + 1
-        last = ""
+        last, spent = "", False
         for attempt in range(attempts):
             try:
                 return fn()
             except (HalError, OSError, TimeoutError, ValueError) as exc:
-                last = f"{type(exc).__name__}: {exc}"
+                last, spent = f"{type(exc).__name__}: {exc}", isinstance(exc, DeviceSpent)
                 self.faults.append(f"{step}: {last}")
                 self.pump()
-        raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}", fault=True)
+        raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}", fault=not spent)
 
     def move(self, view: ViewAngles) -> None:
         """Send the goals, then poll until settled; each bus call has its own retries."""
