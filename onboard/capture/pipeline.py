@@ -32,7 +32,7 @@ from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, 
 from btf.fit.fitter import FrameFitter
 from btf.record import FittedModel
 from hal.devices import Hal
-from hal.interfaces import CameraSettings, DeviceSpent, HalError, ViewAngles, view_from_orientation
+from hal.interfaces import CameraSettings, DeviceGone, DeviceSpent, HalError, ViewAngles, view_from_orientation
 from onboard.capture import skip
 from onboard.capture.camera_lock import CameraLock, reference_level
 from onboard.config import Config
@@ -150,6 +150,8 @@ class Pipeline:
         for attempt in range(attempts):
             try:
                 return fn()
+            except DeviceGone as exc:  # not there: no retry helps now (the sweep waits for it)
+                raise DeviceGone(f"{step}: {exc}") from exc
             except (HalError, OSError, TimeoutError, ValueError) as exc:
                 last, spent = f"{type(exc).__name__}: {exc}", isinstance(exc, DeviceSpent)
                 self.faults.append(f"{step}: {last}")

@@ -39,7 +39,7 @@ class Status:
         rejected = sorted(dict(getattr(self.link.stats(), "rejected", {}) or {}).items())
         count, letters = self.outbox.dead_letters(DEAD_LETTERS_SHOWN)
         return fit(dataclasses.replace(
-            self.said(), outbox=len(self.outbox), paused=s.paused_reason,
+            self.said(), outbox=len(self.outbox), paused=s.paused_reason or s.device_gone,
             rejected=pk.Kept(tuple(pk.Rejection(str(k), int(n)) for k, n in rejected)),
             failsafe=_events(self.failsafe.events),
             failsafe_s=float(s.cfg.link.failsafe_s), torque=bool(s.torque), faults=_kept(self.pipeline.faults),
@@ -54,7 +54,8 @@ class Status:
         return pk.StatusReport(mode=s.mode.value, disk=pk.Disk(s.disk, s.disk_free))
 
     def robot_state(self) -> pk.RobotState:
-        if self.state.mode is Mode.FAILSAFE or self.state.paused_reason or self.state.disk != "ok":
+        s = self.state
+        if s.mode is Mode.FAILSAFE or s.paused_reason or s.device_gone or s.disk != "ok":
             return pk.RobotState.PAUSED
         return pk.RobotState.SWEEPING if self.state.mode is Mode.SWEEPING else pk.RobotState.IDLE
 

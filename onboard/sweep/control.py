@@ -6,14 +6,19 @@ pose queued and done, or neither; the host drops re-sent rows by (robot, incarna
 Faults become retries, then a skipped pose with its reason; the sweep goes on, and after its
 last planned pose measures again each pose a device fault skipped (`[sweep] retry_skipped`
 more tries each). Its last STATUS lists the poses still missing, each with why. A full outbox
-or a disk short of room pauses it; the pose is measured again when there is room.
+or a disk short of room pauses it; the pose is measured again when there is room. A device that
+is gone (unplugged) pauses it too, said in a STATUS and the log: the pose is tried again every
+PROBE_S, and once the device answers the sweep resumes (said again), nothing skipped for it.
 """
 from __future__ import annotations
 
 import copy
 import logging
+import time
+from typing import Callable
 
 from onboard.capture.filing import Captures
+from hal.interfaces import DeviceGone
 from onboard.capture.pipeline import FittedView, Pipeline, PoseSkipped
 from onboard.link.outbox import DiskFull, Outbox, OutboxFull
 from onboard.link.status import Status, skipped_pose, sweep_report
@@ -23,17 +28,21 @@ from onboard.watchdog import Notifier
 from radio import packets as pk
 
 log = logging.getLogger("btf.robot")
+PROBE_S = 1.0  # while a device is gone, how often its pose is tried again
 
 
 class SweepControl:
     def __init__(self, state: RuntimeState, outbox: Outbox, pipeline: Pipeline, captures: Captures,
-                 status: Status, notifier: Notifier, reserve: int, new_sweep: bool = False) -> None:
+                 status: Status, notifier: Notifier, reserve: int, new_sweep: bool = False,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.state, self.outbox, self.pipeline, self.captures = state, outbox, pipeline, captures
         self.status, self.notifier = status, notifier
         self.sweeps = SweepStore(outbox, legacy_dir=state.cfg.state_dir)
         self.reserve = reserve  # outbox bytes kept free for replies and STATUS
         self.new_sweep = new_sweep
         self.full_until_ack = False  # a commit hit the quota: measure again after an ACK
+        self.clock = clock
+        self._probe_at = 0.0  # when a pose waiting for a device that is gone is tried again
 
     def plan(self) -> SweepPlan:
         s = self.state.cfg.sweep
@@ -89,19 +98,44 @@ class SweepControl:
             self.state.paused_reason = (f"disk {self.state.disk}: {self.state.disk_free} bytes free under "
                                         f"{self.state.cfg.state_dir}; acquisition paused until there is room")
             return "paused"
-        nxt = copy.deepcopy(p)
+        if self.state.device_gone and self.clock() < self._probe_at:
+            return "paused"
+        nxt, cap, reason, fault = copy.deepcopy(p), None, "", False
         try:
             with self.state.arm_work():
                 cap = self._measure(p)
         except Interrupted:  # the command or failsafe that interrupted has set the state
             return "interrupted"
+        except DeviceGone as exc:
+            return self._gone(str(exc))
         except PoseSkipped as exc:
-            return self._file(p, nxt, None, exc.reason, exc.fault)
+            reason, fault = exc.reason, exc.fault
         except Exception as exc:
             # A fault the pipeline did not foresee skips the pose with its reason
             # instead of failing the same pose forever.
-            return self._file(p, nxt, None, f"internal: {type(exc).__name__}: {exc}")
-        return self._file(p, nxt, cap, "")
+            reason = f"internal: {type(exc).__name__}: {exc}"
+        self._back()
+        return self._file(p, nxt, cap, reason, fault)
+
+    def _gone(self, why: str) -> str:
+        """A device is not there: nothing measured, nothing skipped; the pose is tried again in
+        PROBE_S. The first time, said (log, errors, STATUS)."""
+        self._probe_at = self.clock() + PROBE_S
+        if not self.state.device_gone:
+            self.state.device_gone = f"{why}; sweep paused until it answers again"
+            text = f"device gone: {self.state.device_gone}"
+            self.state.errors.append(text)
+            log.warning("%s", text)
+            self.status.send(text, pk.StatusReport(paused=self.state.device_gone))
+        return "paused"
+
+    def _back(self) -> None:
+        """The devices answer again (the pose went through, or failed for another reason): said."""
+        if self.state.device_gone:
+            text = f"devices answer again: sweep resumes (was: {self.state.device_gone.split('; sweep paused')[0]})"
+            self.state.device_gone = ""
+            log.warning("%s", text)
+            self.status.send(text, pk.StatusReport(paused=self.state.paused_reason))
 
     def _measure(self, p: SweepProgress) -> FittedView:
         commanded = p.current()
