@@ -1,6 +1,10 @@
 """Skipped poses are measured again: after a sweep's planned poses, each pose a device fault
 skipped is tried again, up to `[sweep] retry_skipped` more times, the oldest first; the sweep
 ends with every pose measured or listed as missing, each with why."""
+import os
+
+import pytest
+
 from hal.fakes import Faults
 from hal.interfaces import ViewAngles
 from onboard.sweep.plan import SkippedPose, SweepPlan, SweepProgress
@@ -77,12 +81,19 @@ def test_with_retry_skipped_zero_the_pose_stays_missing_with_its_reason(fake_rob
     assert missing.reason.startswith("tracker failed after 3 attempts") and done.report.sweep.measured == 2
 
 
-def test_a_sweep_at_a_twenty_percent_fault_rate_ends_with_every_pose_measured_or_missing_with_why(fake_robot):
-    """Stalls, timeouts and NACKs on 42 poses; a quick servo so a stall costs only the settle timeout."""
-    plan = {"start": 90, "stop": 50, "step": 2, "azimuths": [0, 90], "settle_timeout_s": 0.02, "retry_skipped": 2}
-    rt, tr = make(fake_robot, rate=0.2, extra=(SMALL, {"sweep": plan}))
+def faulty_sweep(fake_robot, stop: float, seed: int = 3, retry_skipped: int = 2):
+    """A sweep from 90 to `stop` in 2 degree steps at two azimuths, 20% of device calls failing
+    (stalls, timeouts, NACKs); a quick servo, so a stall costs only the settle timeout."""
+    plan = {"start": 90, "stop": stop, "step": 2, "azimuths": [0, 90], "settle_timeout_s": 0.02,
+            "retry_skipped": retry_skipped}
+    rt, tr = make(fake_robot, rate=0.2, extra=(SMALL, {"sweep": plan, "hal": {"fault_seed": seed}}))
     rt.hal.servo_bus.speed_deg_s = 20000.0
     sweep(rt)
+    return rt, tr
+
+
+def test_a_sweep_at_a_twenty_percent_fault_rate_ends_with_every_pose_measured_or_missing_with_why(fake_robot):
+    rt, tr = faulty_sweep(fake_robot, 50)
     p, packets = rt.progress, decoded(tr)
     measured, missing = {i for i, _ in p.measured}, {k.index for k in p.skipped}
     assert p.done and measured | missing == set(range(42)) and not measured & missing
@@ -97,3 +108,19 @@ def test_a_sweep_at_a_twenty_percent_fault_rate_ends_with_every_pose_measured_or
     captured = {(round(x.commanded[0]), round(x.commanded[1])) for x in packets
                 if isinstance(x, (pk.ModelsPacket, pk.UnchangedPacket))}
     assert captured == {(round(v.elevation), round(v.azimuth)) for v in (p.plan.pose(i) for i in measured)}
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not os.environ.get("BTF_STRESS"), reason="stress run only (make stress): 82 poses, 5 fault seeds")
+@pytest.mark.parametrize("seed", range(5))
+def test_82_poses_at_a_twenty_percent_fault_rate_end_measured_or_missing_and_the_retries_win_most_back(
+        fake_robot, seed):
+    rt, tr = faulty_sweep(fake_robot, 10, seed)
+    p = rt.progress
+    measured, missing = {i for i, _ in p.measured}, {k.index for k in p.skipped}
+    assert p.done and measured | missing == set(range(82)) and not measured & missing
+    (done,) = [x for x in decoded(tr) if isinstance(x, pk.StatusPacket) and x.text == "sweep done"]
+    assert {(k.index, k.reason) for k in done.report.sweep.missing} == {(k.index, k.reason) for k in p.skipped}
+    first = {x.report.sweep.skipped.items[0].index for x in decoded(tr)
+             if isinstance(x, pk.StatusPacket) and x.text.startswith("skipped pose: ")}
+    assert len(missing) * 3 < len(first)  # most poses skipped once were measured on a later try
