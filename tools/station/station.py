@@ -10,7 +10,8 @@ One asyncio event loop runs it all. The link pump (`run`) turns a `radio.pump.Li
 port on a thread of its own, so the loop never waits on the port: `LinkPump.transfer` (write
 what is due, read what arrived) runs there; on the loop, what arrived is fed to the link and
 every delivered packet is stored (`LinkPump.feed`), and only then is the next write taken
-(`LinkPump.due`): an acknowledgement never leaves before its packet is in the database. The
+(`LinkPump.due`): an acknowledgement never leaves before its packet is on stable storage (the
+turn's packets in one transaction, its commit fsync'd: synchronous=FULL, one fsync a turn). The
 `Link`, the `Store`, the snapshot and the bus are touched on the loop only.
 
 The interface for code inside the station (the control socket, the operator's page):
@@ -49,6 +50,7 @@ from __future__ import annotations
 
 import asyncio
 import secrets
+import sqlite3
 import time
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -62,6 +64,7 @@ from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet
 from tools.station.bus import EventBus
 from tools.station.log import StationLog, event, likely_cause
 from tools.station.snapshot import StationSnapshot
+from tools.store.database import disk_free
 
 WRONG_KEY_FRAMES = 8  # frames failing authentication, none passing: the key is wrong
 REJECTED_EVERY_S = 1.0  # rejected-frame events, per reason, at most this often
@@ -172,11 +175,13 @@ class Station:
     def _turn(self, data: bytes, room: int) -> bytes:
         """Feed the link what arrived, store and route what it delivered; what to write next."""
         now, wall = self.clock(), self.wall()
-        for ev in self.pump.feed(data, now):
+        events = self.pump.feed(data, now)
+        stored = iter(self._store(events))  # durable before anything of this turn is said or ACKed
+        for ev in events:
             if isinstance(ev, Delivered):
                 self.last_delivery = now
                 self.snapshot.note_delivered(len(ev.payload), wall)
-                self._delivered(self.receiver.handle(ev.payload, ev.incarnation.hex()), wall)
+                self._delivered(next(stored), wall)
             elif isinstance(ev, (LinkUp, LinkDown)):
                 up = isinstance(ev, LinkUp)
                 self.snapshot.note_link(up, wall)
@@ -190,6 +195,23 @@ class Station:
         self._watch_link(wall)
         self._ask_status(now)
         return self.pump.due(room, now)
+
+    def _store(self, events: list) -> list[Item]:
+        """What each delivered packet became, all stored in one transaction: one commit, one
+        fsync (synchronous=FULL), for the turn's packets however many, before `due` lets their
+        acknowledgements out. StoreFailed when it cannot commit (nothing of the turn is kept)."""
+        delivered = [ev for ev in events if isinstance(ev, Delivered)]
+        store = self.receiver.store
+        if not delivered or store is None:
+            return [self.receiver.handle(ev.payload, ev.incarnation.hex()) for ev in delivered]
+        try:
+            with store.batch():
+                return [self.receiver.handle(ev.payload, ev.incarnation.hex()) for ev in delivered]
+        except sqlite3.Error as exc:  # the commit itself: no room for the WAL, an I/O error
+            name = getattr(exc, "sqlite_errorname", "") or ""
+            raise StoreFailed(f"database {store.path}: cannot commit {len(delivered)} packet"
+                              f"{'s' * (len(delivered) > 1)}: {exc} ({disk_free(store.path)} free on its disk)",
+                              damaged=name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB"))) from None
 
     def _delivered(self, item: Item, wall: float) -> None:
         if self.on_item is not None:

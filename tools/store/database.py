@@ -10,6 +10,7 @@ the file; `tools.store.rows` checks every row read back).
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 from contextlib import contextmanager
 from pathlib import Path
@@ -26,7 +27,16 @@ from tools.data.images import decode_png, encode_png
 from tools.store.rows import CAMERA_COLUMNS, StoredCapture, capture_from_row, mask_png, model_from_row
 from tools.store.schema import SCHEMA_VERSION, CorruptDatabase, StoreUnavailable, connect
 
-__all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "SCHEMA_VERSION"]
+__all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "SCHEMA_VERSION", "disk_free"]
+
+def disk_free(path: str | Path) -> str:
+    """The room left on the disk holding `path`, for a line saying why a write failed."""
+    try:
+        st = os.statvfs(os.path.dirname(os.path.abspath(path)))
+    except OSError:
+        return "unknown bytes"
+    return f"{st.f_bavail * st.f_frsize} bytes"
+
 
 class _Undo(Exception):
     """Drops the current write (e.g. a capture that was already stored)."""
