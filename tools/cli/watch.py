@@ -46,6 +46,8 @@ def run(args: argparse.Namespace) -> int:
 
 def summary(s: dict) -> str:
     """The snapshot in a few lines, for a person."""
+    from tools.station.refusals import wrong_key_line  # the station's modules: not at btf-host's start
+
     ln, r, sw = s["link"], s["robot"], s["sweep"]
     pose = "?" if r["pose"] is None else f"{r['pose']['elevation']:.1f}°/{r['pose']['azimuth']:.1f}°"
     heard = "never" if ln["last_heard_s"] is None else f"{ln['last_heard_s']:g} s ago"
@@ -55,6 +57,8 @@ def summary(s: dict) -> str:
              f"accepted {ln['frames_accepted']}, retransmitted {ln['retransmissions']}, rejected: {rejected}",
              f"robot {r['id']}: {r['mode'] or '?'} at {pose}, outbox {r['outbox']}, "
              f"faults {len(r['faults'])}, errors {len(r['errors'])}"]
+    if wrong := wrong_key_line(ln["rejected"].get("tag", 0), ln["frames_accepted"]):
+        lines.append(wrong)
     if sw["id"] is not None:
         lines.append(f"sweep {sw['id']}: pose {sw['next']} of {sw['poses']}, {len(sw['skipped'])} skipped"
                      + ("" if sw["active"] else " (not running)"))

@@ -34,7 +34,9 @@ The interface for code inside the station (the control socket, the operator's pa
   A command id the robot saw before is answered from its memory, never run twice, so a client
   that lost its station re-submits the same id to the next one.
 - `station.stop()` ends `run` after the current turn; `station.failure` says why it ended on
-  its own (`StationFailure`: a wrong key, a store that cannot be written, a port that failed).
+  its own (`StationFailure`: a store that cannot be written, a port that failed; never a frame
+  or a client: those are counted, said and refused). `station.wrong_key` is the one line
+  saying the key is likely wrong, while it is.
 
 Every event is a dict `{"kind", "time" (ISO 8601, UTC), "t" (epoch s), "text", ...}` with kind
 one of: capture, unchanged, mask (`robot`, `seq`, `stored`, and `capture`: where it was filed),
@@ -42,8 +44,9 @@ status, log, bad, other (a packet: `robot`, `seq`, `stored`, `packet` as
 `tools.station.receiver.packet_json`; a status event is also the answer to the station's own STATUS
 request, published every `status_every` seconds and not logged), failsafe (the robot's report of
 one), command (sent:
-`command_id`, `name`, `args`), answer (`command_id`, `ok`, `answer`), link (`up`), rejected
-(`reason`, `count`, `total`, the likely `cause`), station (started, stopping, failed); the
+`command_id`, `name`, `args`), answer (`command_id`, `ok`, `answer`), link (`up`; the first up after a start says the
+re-sync: `tools.station.refusals`), rejected (`reason`, `count`, `total`, the likely `cause`; a
+likely wrong key in one line of its own), station (started, stopping, failed); the
 subscriber's own `lost` (`count`). The log (`tools.station.log`) writes each one.
 """
 from __future__ import annotations
@@ -62,12 +65,11 @@ from radio.link import Delivered, LinkDown, LinkUp, PeerStale
 from radio.pump import LinkPump
 from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json
 from tools.station.bus import EventBus
-from tools.station.log import StationLog, event, likely_cause
+from tools.station.log import StationLog, event
+from tools.station.refusals import Refusals
 from tools.station.snapshot import StationSnapshot
 from tools.store.database import disk_free
 
-WRONG_KEY_FRAMES = 8  # frames failing authentication, none passing: the key is wrong
-REJECTED_EVERY_S = 1.0  # rejected-frame events, per reason, at most this often
 SENT_KEPT = 1024  # commands remembered until answered (for the snapshot)
 POLLS_KEPT = 16  # the station's own STATUS requests it recognises the answers of
 
@@ -96,8 +98,8 @@ class Station:
         self._sent: dict[int, tuple[CommandName, dict]] = {}
         self._poll: tuple[int, float] | None = None  # the STATUS this station asked for, and when
         self._polls: deque[int] = deque(maxlen=POLLS_KEPT)  # its earlier ones: answered late, still its own
-        self._rejected: dict[str, int] = {}  # counts already reported
-        self._rejected_at: dict[str, float] = {}
+        self.refusals = Refusals(wall())
+        self._told_wrong_key = False
         self._accepted = 0
         self._polled_at = -1e9
 
@@ -185,8 +187,8 @@ class Station:
             elif isinstance(ev, (LinkUp, LinkDown)):
                 up = isinstance(ev, LinkUp)
                 self.snapshot.note_link(up, wall)
-                self.emit(event("link", "up: the robot is heard" if up else
-                                f"down: nothing heard from the robot for {self.pump.link.link_timeout:g} s",
+                self.emit(event("link", "up: the robot is heard" + self.refusals.link_up(self.pump.stats(), wall)
+                                if up else f"down: nothing heard from the robot for {self.pump.link.link_timeout:g} s",
                                 wall, up=up))
             elif isinstance(ev, PeerStale):  # the robot's counters are behind: said once, with the remedy
                 self.emit(event("link", ev.text, wall, up=self.pump.up))
@@ -277,25 +279,24 @@ class Station:
             if not futs:
                 del self._waiting[cid]
 
+    @property
+    def wrong_key(self) -> str:
+        """The line saying the key is likely wrong, while frames fail authentication and none
+        passed ('' otherwise). Never a reason to stop: anyone on the radio can send such frames."""
+        return self.refusals.wrong_key(self.pump.stats())
+
     def _watch_link(self, wall: float) -> None:
-        """Quality counters from the link; rejected frames with their likely cause; a key
-        that authenticates nothing ends the station."""
+        """Quality counters from the link; refused frames with their likely cause (a wrong key
+        in one line, the re-sync after a start as such): counted, said, never the end."""
         st = self.pump.stats()
-        self.snapshot.link.stats = st
+        self.snapshot.link.stats = self.refusals.view(st)
         if st.frames_accepted > self._accepted:
             self._accepted, self.snapshot.link.last_heard = st.frames_accepted, wall
-        for reason, total in st.rejected.items():
-            new = total - self._rejected.get(reason, 0)
-            if new and wall - self._rejected_at.get(reason, -1e9) >= REJECTED_EVERY_S:
-                self._rejected[reason], self._rejected_at[reason] = total, wall
-                self.emit(event("rejected", f"{new} frame{'s' * (new > 1)} refused: {likely_cause(reason)}",
-                                wall, reason=reason, count=new, total=total, cause=likely_cause(reason)))
-        tags = st.rejected.get("tag", 0)
-        if tags >= WRONG_KEY_FRAMES and st.frames_accepted == 0:
-            self._stop = True
-            self.failure = StationFailure(
-                f"{tags} frames failed authentication and none passed: wrong key? --key must hold the "
-                "same key as the robot's link.key_file", status=2)
+        for text, fields in self.refusals.update(st, wall):
+            self.emit(event("rejected", text, wall, **fields))
+            if fields.get("wrong_key") and not self._told_wrong_key and self.on_item is not None:
+                self._told_wrong_key = True  # the foreground's reader is told once, the log each time
+                self.on_item(Item(ItemKind.LINK, None, None, False, text))
 
     def _ask_status(self, now: float) -> None:
         """A STATUS every `status_every` seconds while the link is up, for the snapshot."""
