@@ -15,7 +15,7 @@ from benchmarks.stability_grid import SATURATIONS, Point, Saturation, curve, gri
 from benchmarks.stability_score import METHODS, Cause, Size, Truth, diagnose, evaluate, fit_and_score, score
 from btf.johnson import Family, Johnson
 
-EXPECTED = {"bracketing", "core", "dependence", "hostmem", "ingest", "onboard", "page", "peers", "runtime", "sampling", "scene", "stability",
+EXPECTED = {"bracketing", "core", "dependence", "hostile", "hostmem", "ingest", "onboard", "page", "peers", "runtime", "sampling", "scene", "stability",
             "startup",
             "subsample", "synth", "wire", "link", "failsafe"}
 

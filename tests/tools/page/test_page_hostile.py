@@ -7,38 +7,28 @@ import http.client
 import os
 import re
 import resource
-import socket
-import statistics
-import time
 from collections import Counter
 from urllib.parse import urlsplit
 
 import pytest
 
-from radio.packets.commands import CommandName
+from benchmarks.hostile_clients import (
+    FD_LIMIT, event_streams, half_requests, limit_fds, median_ping_s, room_for_sockets, rss_kb, until)
 from tests.support.browser import page_address
 from tests.support.station_rig import Rig
 from tools.page.guard import HEADER_TIMEOUT_S, connection_cap
 from tools.page.server import STREAMS, STREAMS_PER_CLIENT
-from tools.station.control import StationClient, socket_path
-
-FD_LIMIT = 1024
-
-
-def limit_fds() -> None:
-    resource.setrlimit(resource.RLIMIT_NOFILE, (FD_LIMIT, FD_LIMIT))
+from tools.station.control import socket_path
 
 
 @pytest.fixture
 def many_sockets():
     """Room in this process for thousands of client sockets."""
-    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
-    want = 4096 if hard == resource.RLIM_INFINITY else min(hard, 4096)
-    if want < 2600:
-        pytest.skip(f"this process may open {hard} files, too few for the clients")
-    resource.setrlimit(resource.RLIMIT_NOFILE, (want, hard))
+    before = room_for_sockets(2100)
+    if before is None:
+        pytest.skip("this process may not open the 2,100 sockets the clients need")
     yield
-    resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+    resource.setrlimit(resource.RLIMIT_NOFILE, before)
 
 
 @pytest.fixture
@@ -56,87 +46,28 @@ def station(tmp_path):
     rig.close()
 
 
-def ping_s(rig) -> float:
-    """Seconds from a PING sent through the station's socket to the robot's answer."""
-    client = StationClient.connect(socket_path(rig.db), timeout=30)
-    assert client is not None, "the station's socket refused"
-    try:
-        t0 = time.perf_counter()
-        client.send({"op": "command", "name": CommandName.PING.name, "args": {}})
-        while (msg := client.receive(timeout=30))["op"] != "answer":
-            pass
-        assert msg["answer"]["ok"]
-        return time.perf_counter() - t0
-    finally:
-        client.close()
-
-
-def median_ping_s(rig, n: int = 5) -> float:
-    return statistics.median(ping_s(rig) for _ in range(n))
-
-
-class Client:
-    """One connection of a hostile client; `state()`: open (nothing said yet), refused (a 503, or
-    closed without a word), else the first line of the answer (kept: a stream goes on)."""
-
-    def __init__(self, address: tuple[str, int], request: bytes, source: str = "127.0.0.1") -> None:
-        self.source = source
-        self.sock = socket.create_connection(address, timeout=30, source_address=(source, 0))
-        self.sock.sendall(request)
-        self.sock.setblocking(False)
-        self.answer: str | None = None
-
-    def state(self) -> str:
-        if self.answer in (None, "200"):
-            try:
-                data = self.sock.recv(65536)
-            except BlockingIOError:
-                return self.answer or "open"
-            except ConnectionResetError:
-                data = b""
-            if self.answer is None:
-                self.answer = "refused" if not data or data.startswith(b"HTTP/1.1 503") else data.split(b" ")[1].decode()
-            elif not data:
-                self.answer = "closed"
-        return self.answer
-
-
-def until(predicate, limit_s: float) -> bool:
-    end = time.monotonic() + limit_s
-    while not predicate() and time.monotonic() < end:
-        time.sleep(0.1)
-    return predicate()
-
-
 def stderr_of(rig) -> str:
     return (rig.where / f"station-{rig.stations}.err").read_text()
-
-
-def rss_kb(pid: int) -> int:
-    with open(f"/proc/{pid}/status") as fh:
-        return next(int(line.split()[1]) for line in fh if line.startswith("VmRSS:"))
 
 
 def test_slow_connections_past_the_cap_are_refused_at_once_the_rest_time_out_and_ping_stays_fast(
         station, many_sockets):
     rig, proc, url = station
     cap = connection_cap(FD_LIMIT)
-    half = f"GET / HTTP/1.1\r\nHost: {url.netloc}\r\nX-Slow: ".encode()  # never finished
     clients = []
     try:
-        for _ in range(cap + 200):
-            clients.append(Client((url.hostname, url.port), half))
+        clients = half_requests((url.hostname, url.port), url.netloc, cap + 200)
         states = lambda: Counter(c.state() for c in clients)  # noqa: E731
         assert until(lambda: states()["refused"] >= 200, 60)
         assert states() == {"open": cap, "refused": 200}  # the flood is in place
-        assert median_ping_s(rig) < 1.0
+        assert median_ping_s(socket_path(rig.db)) < 1.0
         code, (answer,), err = rig.cmd("ping")
         assert code == 0 and answer["ok"], err
         # half-sent headers do not hold a connection: every one is closed by the station
         assert until(lambda: states() == {"refused": cap + 200}, HEADER_TIMEOUT_S + 60)
     finally:
         for c in clients:
-            c.sock.close()
+            c.close()
     assert proc.poll() is None
     err = stderr_of(rig)
     assert "Too many open files" not in err and "Traceback" not in err
@@ -145,35 +76,33 @@ def test_slow_connections_past_the_cap_are_refused_at_once_the_rest_time_out_and
     assert any(t.startswith("page: connections closed, no whole request within") for t in said), said
 
 
-def flood_streams(rig, proc, url, token: str, streams: int, clients: int) -> None:
+def flood_streams(rig, proc, url, streams: int, sources: int) -> None:
     idle = rss_kb(proc.pid)
-    ask = f"GET /events HTTP/1.1\r\nHost: {url.netloc}\r\nX-BTF-Token: {token}\r\n\r\n".encode()
     flood = []
     try:
-        for i in range(streams):
-            flood.append(Client((url.hostname, url.port), ask, f"127.0.0.{2 + i % clients}"))
+        flood = event_streams((url.hostname, url.port), url.netloc, url.query.removeprefix("token="), streams,
+                              sources)
         assert until(lambda: all(c.state() != "open" for c in flood), 60)
         # at most STREAMS streams, at most STREAMS_PER_CLIENT from one address; the rest refused
         streaming = Counter(c.source for c in flood if c.state() == "200")
         assert sum(streaming.values()) == STREAMS and max(streaming.values()) <= STREAMS_PER_CLIENT, streaming
         assert {c.state() for c in flood} == {"200", "refused"}
-        assert median_ping_s(rig) < 1.0
+        assert median_ping_s(socket_path(rig.db)) < 1.0
         assert rss_kb(proc.pid) < 2 * idle, (rss_kb(proc.pid), idle)
     finally:
         for c in flood:
-            c.sock.close()
+            c.close()
     assert proc.poll() is None and "Traceback" not in stderr_of(rig)
 
 
 def test_event_streams_past_their_caps_are_refused_and_memory_and_ping_hold(station, many_sockets):
     rig, proc, url = station
-    token = url.query.removeprefix("token=")
-    flood_streams(rig, proc, url, token, streams=200, clients=8)
+    flood_streams(rig, proc, url, streams=200, sources=8)
 
     def opens() -> bool:
         conn = http.client.HTTPConnection(url.hostname, url.port, timeout=30)
         try:
-            conn.request("GET", "/events", headers={"X-BTF-Token": token})
+            conn.request("GET", "/events", headers={"X-BTF-Token": url.query.removeprefix("token=")})
             return conn.getresponse().status == 200
         finally:
             conn.close()
@@ -185,7 +114,7 @@ def test_event_streams_past_their_caps_are_refused_and_memory_and_ping_hold(stat
 @pytest.mark.skipif(not os.environ.get("BTF_STRESS"), reason="stress run only (make stress)")
 def test_two_thousand_event_streams_leave_the_station_its_memory_and_ping(station, many_sockets):
     rig, proc, url = station
-    flood_streams(rig, proc, url, url.query.removeprefix("token="), streams=2000, clients=20)
+    flood_streams(rig, proc, url, streams=2000, sources=20)
 
 
 def request(url, path: str, headers: dict) -> tuple[int, bytes]:
