@@ -10,8 +10,8 @@ import numpy as np
 from scipy import stats
 
 from benchmarks.common import Context, Section, best_time, paired_times, verdict
-from btf.johnson import Family, Johnson
 from btf.fit.fitter import FrameFitter, fit_values
+from btf.johnson import Family, Johnson
 
 
 def _frame(rng: np.random.Generator, side: int = 1000) -> tuple[np.ndarray, np.ndarray]:

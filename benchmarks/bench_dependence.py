@@ -8,12 +8,12 @@ import numpy as np
 
 from benchmarks.common import Context, paired_times, verdict
 from btf.dependence import Dependence
-from btf.johnson import Family, Johnson
-from hal.interfaces import ViewAngles
-from hal.scene import render
 from btf.fit.dependence import measure
 from btf.fit.features import FeatureSpace, FeatureSpec, compute
 from btf.fit.fitter import FrameFitter
+from btf.johnson import Family, Johnson
+from hal.interfaces import ViewAngles
+from hal.scene import render
 from radio.packets import encode_models
 from tools.analysis.fields import empirical_autocorrelation
 from tools.analysis.synth import synthesize

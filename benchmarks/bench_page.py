@@ -42,9 +42,9 @@ def _python(module: str) -> list[str]:
 def fill(db: Path, captures: int) -> None:
     """`captures` captures of one robot: sweeps of 50 poses (10 elevations x 5 azimuths), the
     models of a fake render, the label map with the first."""
+    from btf.fit.fitter import FrameFitter
     from hal.interfaces import ViewAngles
     from hal.scene import render
-    from btf.fit.fitter import FrameFitter
     from tools.station.receiver import mask_key
     from tools.store.database import Store
 

@@ -19,8 +19,8 @@ from scipy import stats
 from benchmarks import as99_moment_fit
 from benchmarks.common import Context, Section, figure, save
 from benchmarks.scenes import field
-from btf.johnson import Family, Johnson
 from btf.fit.fitter import fit_values
+from btf.johnson import Family, Johnson
 from tools.analysis.pdfs import binned
 
 METHODS = ("percentile", "johnsonsu MLE", "johnsonsb MLE", "moments (AS 99)", "gaussian", "weibull")

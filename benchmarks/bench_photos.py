@@ -19,8 +19,8 @@ from scipy import stats
 
 from benchmarks import photo_cases, rpeer
 from benchmarks.common import Context, Section, figure, save, verdict
-from btf.johnson import Family, Johnson
 from btf.fit.fitter import fit_histogram, fit_values, plain_fit
+from btf.johnson import Family, Johnson
 from tools.analysis.pdfs import binned, peer_probabilities
 
 LEVELS = 256

@@ -13,13 +13,13 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.common import Context, Saving, Section, paired_rounds, paired_times
+from btf.fit.isodata import IsodataParams, isodata
 from hal.interfaces import ViewAngles
 from hal.scene import render
 from onboard import config
 from onboard.capture.pipeline import Pipeline
-from btf.fit.isodata import IsodataParams, isodata
-from onboard.link.bodies import models_body
 from onboard.capture.segmentation import Segmenter, SegmentMethod
+from onboard.link.bodies import models_body
 
 
 def _cfg(**skip) -> config.Config:

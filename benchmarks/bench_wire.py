@@ -13,8 +13,8 @@ import numpy as np
 
 from benchmarks.common import Context, Section
 from btf.codec import PercentileCodec
-from btf.percentile import model_from_percentiles
 from btf.fit.fitter import fit_histogram
+from btf.percentile import model_from_percentiles
 from radio.packets import decode, encode_models
 
 BANDS = ("R", "G", "B")

@@ -70,8 +70,8 @@ def run_trials(size: tuple[int, int], trials: int, failsafe_s: float = 1.0, seed
     """`trials` failsafe trips of a robot sweeping at frame `size` (height, width)."""
     from hal.factory import build_hal
     from onboard import config
-    from onboard.runtime import Mode, Runtime
     from onboard.capture.segmentation import Segmentation
+    from onboard.runtime import Mode, Runtime
 
     rng = random.Random(seed)
     with tempfile.TemporaryDirectory(prefix="btf-failsafe-") as tmp:

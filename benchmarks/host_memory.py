@@ -80,8 +80,8 @@ def make_scene(directory: Path, height: int, width: int, labels: int = 6, seed: 
         paths.append(directory / name)
         del img
     cv2.imwrite(str(directory / "mask.png"), mask)
-    from tools.data.images import fit_image
     from tools.analysis.synth import models_document
+    from tools.data.images import fit_image
 
     fitted = fit_image(paths[0], directory / "mask.png", "rgb")
     models = directory / "models.json"

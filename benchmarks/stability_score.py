@@ -23,9 +23,9 @@ from benchmarks import as99_moment_fit
 from benchmarks.model_histograms import expected_histogram, histogram_l1
 from benchmarks.stability_grid import SATURATIONS, Point, Saturation
 from btf.codec import z_for_count
+from btf.fit.fitter import fit_histogram, histogram_percentiles, plain_fit
 from btf.johnson import Family, Johnson, normal_cdf
 from btf.percentile import model_from_percentiles
-from btf.fit.fitter import fit_histogram, histogram_percentiles, plain_fit
 
 U = np.linspace(0.01, 0.99, 99)
 U_W1 = (np.arange(2000) + 0.5) / 2000

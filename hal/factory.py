@@ -2,8 +2,8 @@
 
 The body comes from the config mapping's `body` (the keys of `onboard.config.HalConfig`)
 or else from `BTF_HAL`; with neither, `build_hal` refuses: a robot must never run on
-fakes by accident. Device modules are imported only when their body is chosen, so a
-machine without a camera stack can still build the fakes. What it builds is a `hal.Hal`.
+fakes by accident. The drivers that need OpenCV or dynamixel-sdk are imported only when
+their body is chosen, so a machine without a camera stack can still build the fakes. What it builds is a `hal.Hal`.
 """
 from __future__ import annotations
 
@@ -15,9 +15,17 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from hal.arm import Arm, ArmCalibration, JointCalibration, load_arm_fit
-from hal.bno055 import AxisRemap
+from hal.bno055 import AxisRemap, BNO055Tracker
+from hal.devices import Hal
+from hal.emulators.bno055 import EmulatedSMBus
+from hal.emulators.dxl import DxlEmulator
 from hal.fakes import Faults
-from hal.interfaces import Body, Camera, Hal, HalError, Orientation, ViewAngles
+from hal.fakes.camera import FakeCamera
+from hal.fakes.servo import FakeServoBus
+from hal.fakes.tracker import FakeTracker
+from hal.interfaces import Body, Camera, HalError, Orientation, ViewAngles
+from hal.orientation import MOUNTS
+from hal.scene import SCENES, render
 
 ENV_VAR = "BTF_HAL"
 # Views the emulated camera's image sequence is rendered at (it replays them in order).
@@ -111,8 +119,6 @@ def world_view(world: ArmCalibration, servo_deg: Mapping[int, float]) -> ViewAng
 
 
 def _tracker_mount(options: Mapping[str, Any]) -> Any:
-    from hal.orientation import MOUNTS
-
     name = str(options.get("fake_tracker_mount") or "upright")
     if name in MOUNTS:
         return None if name == "upright" else MOUNTS[name]
@@ -149,8 +155,6 @@ def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, s
         raise HalConfigError(f"{', '.join(k for k in FAKE_WORLD if options.get(k) is not None)}: "
                              "only fake and emulated bodies take deliberate faults")
     if body is not Body.REAL:
-        from hal.scene import SCENES
-
         if options.get("scene", "black") not in SCENES:
             raise HalConfigError(f"unknown scene {options['scene']!r}; choose from {', '.join(SCENES)}")
     builder = {Body.FAKE: _fake, Body.EMULATED: _emulated, Body.REAL: _real}[body]
@@ -168,10 +172,6 @@ def _faults(options: Mapping[str, Any], kinds: frozenset[str] = frozenset()) -> 
 
 
 def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int], world: ArmCalibration) -> Hal:
-    from hal.fakes.camera import FakeCamera
-    from hal.fakes.servo import FakeServoBus
-    from hal.fakes.tracker import FakeTracker
-
     seed = int(options.get("seed", 0))
     start = cal.tilt.servo_deg(0.0)  # parked looking straight down
     bus = FakeServoBus(tuple(cal.servo_ids), faults=_faults(options), start_deg={cal.tilt.servo_id: start,
@@ -195,11 +195,8 @@ def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
 
 def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int],
               world: ArmCalibration) -> Hal:
-    from hal.bno055 import BNO055Tracker
-    from hal.dynamixel import DynamixelServoBus
-    from hal.emulators.bno055 import EmulatedSMBus
+    from hal.dynamixel import DynamixelServoBus  # dynamixel-sdk and OpenCV: only for the bodies that use them
     from hal.emulators.camera import SequenceCamera, V4L2Controls
-    from hal.emulators.dxl import DxlEmulator
 
     mount = _tracker_mount(options)
     emulator = DxlEmulator(tuple(cal.servo_ids), faults=_faults(options, frozenset({"drop", "corrupt"})))
@@ -233,16 +230,14 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
 
 def _write_sequence(directory: Path, scene: str, size: tuple[int, int], seed: int, reference: bool) -> None:
     """Frames the scene renderer draws, saved as an image sequence for OpenCV to replay."""
-    from hal.emulators.camera import write_sequence
-    from hal.scene import render
+    from hal.emulators.camera import write_sequence  # OpenCV: only for the emulated body
 
     write_sequence(directory, (render(scene, view, size=size, seed=seed, reference=reference).image
                                for view in SEQUENCE_VIEWS))
 
 
 def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int], world: ArmCalibration) -> Hal:
-    from hal.bno055 import BNO055Tracker
-    from hal.dynamixel import DynamixelServoBus
+    from hal.dynamixel import DynamixelServoBus  # dynamixel-sdk: only for the bodies that use it
 
     port = str(options.get("servo_port", ""))
     if not port:
@@ -260,7 +255,7 @@ def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
 
 def _real_camera(device: str) -> Camera:
     """`camera = "picamera2"`, a V4L2 index or path; unset: picamera2 when importable, else device 0."""
-    from hal.camera import OpenCVCamera, PiCamera2Camera
+    from hal.camera import OpenCVCamera, PiCamera2Camera  # OpenCV: only for the real body
 
     if device == "picamera2" or (not device and _picamera2_importable()):
         return PiCamera2Camera()

@@ -15,7 +15,8 @@ import numpy as np
 
 from hal.arm import Arm, ArmFit, JointCalibration, JointFit
 from hal.bno055 import AxisRemap
-from hal.interfaces import Hal, HalError, Orientation, ViewAngles, view_from_orientation
+from hal.devices import Hal
+from hal.interfaces import HalError, Orientation, ViewAngles, view_from_orientation
 from hal.orientation import fit_rotation, nearest_axis_rotation, up_in_camera, up_in_device
 
 READINGS_PER_POSE = 5

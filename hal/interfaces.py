@@ -8,12 +8,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import TYPE_CHECKING, Callable, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from hal.arm import Arm
 
 
 class HalError(RuntimeError):
@@ -170,28 +167,6 @@ class Body(str, Enum):
     REAL = "real"
     EMULATED = "emulated"
     FAKE = "fake"
-
-
-@dataclass(frozen=True)
-class Hal:
-    """Every device of the robot, built for one body by `hal.factory.build_hal`; `close()`
-    releases them all. `ground_truth` is None except on the fake body."""
-
-    body: Body
-    servo_bus: ServoBus
-    arm: Arm
-    tracker: OrientationTracker
-    camera: Camera
-    size: tuple[int, int]
-    _cleanup: tuple[Callable[[], None], ...] = field(default=(), repr=False)
-    ground_truth: GroundTruth | None = None
-
-    def close(self) -> None:
-        for closer in (self.camera.close, self.tracker.close, self.servo_bus.close, *self._cleanup):
-            try:
-                closer()
-            except Exception:  # noqa: BLE001 - closing must release everything it can
-                pass
 
 
 def view_from_orientation(o: Orientation) -> ViewAngles:

@@ -15,6 +15,9 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Mapping
 
+from btf.capture_settings import LINEAR_SPACES, MAX_BRACKETS
+from hal.controls import AUTO, FALLBACK_LOCK, hold, parse_controls
+from hal.interfaces import CameraControls, CameraSettings
 from onboard.sweep.plan import SweepPlan
 
 # A camera control: a number, "auto" (the camera's automatic) or "hold" (locked at what the
@@ -117,6 +120,23 @@ class CameraConfig:
     bracket_max: int = 2  # shorter exposures per capture
     bracket_min_ratio: float = 0.0625  # the shortest bracket, as a share of the capture's exposure
     calibrate_margin: float = 0.15  # calibrate exposure: the brightest view's top level below (1 - margin) of full
+
+    def controls(self, standing: CameraSettings | None) -> CameraControls:
+        """The controls this asks the camera for; `hold` takes the value from `standing` (None:
+        only check the text). ValueError names a value that does not parse."""
+        held = hold(standing) if standing is not None else FALLBACK_LOCK
+        exposure = held.exposure_us if _is_hold(self.exposure) else self.exposure
+        gain = held.gain if _is_hold(self.gain) else self.gain
+        if _is_hold(self.white_balance):
+            wb: str | float = (f"{held.white_balance_gains[0]!r},{held.white_balance_gains[1]!r}"
+                               if held.white_balance_gains is not None else repr(held.white_balance_kelvin))
+        else:
+            wb = self.white_balance
+        return parse_controls(AUTO if exposure is None else exposure, AUTO if gain is None else gain, wb)
+
+
+def _is_hold(value: str) -> bool:
+    return str(value).strip().lower() == "hold"
 
 
 @dataclass(frozen=True, slots=True)
@@ -303,12 +323,9 @@ def check(cfg: Config) -> None:
 
 
 def check_camera(cfg: Config) -> None:
-    from btf.capture_settings import LINEAR_SPACES, MAX_BRACKETS
-    from onboard.capture.camera_lock import requested
-
     c = cfg.camera
     try:
-        requested(c, None)
+        c.controls(None)
     except ValueError as exc:
         raise ConfigError(f"[camera]: {exc}") from None
     if not 0.0 <= c.bracket_limit < 1.0:

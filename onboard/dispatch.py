@@ -13,23 +13,27 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Callable
+from typing import Any, Callable
 
-from hal.interfaces import ViewAngles
+from hal.arm import Arm
+from hal.controls import describe
+from hal.interfaces import ServoBus, ViewAngles
 from onboard import config as config_mod
-from onboard.link import bodies as wire
-from onboard.capture.pipeline import PoseSkipped
+from onboard.capture.filing import Captures
+from onboard.capture.pipeline import Pipeline, PoseSkipped
+from onboard.capture.segmentation import Segmentation
 from onboard.config import ConfigError
-from onboard.link.outbox import OutboxFull, Reply
-from onboard.state import Interrupted
-from onboard.link.status import flat
+from onboard.failsafe import Failsafe
+from onboard.link import bodies as wire
+from onboard.link.outbox import Outbox, OutboxFull, Reply
+from onboard.link.service import LinkService
+from onboard.link.status import Status, flat
+from onboard.state import Interrupted, RuntimeState
+from onboard.sweep.control import SweepControl
 from onboard.sweep.plan import SweepPlan
 from radio import FrameError
 from radio import packets as pk
 from radio.packets.commands import COMMANDS, CommandName
-
-if TYPE_CHECKING:
-    from onboard.runtime import Runtime
 
 log = logging.getLogger("btf.robot")
 C = CommandName
@@ -101,10 +105,15 @@ def _args_text(args: dict) -> str:
 
 
 class Dispatcher:
-    """Runs the base's commands on the robot's parts (it is the one part that uses them all)."""
+    """Runs the base's commands on the robot's parts: each is given here, none reached through
+    another."""
 
-    def __init__(self, rt: Runtime) -> None:
-        self.rt = rt
+    def __init__(self, state: RuntimeState, outbox: Outbox, link: LinkService, failsafe: Failsafe,
+                 status: Status, pipeline: Pipeline, captures: Captures, sweep: SweepControl, arm: Arm,
+                 servo_bus: ServoBus, segmenter: Segmentation, wall: Callable[[], float]) -> None:
+        self.state, self.outbox, self.link, self.failsafe = state, outbox, link, failsafe
+        self.status_report, self.pipeline, self.captures, self.sweep_control = status, pipeline, captures, sweep
+        self.arm, self.servo_bus, self.segmenter, self.wall = arm, servo_bus, segmenter, wall
         self.handlers: dict[CommandName, Callable[[dict, Effect], Result]] = {
             C.PING: self.ping, C.STATUS: self.status, C.GOTO: self.goto, C.CAPTURE: self.capture,
             C.SWEEP: self.sweep, C.ABORT: self.abort, C.SET: self.set, C.TORQUE_OFF: self.torque_off,
@@ -116,19 +125,18 @@ class Dispatcher:
 
     def on_body(self, body: bytes) -> None:
         """A message from the base: a command is answered (once), anything else ignored."""
-        rt = self.rt
         try:
             cmd = pk.decode(body)
         except FrameError as exc:
-            rt.state.errors.append(f"bad packet from base: {exc}")
+            self.state.errors.append(f"bad packet from base: {exc}")
             return
         if not isinstance(cmd, pk.CommandPacket):
             return  # not a command (e.g. the base's own status): nothing to answer
         said = f"command {cmd.command_id} {cmd.name.name}{_args_text(cmd.args)}"
-        known = rt.outbox.remembered(cmd.command_id)
+        known = self.outbox.remembered(cmd.command_id)
         if known is not None:  # run before: answer again, unless that answer is still queued
-            if rt.outbox.kind_of(known.msg_id) is None:
-                rt.link.queue(known.kind, known.body)
+            if self.outbox.kind_of(known.msg_id) is None:
+                self.link.queue(known.kind, known.body)
             log.info("%s: sent again, answered from memory", said)
             return
         effect = Effect()
@@ -143,13 +151,13 @@ class Dispatcher:
             log.info("%s: ACK%s", said, "" if COMMANDS[cmd.name].query else _args_text(result))
         stands = self._answer(cmd.command_id, answer, effect, COMMANDS[cmd.name].query)
         if stands and not isinstance(result, Refusal) and COMMANDS[cmd.name].interrupts:
-            rt.state.interrupt_work(cmd.name.name)  # the pose being measured ends at the next service
+            self.state.interrupt_work(cmd.name.name)  # the pose being measured ends at the next service
 
     def run(self, name: CommandName, args: dict, effect: Effect | None = None) -> Result:
         """Run one command: the ACK's extras, or a Refusal. What it produces goes into `effect`."""
         effect = Effect() if effect is None else effect
-        spec, state = COMMANDS[name], self.rt.state
-        if not spec.query and self.rt.failsafe.active:
+        spec, state = COMMANDS[name], self.state
+        if not spec.query and self.failsafe.active:
             return Refusal(pk.Reason.BUSY, "failsafe active: the link was lost; it clears when the link is back up")
         if spec.moves_arm and state.busy:
             return Refusal(pk.Reason.BUSY, "busy: the arm is measuring a pose; send it again, or ABORT first")
@@ -162,59 +170,57 @@ class Dispatcher:
 
     def _answer(self, command_id: int, answer: tuple[int, bytes], effect: Effect, query: bool = False) -> bool:
         """Commit a reply with its command's effect, remembered by id; whether the effect stands."""
-        rt = self.rt
         try:
-            rt.outbox.commit(effect.packets, effect.state, reserve=effect.reserve,
+            self.outbox.commit(effect.packets, effect.state, reserve=effect.reserve,
                              reply=Reply(command_id, *answer))
         except OutboxFull as exc:
             effect.undo()
             if not (effect.packets or effect.state):
                 if query:  # a query is harmless to answer again: straight on the link
-                    rt.link.send_direct(*answer)
+                    self.link.send_direct(*answer)
                 else:
-                    rt.state.paused_reason = str(exc)  # not even the reply fits: a retry finds room later
+                    self.state.paused_reason = str(exc)  # not even the reply fits: a retry finds room later
                 return False
             # What the command produced does not fit: refuse it instead, and say why.
             nack = wire.reply_body(command_id, False, str(exc), reason=pk.Reason.OUTBOX_FULL)
             try:
-                rt.outbox.commit(reply=Reply(command_id, *nack))
+                self.outbox.commit(reply=Reply(command_id, *nack))
             except OutboxFull as full:
-                rt.state.paused_reason = str(full)
+                self.state.paused_reason = str(full)
             return False
-        rt.state.paused_reason = ""
+        self.state.paused_reason = ""
         effect.done()
         return True
 
     # -- the handlers, one per command -----------------------------------------------------
     def ping(self, args: dict, effect: Effect) -> Result:
-        return {"time": self.rt.wall()}
+        return {"time": self.wall()}
 
     def status(self, args: dict, effect: Effect) -> Result:
-        return flat(self.rt.status.report())
+        return flat(self.status_report.report())
 
     def goto(self, args: dict, effect: Effect) -> Result:
         view = ViewAngles(float(args["elevation"]), float(args.get("azimuth", 0.0)))
-        pipeline = self.rt.pipeline
-        with self.rt.state.arm_work():
+        pipeline = self.pipeline
+        with self.state.arm_work():
             pipeline.move(view)
             m = pipeline.measure_view()
         return {"elevation": m.elevation, "azimuth": m.azimuth}
 
     def capture(self, args: dict, effect: Effect) -> Result:
-        rt = self.rt
-        with rt.state.arm_work():
-            measured = rt.pipeline.measure_view()
-            cap = rt.pipeline.shoot(measured, measured)
-        seq, effect.packets, effect.state = rt.captures.packets(cap)
-        effect.reserve = rt.sweep.reserve
-        effect.done = lambda: rt.captures.filed(cap, seq)
-        effect.undo = lambda: rt.pipeline.rollback(cap)
+        with self.state.arm_work():
+            measured = self.pipeline.measure_view()
+            cap = self.pipeline.shoot(measured, measured)
+        seq, effect.packets, effect.state = self.captures.packets(cap)
+        effect.reserve = self.sweep_control.reserve
+        effect.done = lambda: self.captures.filed(cap, seq)
+        effect.undo = lambda: self.pipeline.rollback(cap)
         return {"seq": seq, "models": len(cap.results)}
 
     def sweep(self, args: dict, effect: Effect) -> Result:
         # The packet decoder has checked every argument's type and range.
-        sweep = self.rt.sweep
-        azs = tuple(float(a) for a in args.get("azimuths", self.rt.state.cfg.sweep.azimuths))
+        sweep = self.sweep_control
+        azs = tuple(float(a) for a in args.get("azimuths", self.state.cfg.sweep.azimuths))
         if "elevations" in args:
             els = tuple(float(e) for e in args["elevations"])
             plan = SweepPlan(els[0], els[-1], 1.0, azs, els)
@@ -226,44 +232,42 @@ class Dispatcher:
         return {"sweep": p.sweep_id, "poses": p.plan.count}
 
     def abort(self, args: dict, effect: Effect) -> Result:
-        self.rt.sweep.stop()
-        self.rt.hal.arm.stop_and_hold()
+        self.sweep_control.stop()
+        self.arm.stop_and_hold()
         return {"aborted": True}
 
     def set(self, args: dict, effect: Effect) -> Result:
-        camera = str(args["key"]).startswith("camera.") and self.rt.pipeline.lock is not None
-        if camera and self.rt.state.busy:  # the pose's frames are being taken, in the worker
+        camera = str(args["key"]).startswith("camera.") and self.pipeline.lock is not None
+        if camera and self.state.busy:  # the pose's frames are being taken, in the worker
             return Refusal(pk.Reason.BUSY, "busy: the camera is taking a pose's frames; send it again")
         self.set_keys({args["key"]: args["value"]})
         if camera:
-            from hal.controls import describe
-
-            granted = self.rt.pipeline.lock_camera()  # now, so the answer says what the camera took
+            granted = self.pipeline.lock_camera()  # now, so the answer says what the camera took
             return {"set": args["key"], "camera": describe(granted), "locked": granted.locked}
         return {"set": args["key"]}
 
     def torque_off(self, args: dict, effect: Effect) -> Result:
-        self.rt.sweep.stop()
-        self.rt.state.torque = False  # even if the bus fails below: the servos may be limp
-        self.rt.hal.arm.torque_off()
+        self.sweep_control.stop()
+        self.state.torque = False  # even if the bus fails below: the servos may be limp
+        self.arm.torque_off()
         return {"torque": False}
 
     def torque_on(self, args: dict, effect: Effect) -> Result:
-        self.rt.pipeline.retry("torque on", self.rt.hal.arm.enable)
-        self.rt.state.torque = True
+        self.pipeline.retry("torque on", self.arm.enable)
+        self.state.torque = True
         return {"torque": True}
 
     def reboot_servo(self, args: dict, effect: Effect) -> Result:
         sid = int(args["servo_id"])
-        self.rt.hal.servo_bus.reboot(sid)
+        self.servo_bus.reboot(sid)
         return {"rebooted": sid}
 
     def send_mask(self, args: dict, effect: Effect) -> Result:
         """The label map of capture `seq`: the robot keeps its last capture's only (the host
         stores every MASK sent); the next capture's is sent with it."""
-        caps, seq = self.rt.captures, int(args["seq"])
+        caps, seq = self.captures, int(args["seq"])
         if seq == caps.seq.peek() and caps.last_labels is None:
-            self.rt.segmenter.force_send()
+            self.segmenter.force_send()
             return {"queued": False, "next_capture": True}
         packet = caps.mask_packet(seq) if seq == caps.last_seq else None
         if packet is None:
@@ -276,7 +280,7 @@ class Dispatcher:
 
     def set_keys(self, settings: dict[str, Any]) -> None:
         """SET section.key = value for the keys that may change at run time."""
-        state = self.rt.state
+        state = self.state
         cfg = state.cfg
         for dotted, value in settings.items():
             section, _, key = str(dotted).partition(".")
@@ -285,5 +289,4 @@ class Dispatcher:
                 raise ConfigError(f"{dotted} cannot be set at run time (settable: {allowed})")
             cfg = config_mod.with_value(cfg, str(dotted), value)
         config_mod.check(cfg)
-        state.cfg = cfg
-        self.rt.pipeline.cfg = cfg
+        state.cfg = cfg  # the one configuration in force: the pipeline reads it from here

@@ -15,21 +15,22 @@ import time
 from collections import deque
 from typing import Callable
 
-from hal.interfaces import Hal
-from onboard.capture.pipeline import Pipeline, PoseSkipped
+from hal.controls import describe
+from hal.devices import Hal
 from onboard.capture.filing import PCA_KEY, Captures, read_pca
+from onboard.capture.pipeline import Pipeline, PoseSkipped
+from onboard.capture.segmentation import Segmentation
 from onboard.config import Config
 from onboard.disk import Disk, Pressure
 from onboard.dispatch import Dispatcher
 from onboard.failsafe import Failsafe
-from onboard.link.service import LinkService
 from onboard.link.outbox import NO_ROOM, Outbox, OutboxError, free_bytes, open_outbox
-from onboard.state import Mode, RuntimeState
-from onboard.capture.segmentation import Segmentation
+from onboard.link.service import LinkService
 from onboard.link.status import Status
-from onboard.sweep.plan import SweepProgress
-from onboard.sweep.control import SweepControl
 from onboard.link.transport import Transport
+from onboard.state import Mode, RuntimeState
+from onboard.sweep.control import SweepControl
+from onboard.sweep.plan import SweepProgress
 from onboard.watchdog import Notifier
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale
 
@@ -85,7 +86,7 @@ class Runtime:
         self.outbox.on_full = lambda: self.disk.write_failed("a write found the disk full")
         self._unheld_said = False
         self.notifier = notifier if notifier is not None else Notifier(address="")
-        self.pipeline = Pipeline(cfg, hal, segmenter, pump=self._pump, sleep=sleep,
+        self.pipeline = Pipeline(lambda: self.state.cfg, hal, segmenter, pump=self._pump, sleep=sleep,
                                  resend_mask=segmenter.force_send)
         self.pipeline.pca = read_pca(self.outbox.state(PCA_KEY), cfg.state_dir / "pca.json")
         self.link = LinkService(transport, self.outbox, self.state, on_ack=self._room_freed)
@@ -96,7 +97,8 @@ class Runtime:
         # Captures stop short of the quota, so replies and STATUS still fit when they do.
         self.sweep = SweepControl(self.state, self.outbox, self.pipeline, self.captures, self.status,
                                   self.notifier, reserve=self.outbox.quota_bytes // 8, new_sweep=new_sweep)
-        self.dispatch = Dispatcher(self)
+        self.dispatch = Dispatcher(self.state, self.outbox, self.link, self.failsafe, self.status, self.pipeline,
+                                   self.captures, self.sweep, hal.arm, hal.servo_bus, segmenter, wall)
 
     # What a caller watches, from the shared state.
     @property
@@ -198,8 +200,6 @@ class Runtime:
 
     def lock_camera(self) -> str:
         """Lock the camera as `[camera]` says; one line for STATUS, with why it will not measure."""
-        from hal.controls import describe
-
         try:
             granted = self.pipeline.lock_camera()
         except PoseSkipped as exc:

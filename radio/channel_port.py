@@ -26,6 +26,7 @@ from typing import Any, Callable
 from serial import SerialBase, SerialException
 
 from radio.channel import Channel, ChannelConfig
+from radio.ports import PortBusy, open_url
 
 SLICE = 0.002  # seconds a read waits on the wrapped port before it looks at the channel again
 Tap = Callable[[str, bytes], None]  # ("out", bytes this end wrote) / ("in", bytes from the far port)
@@ -107,7 +108,6 @@ class ChannelPort(SerialBase):
         if self.is_open:
             raise SerialException("port is already open")
         config, seed, inner_url = parse_url(self.portstr)
-        from radio.ports import PortBusy, open_url
 
         try:
             inner = open_url(inner_url, self._baudrate, timeout=SLICE, exclusive=bool(self._exclusive))

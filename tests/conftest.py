@@ -22,10 +22,10 @@ def fake_robot(tmp_path):
     `where` again is a restart on the same state."""
     from hal.factory import build_hal
     from onboard import config
-    from onboard.link.outbox import Outbox
-    from onboard.runtime import Runtime
     from onboard.capture.segmentation import Segmentation
+    from onboard.link.outbox import Outbox
     from onboard.link.transport import MemoryTransport
+    from onboard.runtime import Runtime
 
     def make(text, where=None, transport=None, hal=None, quota=None, **runtime_kw):
         where = tmp_path if where is None else where

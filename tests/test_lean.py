@@ -57,14 +57,28 @@ def test_onboard_imports_nothing_from_the_host_side():
     code = (
         "import importlib, json, pkgutil, sys\n"
         "import onboard\n"
-        "for m in pkgutil.iter_modules(onboard.__path__):\n"
-        "    importlib.import_module('onboard.' + m.name)\n"
+        "for m in pkgutil.walk_packages(onboard.__path__, 'onboard.'):\n"
+        "    if not m.name.endswith('__main__'): importlib.import_module(m.name)\n"
         "print(json.dumps(sorted(sys.modules)))\n"
     )
     out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
     loaded = json.loads(out.stdout.strip().splitlines()[-1])
     bad = [m for m in loaded if m.split(".")[0] in FORBIDDEN_ONBOARD]
     assert not bad, f"onboard imported host-side or heavy modules: {bad}"
+
+
+def test_the_shared_package_stands_on_numpy_and_the_standard_library_alone():
+    code = (
+        "import importlib, json, pkgutil, sys\n"
+        "import btf\n"
+        "for m in pkgutil.walk_packages(btf.__path__, 'btf.'):\n"
+        "    if not m.name.endswith('__main__'): importlib.import_module(m.name)\n"
+        "print(json.dumps(sorted(sys.modules)))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    loaded = {m.split(".")[0] for m in json.loads(out.stdout.strip().splitlines()[-1])}
+    others = loaded - set(sys.stdlib_module_names) - {"btf", "numpy"} - {m for m in loaded if m.startswith("_")}
+    assert not others, f"btf imported more than numpy and the standard library: {sorted(others)}"
 
 
 def test_the_radio_packets_load_no_fitter():

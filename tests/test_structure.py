@@ -1,6 +1,9 @@
-"""The house stays readable: no import cycle between modules, modules under 450 lines and
-functions under 80 in btf/, radio/, hal/, onboard/ and tools/ (read from the source with ast,
-function-level imports included). The layers between packages are tests/test_lean.py's.
+"""The house stays readable: no import cycle between modules (read from the source with ast,
+function-level and TYPE_CHECKING imports included), modules under 450 lines and functions under
+80, few top-level modules in tools/ and onboard/ (the rest in subpackages named for what they
+hold), imports at the top of modules but for a few lazy ones that say why, and tools/ taking from
+onboard/ only the CLI runner, the configuration and the sweep plan. The layers between packages
+are tests/test_lean.py's.
 """
 from __future__ import annotations
 
@@ -25,24 +28,12 @@ def modules(root: pathlib.Path = ROOT) -> dict[str, pathlib.Path]:
     return out
 
 
-def _type_checking_only(tree: ast.AST) -> set[int]:
-    """ids of the nodes inside `if TYPE_CHECKING:` blocks: imports for annotations only, which
-    run at no import time and so close no cycle."""
-    inside = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.If) and isinstance(node.test, ast.Name) and node.test.id == "TYPE_CHECKING":
-            inside |= {id(n) for stmt in node.body for n in ast.walk(stmt)}
-    return inside
-
-
 def imported(tree: ast.AST, known: set[str]) -> set[str]:
-    """The modules of `known` that a module's body imports anywhere at run time (`from a import b`
-    may name module a.b)."""
+    """The modules of `known` that a module's body imports anywhere, for annotations too (`from
+    a import b` may name module a.b): a cycle closed through a function or `TYPE_CHECKING` is
+    still a cycle of the design."""
     names = set()
-    typing_only = _type_checking_only(tree)
     for node in ast.walk(tree):
-        if id(node) in typing_only:
-            continue
         if isinstance(node, ast.Import):
             names |= {a.name for a in node.names}
         elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
@@ -124,3 +115,72 @@ def test_the_size_check_sees_a_long_function_and_a_long_module(tmp_path):
     (pkg / "big.py").write_text("x = 1\n" * 451)
     (pkg / "fits.py").write_text("x = 1\n" * 450)
     assert too_long(tmp_path) == {"btf/long.py::f": 81, "btf/big.py": 451}
+
+
+# -- the shape of the tree --------------------------------------------------------------------
+MAX_TOP_LEVEL_MODULES = 8  # in tools/ and onboard/; the rest live in subpackages
+MAX_LAZY_IMPORTS = 40  # project imports inside functions, each saying why
+
+
+def test_tools_and_onboard_keep_few_modules_at_their_top_level():
+    for package in ("tools", "onboard"):
+        top = sorted(p.name for p in (ROOT / package).glob("*.py"))
+        assert len(top) <= MAX_TOP_LEVEL_MODULES, f"{package}/ has {len(top)} top-level modules: {top}"
+
+
+def lazy_imports(root: pathlib.Path = ROOT) -> dict[str, bool]:
+    """'path:line' of every project import inside a function -> whether it says why (a comment
+    on its line, on the line above, or on the first import of the group it opens)."""
+    out = {}
+    for path in modules(root).values():
+        text = path.read_text(encoding="utf-8")
+        lines = text.splitlines()
+        tree = ast.parse(text)
+        functions = [n for n in ast.walk(tree) if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))]
+        blocks = [getattr(n, field) for fn in functions for n in ast.walk(fn)
+                  for field in ("body", "orelse", "finalbody") if isinstance(getattr(n, field, None), list)]
+        for block in blocks:
+            reason = False
+            previous = None
+            for node in block:
+                if not isinstance(node, (ast.Import, ast.ImportFrom)):
+                    previous = None
+                    continue
+                module = node.module if isinstance(node, ast.ImportFrom) else node.names[0].name
+                own = "#" in lines[node.lineno - 1] or lines[node.lineno - 2].strip().startswith("#")
+                reason = own or (previous is not None and reason)
+                previous = node
+                if module and module.split(".")[0] in PACKAGES:
+                    out[f"{path.relative_to(root)}:{node.lineno}"] = reason
+    return out
+
+
+def test_imports_sit_at_the_top_but_a_few_lazy_ones_that_say_why():
+    lazy = lazy_imports()
+    assert len(lazy) <= MAX_LAZY_IMPORTS, f"{len(lazy)} project imports inside functions: {sorted(lazy)}"
+    silent = sorted(k for k, said in lazy.items() if not said)
+    assert not silent, f"lazy imports that do not say why: {silent}"
+
+
+def test_the_lazy_import_count_sees_an_import_in_a_function(tmp_path):
+    pkg = tmp_path / "tools"
+    pkg.mkdir()
+    (pkg / "a.py").write_text("def f():\n    from tools import b  # heavy\n    from tools import c\n\n"
+                              "def g():\n    import tools.b\n")
+    assert lazy_imports(tmp_path) == {"tools/a.py:2": True, "tools/a.py:3": True, "tools/a.py:6": False}
+
+
+# tools/ takes from onboard/ only these: the fitter is btf.fit, shared by robot and host.
+TOOLS_FROM_ONBOARD = {"onboard.cli", "onboard.cli.runner", "onboard.config", "onboard.sweep.plan"}
+
+
+def test_tools_take_from_onboard_only_the_cli_runner_the_configuration_and_the_sweep_plan():
+    mods = modules()
+    used = {}
+    for name, path in mods.items():
+        if name.split(".")[0] == "tools":
+            got = {m for m in imported(ast.parse(path.read_text(encoding="utf-8")), set(mods))
+                   if m.split(".")[0] == "onboard"} - TOOLS_FROM_ONBOARD
+            if got:
+                used[name] = sorted(got)
+    assert not used, f"tools modules that reach into the robot's runtime: {used}"

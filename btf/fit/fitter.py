@@ -10,8 +10,8 @@ import math
 import numpy as np
 
 from btf.codec import PercentileCodec, z_for_count
-from btf.record import FittedModel
 from btf.fit.histogram_fit import fit_counts, fit_histogram, fit_rows, histogram_percentiles, plain_fit
+from btf.record import FittedModel
 
 __all__ = ["FrameFitter", "fit_histogram", "fit_values", "histogram_percentiles", "plain_fit"]
 

@@ -27,11 +27,11 @@ from btf.codec import (
     quantize,
     z_for_count,
 )
+from btf.fit.censor import MIN_REPORTED, Placement, censored_counts, censored_end_one, piled_counts, place
+from btf.fit.reads import SN, TEMPLATE, WIDTH, in_band, l1, rank_grid, sl_bands, solve, template
 from btf.johnson import Johnson
 from btf.percentile import model_from_percentiles
 from btf.record import FittedModel
-from btf.fit.censor import MIN_REPORTED, Placement, censored_counts, censored_end_one, piled_counts, place
-from btf.fit.reads import SN, TEMPLATE, WIDTH, in_band, l1, rank_grid, sl_bands, solve, template
 
 
 def histogram_percentiles(counts: np.ndarray, probs, lo: float = 0.0, bin_width: float = 1.0,

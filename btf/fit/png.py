@@ -1,4 +1,5 @@
-"""Minimal PNG reading and writing with numpy and zlib (the robot has no cv2 for masks).
+"""The project's PNG codec, numpy and zlib only: the robot reads mask files with it and the host
+stores label maps with it (photographs of any format the host reads with OpenCV, tools.data.images).
 
 Reads non-interlaced grayscale (1-16 bit), gray+alpha, RGB, RGBA (8/16 bit) and
 indexed colour (1-8 bit); writes 8/16-bit grayscale, RGB and RGBA.

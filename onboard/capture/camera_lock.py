@@ -8,38 +8,15 @@ capture carries the settings the device reported for it (`btf.capture_settings`)
 """
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from btf.capture_settings import CaptureSettings
-from hal.controls import AUTO, FALLBACK_LOCK, describe, hold, parse_controls
+from hal.controls import describe
 from hal.interfaces import Camera, CameraControls, CameraSettings, HalError
+from onboard.config import CameraConfig
 from radio.packets.camera import held_by_wire
 
-if TYPE_CHECKING:
-    from onboard.config import CameraConfig
-
-HOLD = "hold"
 REFERENCE_CLIPPED_WARN = 0.01  # a reference with more of its pixels at a limit understates the light
-
-
-def requested(cfg: CameraConfig, standing: CameraSettings | None) -> CameraControls:
-    """The controls `cfg` asks for; `hold` takes the value from `standing` (None: only check
-    the text). ValueError names a value that does not parse."""
-    held = hold(standing) if standing is not None else FALLBACK_LOCK
-    exposure = held.exposure_us if _is_hold(cfg.exposure) else cfg.exposure
-    gain = held.gain if _is_hold(cfg.gain) else cfg.gain
-    if _is_hold(cfg.white_balance):
-        wb: str | float = (f"{held.white_balance_gains[0]!r},{held.white_balance_gains[1]!r}"
-                           if held.white_balance_gains is not None else repr(held.white_balance_kelvin))
-    else:
-        wb = cfg.white_balance
-    return parse_controls(AUTO if exposure is None else exposure, AUTO if gain is None else gain, wb)
-
-
-def _is_hold(value: str) -> bool:
-    return str(value).strip().lower() == HOLD
 
 
 def reference_level(data: np.ndarray, labels: np.ndarray, label: int,
@@ -59,7 +36,8 @@ class CameraLock:
     """Applies `[camera]` to one camera and says, per capture, whether it may measure."""
 
     def __init__(self, camera: Camera, cfg: CameraConfig) -> None:
-        self.camera, self.cfg = camera, cfg
+        self.camera = camera
+        self.applied = cfg  # the [camera] last asked of the device (the configuration in force is the runtime's)
         self.standing: CameraSettings | None = None  # before the first lock: what `hold` keeps
         self.asked: CameraControls | None = None
         self.granted: CameraSettings | None = None
@@ -68,14 +46,14 @@ class CameraLock:
         """Ask the camera for `cfg`'s controls; what it granted (read back)."""
         if self.standing is None:
             self.standing = self.camera.settings()
-        self.asked = requested(cfg, self.standing)
-        self.cfg = cfg
+        self.asked = cfg.controls(self.standing)
+        self.applied = cfg
         self.granted = self.camera.set_controls(self.asked)
         return self.granted
 
     def set_exposure(self, exposure_us: float) -> CameraSettings:
         """The same controls at another exposure (bracketing, calibration); what was granted."""
-        asked = self.asked or requested(self.cfg, self.standing)
+        asked = self.asked or self.applied.controls(self.standing)
         self.granted = self.camera.set_controls(CameraControls(exposure_us, asked.gain, asked.white_balance_kelvin,
                                                                asked.white_balance_gains))
         return self.granted
@@ -93,7 +71,7 @@ class CameraLock:
     def refusal(self, now: CameraSettings | None = None) -> str:
         """Why a capture must not be kept with these settings ("" when it may)."""
         s = now or self.granted
-        if s is None or s.locked or self.cfg.allow_auto:
+        if s is None or s.locked or self.applied.allow_auto:
             return ""
         return (f"camera does not hold its lock ({describe(s)}); set [camera] controls the device honours, "
                 "or camera.allow_auto = true to measure anyway (captures are then flagged)")

@@ -10,9 +10,10 @@ from typing import Any, Callable
 
 import numpy as np
 
-from onboard.link import bodies as wire
+from btf.fit.features import PcaBasis
 from onboard.capture import skip
 from onboard.capture.pipeline import FittedView, remember
+from onboard.link import bodies as wire
 from onboard.link.outbox import Outbox
 from onboard.state import RuntimeState
 
@@ -66,8 +67,6 @@ class Captures:
 
 def read_pca(text: str | None, legacy: Path) -> Any:
     """The scene's PCA basis saved before a restart (None if none or unreadable: refit)."""
-    from btf.fit.features import PcaBasis
-
     try:
         if text is None and legacy.exists():
             text = legacy.read_text()  # where the basis lived before it moved into the outbox

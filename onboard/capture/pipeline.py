@@ -27,15 +27,15 @@ import numpy as np
 
 from btf.capture_settings import CaptureSettings
 from btf.dependence import Dependence
+from btf.fit import bracketing, dependence
+from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
+from btf.fit.fitter import FrameFitter
 from btf.record import FittedModel
-from hal.interfaces import CameraSettings, Hal, HalError, ViewAngles, view_from_orientation
-from btf.fit import bracketing
-from btf.fit import dependence
+from hal.devices import Hal
+from hal.interfaces import CameraSettings, HalError, ViewAngles, view_from_orientation
 from onboard.capture import skip
 from onboard.capture.camera_lock import CameraLock, reference_level
 from onboard.config import Config
-from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
-from btf.fit.fitter import FrameFitter
 
 T = TypeVar("T")
 MAX_POSES_REMEMBERED = 512  # previous models kept per pose for the UNCHANGED rule
@@ -79,14 +79,16 @@ class Pipeline:
 
     def __init__(
         self,
-        cfg: Config,
+        cfg: Config | Callable[[], Config],
         hal: Hal,
         segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple[np.ndarray, bool]],
         pump: Callable[[], None] | None = None,
         sleep: Callable[[float], None] = time.sleep,
         resend_mask: Callable[[], None] = lambda: None,
     ) -> None:
-        self.cfg = cfg
+        # The configuration in force is the runtime's (a SET replaces it): read, never copied.
+        self._config = cfg if callable(cfg) else (lambda: cfg)
+        cfg = self._config()
         self.hal = hal
         self.segmenter = segmenter
         self.resend_mask = resend_mask  # the next capture sends its label map (after a rollback)
@@ -102,6 +104,10 @@ class Pipeline:
         self._previous: dict[tuple[int, int], dict[tuple[int, int], FittedModel]] = {}
         self.faults: list[str] = []  # every retried fault, for STATUS
         self.lock = CameraLock(hal.camera, cfg.camera) if hal is not None else None
+
+    @property
+    def cfg(self) -> Config:
+        return self._config()
 
     # -- device steps ------------------------------------------------------------------
 
@@ -194,7 +200,7 @@ class Pipeline:
         """A frame and the settings the camera reports for it; PoseSkipped when the camera does
         not hold its lock and `[camera] allow_auto` is false."""
         assert self.lock is not None
-        if self.lock.asked is None or self.lock.cfg != self.cfg.camera:
+        if self.lock.asked is None or self.lock.applied != self.cfg.camera:
             self.lock_camera()
         why = self.lock.refusal()  # known before the frame: do not take it
         if why:

@@ -13,14 +13,15 @@ from typing import Any
 
 import numpy as np
 
-from hal.interfaces import Hal, ViewAngles
-from hal.state_file import write_state
-from onboard.capture.pipeline import PoseSkipped
-from onboard.config import Config, ConfigError, SegmentConfig
 from btf.fit.features import FeatureFrame
 from btf.fit.isodata import IsodataParams, Labeller, fit_centres, spread, subsample
+from hal.devices import Hal
+from hal.interfaces import ViewAngles
+from hal.state_file import write_state
 from onboard.capture.mask_file import load_mask
 from onboard.capture.palette import Palette
+from onboard.capture.pipeline import PoseSkipped
+from onboard.config import Config, ConfigError, SegmentConfig
 from radio.packets.base import MAX_LABELS
 from radio.packets.mask import MAX_SIDE, downsample_labels
 

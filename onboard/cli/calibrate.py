@@ -17,16 +17,22 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from hal.arm import save_arm_fit
+from hal.controls import describe
+from hal.factory import HalConfigError, build_hal
+from hal.geometry import GOOD_FIT_DEG, NADIR_TOLERANCE_DEG, SQUARE_TOLERANCE_DEG, calibrate_arm, calibrate_tracker
+from onboard.capture.camera_lock import CameraLock
+from onboard.capture.exposure import calibrate_exposure, plan_extremes, save_exposure
 from onboard.cli.runner import CliError
 from onboard.cli.selftest import _hal_options
+from onboard.config import Config, SweepConfig, load
+from onboard.sweep.plan import SweepPlan
 
 if TYPE_CHECKING:
-    from hal.interfaces import Hal
+    from hal.devices import Hal
 
 
-def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser("calibrate", help="fit the arm's joints to the tracker, check the tracker's axis remap, "
-                                         "or choose the sweep's exposure")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("what", choices=("arm", "tracker", "exposure"))
     p.add_argument("--hal", choices=("fake", "emulated", "real"), help="device body (default: config or BTF_HAL)")
     p.add_argument("--config", metavar="FILE", help="robot TOML config: its [hal] section and state_dir")
@@ -45,15 +51,12 @@ def add_parser(sub: Any) -> argparse.ArgumentParser:
     fake.add_argument("--fake-tracker-mount", metavar="NAME",
                       help="mount the tracker wrongly: upside_down, turned_90, turned_180, turned_270, ...")
     fake.add_argument("--fake-tracker-bias", type=float, metavar="DEG", help="tracker bias (default 0.5)")
-    return p
 
 
 def _options(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
     options = _hal_options(args) or {}
     state_dir = Path("state")
     if args.config:
-        from onboard.config import load
-
         state_dir = load(args.config).state_dir  # _hal_options already refused a bad file
     if args.state_dir:
         state_dir = Path(args.state_dir)
@@ -73,8 +76,6 @@ def _options(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hal.factory import HalConfigError, build_hal
-
     if args.start_exposure is not None and not (args.start_exposure > 0 and args.start_exposure < float("inf")):
         raise CliError(f"--start-exposure must be a positive number of microseconds, got {args.start_exposure:g}")
     options, state_dir = _options(args)
@@ -106,9 +107,6 @@ def _say(args: argparse.Namespace, text: str) -> None:
 
 
 def _arm(args: argparse.Namespace, hal: Hal, state_dir: Path) -> int:
-    from hal.arm import save_arm_fit
-    from hal.geometry import GOOD_FIT_DEG, calibrate_arm
-
     report = calibrate_arm(hal)
     stored = str(save_arm_fit(state_dir, report.fit)) if report.ok else None
     if args.json:
@@ -138,8 +136,6 @@ def _arm(args: argparse.Namespace, hal: Hal, state_dir: Path) -> int:
 
 
 def _tracker(args: argparse.Namespace, hal: Hal) -> int:
-    from hal.geometry import NADIR_TOLERANCE_DEG, SQUARE_TOLERANCE_DEG, calibrate_tracker
-
     r = calibrate_tracker(hal)
     if args.json:
         print(json.dumps({"what": "tracker", "body": hal.body.value, "ok": r.ok,
@@ -166,12 +162,6 @@ def _tracker(args: argparse.Namespace, hal: Hal) -> int:
 
 
 def _exposure(args: argparse.Namespace, hal: Hal, state_dir: Path) -> int:
-    from hal.controls import describe
-    from onboard.capture.camera_lock import CameraLock
-    from onboard.config import Config, SweepConfig, load
-    from onboard.capture.exposure import calibrate_exposure, plan_extremes, save_exposure
-    from onboard.sweep.plan import SweepPlan
-
     cfg = load(args.config) if args.config else Config()
     s: SweepConfig = cfg.sweep
     views = plan_extremes(SweepPlan(s.start, s.stop, s.step, s.azimuths))

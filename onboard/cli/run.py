@@ -17,13 +17,24 @@ import tempfile
 import time
 from pathlib import Path
 
+from hal.factory import build_hal
+from hal.interfaces import HalError
 from onboard import config as config_mod
+from onboard.capture.exposure import EXPOSURE_FILE, load_exposure
+from onboard.capture.segmentation import Segmentation
 from onboard.cli.runner import CliError, RetryLater
-from onboard.config import ConfigError
+from onboard.config import CameraValue, ConfigError
+from onboard.link.outbox import OutboxError
+from onboard.runtime import Runtime, open_state
+from onboard.watchdog import Notifier
+from radio.auth import CounterFileLost, FileCounterStore, write_fresh
+from radio.keys import KeyFileError, load_key
+from radio.link import Link
+from radio.ports import open_url
+from radio.pump import LinkPump
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("run", help="run the robot: sweeps, commands, outbox, failsafe")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", required=True, help="robot TOML config (see examples/robot.toml)")
     p.add_argument("--hal", choices=("fake", "emulated", "real"), help="override hal.body")
     p.add_argument("--port", help="override link.url (a device, pty path, loop://, socket://, btfsim://?port=...)")
@@ -36,7 +47,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--new-key", action="store_true",
                    help="link.key_file holds a key never used before (just made by `btf-host keygen`): "
                         "start its link counters afresh; only needed with [link] clock = \"none\"")
-    return p
 
 
 def _setup(args: argparse.Namespace):
@@ -49,8 +59,6 @@ def _setup(args: argparse.Namespace):
         config_mod.check(cfg)
         config_mod.check_key_file(cfg)
         _check_state_dir(cfg.state_dir)
-        from radio.keys import KeyFileError, load_key
-
         try:
             key = load_key(cfg.link.key_file)
         except KeyFileError as exc:
@@ -62,9 +70,6 @@ def _setup(args: argparse.Namespace):
 
 def _calibrated_exposure(cfg):
     """`cfg` with the exposure `btf-robot calibrate exposure` stored, when there is one."""
-    from onboard.config import CameraValue
-    from onboard.capture.exposure import EXPOSURE_FILE, load_exposure
-
     try:
         stored = load_exposure(cfg.state_dir)
     except ValueError as exc:
@@ -111,15 +116,11 @@ def _state_dir_failed(path: Path, what: str, exc: OSError) -> None:
 
 
 def _open_port(url: str, baud: int):
-    from radio.ports import open_url
-
     return open_url(url, baud, timeout=0.005)
 
 
 def _counters(cfg, new_key: bool):
     """The robot's link counters (state_dir/counters.json); CliError when only a new key helps."""
-    from radio.auth import CounterFileLost, FileCounterStore, write_fresh
-
     path = cfg.state_dir / "counters.json"
     try:
         if new_key:
@@ -133,13 +134,6 @@ def _counters(cfg, new_key: bool):
 
 def _build(cfg, key: bytes, args: argparse.Namespace, hal, port):
     """The runtime on its link; what opening its state had to say is in its notes."""
-    from onboard.link.outbox import OutboxError
-    from onboard.runtime import Runtime, open_state
-    from onboard.capture.segmentation import Segmentation
-    from onboard.watchdog import Notifier
-    from radio.link import Link
-    from radio.pump import LinkPump
-
     segment = Segmentation(cfg, hal)
     counters = _counters(cfg, args.new_key)
     try:
@@ -178,9 +172,6 @@ def console_log() -> None:
 def run(args: argparse.Namespace) -> int:
     cfg, key = _setup(args)
     console_log()
-    from hal.factory import build_hal
-    from hal.interfaces import HalError
-    from onboard.link.outbox import OutboxError
 
     cfg = _calibrated_exposure(cfg)
     try:

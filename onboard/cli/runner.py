@@ -1,7 +1,8 @@
 """The command-line runner both CLIs share: `btf-robot` (onboard.cli) and `btf-host` (tools.cli).
 
 A CLI is a package of subcommand modules `<package>/<name>.py`, each exposing
-`add_parser(subparsers)` and `run(args) -> int`. A configuration or usage problem raises
+`add_arguments(parser)` and `run(args) -> int`, and a table of `Subcommand`s that says what each
+does; only the module of the command being run is imported. A configuration or usage problem raises
 `CliError`: one line, exit status 2 (restarting cannot mend it); a broken environment (a full
 disk, a device not there yet) raises `RetryLater`: one line, exit status 1 (a supervisor
 restarts it). Ctrl-C is status 130, and a reader that went away
@@ -13,6 +14,8 @@ import argparse
 import importlib
 import os
 import sys
+import textwrap
+from dataclasses import dataclass
 
 
 class CliError(Exception):
@@ -23,18 +26,60 @@ class RetryLater(Exception):
     """The environment is broken (a full disk, a device not there yet): one line, exit status 1."""
 
 
-def build_parser(prog: str, package: str, commands: tuple[str, ...], description: str) -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog=prog, description=description)
+class HelpFormatter(argparse.HelpFormatter):
+    """argparse's formatter, but a description or epilog keeps its line breaks (an example
+    stays on its own line) while each line is still wrapped to the terminal."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return "\n".join(textwrap.fill(line, width, initial_indent=indent, subsequent_indent=indent)
+                         if line.strip() else "" for line in text.splitlines())
+
+
+@dataclass(frozen=True, slots=True)
+class Subcommand:
+    """A subcommand as `--help` lists it: its module's name, one line saying what it does, and
+    one example command line (without the program's name)."""
+
+    name: str
+    summary: str
+    example: str
+
+
+def build_parser(prog: str, package: str, commands: tuple[Subcommand, ...], description: str,
+                 chosen: str | None = None) -> argparse.ArgumentParser:
+    """The parser; only the `chosen` subcommand's module is imported for its arguments (all of
+    them when None), so listing the subcommands imports none of them."""
+    parser = argparse.ArgumentParser(prog=prog, description=description, formatter_class=HelpFormatter,
+                                     epilog=f"'{prog} COMMAND --help' shows a command's options and an example.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in commands:
-        module = importlib.import_module(f"{package}.{name.replace('-', '_')}")
-        sub_parser = module.add_parser(sub)
-        sub_parser.set_defaults(_run=module.run)
+    for c in commands:
+        p = sub.add_parser(c.name, help=c.summary, description=c.summary[:1].upper() + c.summary[1:] + ".",
+                           epilog=f"example:\n  {prog} {c.example}",
+                           formatter_class=HelpFormatter)
+        if chosen in (None, c.name):
+            module = importlib.import_module(f"{package}.{c.name.replace('-', '_')}")
+            module.add_arguments(p)
+            p.set_defaults(_run=module.run)
     return parser
+
+
+def chosen_command(argv: list[str], commands: tuple[Subcommand, ...]) -> str:
+    """The subcommand `argv` names ("" when none does, as for a bare `--help`)."""
+    names = {c.name for c in commands}
+    first = next((a for a in argv if not a.startswith("-")), "")
+    return first if first in names else ""
 
 
 # Exit status of a command whose reader went away (`... | head`): 128 + SIGPIPE, as the shell's tools.
 BROKEN_PIPE = 141
+
+
+def main(prog: str, package: str, commands: tuple[Subcommand, ...], description: str,
+         argv: list[str] | None) -> int:
+    """Parse `argv` (sys.argv when None) and run the subcommand it names; the exit status."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(prog, package, commands, description, chosen_command(argv, commands))
+    return run_cli(parser, argv)
 
 
 def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None) -> int:

@@ -14,8 +14,11 @@ from typing import Any, Callable
 import numpy as np
 
 from hal.controls import describe, hold
-from hal.interfaces import Hal, ViewAngles, view_from_orientation
+from hal.devices import Hal
+from hal.factory import HalConfigError, build_hal
+from hal.interfaces import ViewAngles, view_from_orientation
 from onboard.cli.runner import CliError
+from onboard.config import ConfigError, load
 
 POSES = (ViewAngles(60.0, 0.0), ViewAngles(90.0, 0.0))
 POSE_TOLERANCE_DEG = 2.0
@@ -35,19 +38,15 @@ class DeviceResult:
         return json.dumps({"device": self.device, "ok": self.ok, "detail": self.detail})
 
 
-def add_parser(sub: Any) -> argparse.ArgumentParser:
-    p = sub.add_parser("selftest", help="exercise every device and report one JSON line each")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hal", choices=("fake", "emulated", "real"), help="device body (default: config or BTF_HAL)")
     p.add_argument("--config", metavar="FILE", help="robot TOML config; its [hal] section is used")
-    return p
 
 
 def _hal_options(args: argparse.Namespace) -> dict[str, Any] | None:
     """The [hal] section of --config (if given), its body overridden by --hal."""
     options: dict[str, Any] | None = None
     if args.config:
-        from onboard.config import ConfigError, load
-
         try:
             cfg = load(args.config)
         except ConfigError as exc:
@@ -59,12 +58,9 @@ def _hal_options(args: argparse.Namespace) -> dict[str, Any] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hal.factory import HalConfigError, build_hal
-
     options = _hal_options(args)
     state_dir = None
     if args.config:  # the robot's own state: its arm calibration applies
-        from onboard.config import load
 
         state_dir = load(args.config).state_dir
     try:

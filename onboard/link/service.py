@@ -11,8 +11,8 @@ from __future__ import annotations
 from typing import Callable
 
 from onboard.link.outbox import Outbox, OutboxError, OutboxFull
-from onboard.state import RuntimeState
 from onboard.link.transport import Transport
+from onboard.state import RuntimeState
 from radio.link import Acked, Event, LinkStats, QueueFull
 
 

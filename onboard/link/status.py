@@ -8,12 +8,12 @@ from __future__ import annotations
 import json
 from typing import Callable
 
-from onboard.link import bodies as wire
-from onboard.capture.pipeline import Pipeline
 from onboard.capture.filing import Captures
+from onboard.capture.pipeline import Pipeline
 from onboard.failsafe import Failsafe
-from onboard.link.service import LinkService
+from onboard.link import bodies as wire
 from onboard.link.outbox import Outbox
+from onboard.link.service import LinkService
 from onboard.state import Mode, RuntimeState
 from onboard.watchdog import Notifier
 from radio import packets as pk

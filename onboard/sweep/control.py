@@ -11,11 +11,11 @@ from __future__ import annotations
 import copy
 import logging
 
-from onboard.capture.pipeline import FittedView, Pipeline, PoseSkipped
 from onboard.capture.filing import Captures
+from onboard.capture.pipeline import FittedView, Pipeline, PoseSkipped
 from onboard.link.outbox import DiskFull, Outbox, OutboxFull
-from onboard.state import Interrupted, Mode, RuntimeState
 from onboard.link.status import Status
+from onboard.state import Interrupted, Mode, RuntimeState
 from onboard.sweep.plan import Boot, SweepPlan, SweepProgress, SweepStore
 from onboard.watchdog import Notifier
 from radio import packets as pk

@@ -23,7 +23,6 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 from radio import FrameError
-from radio.packets.commands import CommandName, check_args
 from radio.packets.base import (
     MAX_BODY,
     SCHEMA_VERSION,
@@ -39,6 +38,7 @@ from radio.packets.base import (
     want_int,
     want_str,
 )
+from radio.packets.commands import CommandName, check_args
 from radio.packets.mask import MAX_SIDE, MaskPacket, downsample_labels, mask_packet
 from radio.packets.models import LabelModels, ModelsPacket, models_packet
 

@@ -8,10 +8,10 @@ from hypothesis import strategies as st
 
 from benchmarks.model_histograms import expected_histogram, histogram_l1, saturating
 from btf.codec import CENSOR_SCALE, Z_LADDER, fallback_probs
-from btf.johnson import Family, Johnson
-from btf.record import rebuild
 from btf.fit.censor import censored_counts, place
 from btf.fit.fitter import FrameFitter, fit_histogram, plain_fit
+from btf.johnson import Family, Johnson
+from btf.record import rebuild
 from radio.packets import decode, encode_models
 
 

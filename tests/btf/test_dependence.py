@@ -11,9 +11,9 @@ from hypothesis import strategies as st
 
 from btf.codec import z_for_count
 from btf.dependence import LAGS, Dependence
-from btf.johnson import Johnson
 from btf.fit.dependence import measure
 from btf.fit.fitter import FrameFitter
+from btf.johnson import Johnson
 from radio import FrameError
 from radio import packets as pk
 from radio.packets.dependence import decode_dependence, encode_dependence, record_size

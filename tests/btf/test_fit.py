@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from btf.codec import COUNT_LADDER, Z_LADDER, PercentileCodec, z_for_count
+from btf.fit.fitter import FrameFitter, fit_histogram, fit_values
+from btf.fit.reads import GRID
 from btf.johnson import Family, Johnson
 from btf.percentile import model_from_percentiles
 from btf.record import FittedModel, rebuild
-from btf.fit.fitter import FrameFitter, fit_histogram, fit_values
-from btf.fit.reads import GRID
 
 HUGE = 2**53
 

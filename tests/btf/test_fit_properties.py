@@ -6,9 +6,9 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from btf.codec import PercentileCodec
+from btf.fit.fitter import fit_histogram
 from btf.johnson import Family, Johnson, normal_ppf
 from btf.record import rebuild
-from btf.fit.fitter import fit_histogram
 
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 

@@ -8,10 +8,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from benchmarks.model_histograms import histogram_l1
-from btf.johnson import Family, Johnson, normal_cdf
 from btf.fit.censor import _censored_end, censored_end_one
 from btf.fit.fitter import FrameFitter, fit_histogram, fit_values
 from btf.fit.histogram_fit import _percentile_rows, _percentiles_one
+from btf.johnson import Family, Johnson, normal_cdf
 
 
 def _histograms(rng):

@@ -9,11 +9,11 @@ from hypothesis import strategies as st
 
 from benchmarks.model_histograms import expected_histogram, histogram_l1, saturating
 from btf.codec import Z_LADDER, default_codec, percentile_probs
+from btf.fit.fitter import FrameFitter, fit_histogram, histogram_percentiles, plain_fit
+from btf.fit.reads import GRID, TEMPLATE, min_count, phi, solve, template
 from btf.johnson import Family, Johnson
 from btf.percentile import model_from_percentiles
 from btf.record import rebuild
-from btf.fit.fitter import FrameFitter, fit_histogram, histogram_percentiles, plain_fit
-from btf.fit.reads import GRID, TEMPLATE, min_count, phi, solve, template
 from radio.packets import decode, encode_models
 
 SETTINGS = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -203,10 +203,11 @@ def test_picamera2_that_does_not_take_the_controls_is_detected():
 
 @pytest.mark.parametrize("body", ["fake", "emulated"])
 def test_selftest_fails_loudly_for_a_camera_that_keeps_its_automatics(body, capsys, monkeypatch):
-    import hal.factory
+    import onboard.cli.selftest
 
-    build = hal.factory.build_hal
-    monkeypatch.setattr(hal.factory, "build_hal", lambda options, **kw: build({**options, "camera_honours_lock": False}, **kw))
+    build = onboard.cli.selftest.build_hal
+    monkeypatch.setattr(onboard.cli.selftest, "build_hal",
+                        lambda options, **kw: build({**options, "camera_honours_lock": False}, **kw))
     monkeypatch.delenv("BTF_HAL", raising=False)
     code = main(["selftest", "--hal", body])
     out, err = capsys.readouterr()

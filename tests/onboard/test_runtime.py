@@ -3,7 +3,6 @@ import json
 import subprocess
 import sys
 import tracemalloc
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,8 +10,8 @@ import pytest
 from hal.interfaces import ViewAngles
 from onboard import config
 from onboard.capture.pipeline import Pipeline
-from onboard.runtime import Mode
 from onboard.link.transport import MemoryTransport
+from onboard.runtime import Mode
 from radio import packets as pk
 from radio.link import Acked, LinkDown, LinkUp
 from tests.support import ROOT

@@ -9,13 +9,13 @@ import pytest
 
 import hal.fakes.camera as fake_camera
 import hal.scene
+from btf.fit.features import PcaBasis
 from hal.factory import build_hal
 from hal.fakes.camera import FakeCamera
 from hal.interfaces import HalError
 from onboard import config
-from onboard.config import ConfigError
-from btf.fit.features import PcaBasis
 from onboard.capture.segmentation import Segmentation
+from onboard.config import ConfigError
 from radio import FrameError
 from radio import packets as pk
 

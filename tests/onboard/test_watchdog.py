@@ -3,7 +3,6 @@ example unit that relies on it (Type=notify, WatchdogSec, Restart=on-failure).""
 import configparser
 import os
 import socket
-from pathlib import Path
 
 import pytest
 
@@ -110,6 +109,6 @@ def test_example_unit_matches_the_runtime():
     # ExecStart names a command line btf-robot accepts.
     exe, *argv = service["ExecStart"].split()
     assert exe.endswith("/btf-robot")
-    parser = cli.build_parser(cli.PROG, "onboard.cli", cli.COMMANDS, "")
+    parser = cli.build_parser()
     args = parser.parse_args(argv)
     assert args.command == "run" and args.config and not args.new_sweep

@@ -20,8 +20,8 @@ import time
 from pathlib import Path
 
 import pytest
-from tests.support import ROOT
 
+from tests.support import ROOT
 
 
 @functools.cache

@@ -12,10 +12,10 @@ from collections import Counter
 from pathlib import Path
 
 from radio.keys import write_key
+from tests.support import ROOT
 from tools.demo.pty_cable import PtyCable
 from tools.station.control import StationClient, socket_path
 from tools.store.database import Store
-from tests.support import ROOT
 
 ROBOT = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n'
          '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'

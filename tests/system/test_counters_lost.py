@@ -14,8 +14,8 @@ from radio.auth import SKEW_S, CounterFileLost, FileCounterStore, MemoryCounterS
 from radio.link import Delivered, Link, PeerStale
 from radio.ports import FdPort
 from radio.pump import LinkPump
-from tools.station.receiver import HostSession, ItemKind, Receiver
 from tests.support import ROOT
+from tools.station.receiver import HostSession, ItemKind, Receiver
 
 KEY = bytes(range(32))
 T0 = 1.8e9  # the wall clock of the first run (January 2027)

@@ -16,10 +16,10 @@ from radio.keys import load_key, write_key
 from radio.link import Link
 from radio.ports import FdPort
 from radio.pump import LinkPump
+from tests.support import ROOT
 from tests.support.small_disk import SmallDisk, python, robot_argv
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
 from tools.store.database import Store
-from tests.support import ROOT
 
 MiB = 1024 * 1024
 DISK, MIN_FREE, RESERVE = 16 * MiB, 4 * MiB, 2 * MiB

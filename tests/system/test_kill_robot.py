@@ -22,9 +22,9 @@ from radio.keys import load_key, write_key
 from radio.link import Link
 from radio.ports import FdPort
 from radio.pump import LinkPump
+from tests.support import ROOT
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
 from tools.store.database import Store
-from tests.support import ROOT
 
 # 62 poses (31 elevations at two azimuths) at ~0.03-0.13 s each: the ten kills while
 # sweeping (at most ~1.6 s of it) leave the end for the kills around and after it.

@@ -4,7 +4,6 @@ import subprocess
 import sys
 import time
 import tty
-from pathlib import Path
 
 import pytest
 
@@ -15,7 +14,6 @@ from radio.link import Delivered, Link
 from radio.ports import FdPort
 from radio.pump import LinkPump
 from tests.support import ROOT
-
 
 
 def receive_sweep(tmp_path, scene, rate=0.0, limit_s=120.0, radio=""):

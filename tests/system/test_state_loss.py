@@ -11,12 +11,12 @@ from pathlib import Path
 
 from radio.auth import MemoryCounterStore
 from radio.link import Delivered, Link
+from tests.support import ROOT
 from tests.tools.station.test_receiver import models_body
 from tools.cli import main as host_main
 from tools.demo.pty_cable import PtyCable
 from tools.station.receiver import Receiver
 from tools.store.database import Store
-from tests.support import ROOT
 
 KEY = bytes(range(32))
 CONFIG = ('robot_id = 5\nstate_dir = "state"\n[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n'

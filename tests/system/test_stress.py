@@ -15,9 +15,9 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from benchmarks.model_histograms import histogram_l1
+from btf.fit.fitter import fit_histogram, plain_fit
 from btf.johnson import Family, Johnson
 from btf.percentile import model_from_percentiles
-from btf.fit.fitter import fit_histogram, plain_fit
 
 # Slow runs only under `make stress` (BTF_STRESS=1, the long hypothesis profile).
 stress = pytest.mark.skipif(not os.environ.get("BTF_STRESS"), reason="stress run only (make stress)")

@@ -22,6 +22,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from btf.johnson import Johnson
+from tools.analysis.radiometry import sweep_models
 from tools.analysis.synth import ExtrapolationWarning, MissingModels, blend_pixels, fill
 from tools.analysis.tiles import Draws, label_counts, region
 
@@ -181,8 +182,6 @@ def models_by_direction(store, robot: str | None = None, space: str | None = Non
                         normalise: bool = False) -> dict[Direction, dict[tuple[int, int], Johnson]]:
     """For every measured direction in a Store, the models of its latest capture, at its
     exposure or as `tools.analysis.radiometry.sweep_models` brings them to `exposure_us` or normalises them."""
-    from tools.analysis.radiometry import sweep_models
-
     latest: dict[Direction, object] = {}
     for c in store.captures(robot, space, scene):
         lel, laz = c.illumination

@@ -22,8 +22,8 @@ from typing import Callable
 import numpy as np
 from scipy import stats
 
-from btf.johnson import Johnson
 from btf.fit.fitter import fit_histogram
+from btf.johnson import Johnson
 from tools.analysis.level_bins import Grid
 from tools.analysis.metrics import normalized
 from tools.analysis.tiles import Region, label_counts, region, region_histograms

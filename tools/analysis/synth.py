@@ -277,8 +277,6 @@ def dependence_from_document(doc: dict, n_bands: int) -> dict[int, Dependence]:
 
 def models_from_document(doc: object) -> tuple[float | None, dict[tuple[int, int], Johnson], dict]:
     """(angle, models, the document) from one parsed MODELS.json document; ValueError says what is wrong."""
-    from btf.johnson import Family
-
     if not isinstance(doc, dict) or not isinstance(doc.get("models"), list):
         raise ValueError("not a models document (expected an object with a 'models' list)")
     out: dict[tuple[int, int], Johnson] = {}

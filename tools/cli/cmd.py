@@ -6,9 +6,13 @@ from __future__ import annotations
 
 import argparse
 import json
+import secrets
 
+from radio import packets as pk
 from radio.packets.commands import COMMANDS, Command, CommandName
 from tools.cli.options import CliError
+from tools.station.command_route import ask
+from tools.station.snapshot import iso
 
 
 def _cli_type(parse):
@@ -22,11 +26,10 @@ def _cli_type(parse):
     return convert
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("cmd", help="send the robot a command through the station and print its answer",
-                       description="Talks to the station serving DB over its control socket (DB.sock); with no "
-                                   "station running and --port given, opens the port itself for this one command "
-                                   "and stores what arrives in DB as the station would.")
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = ("Talks to the station serving DB over its control socket (DB.sock); with no station running and "
+                     "--port given, opens the port itself for this one command and stores what arrives in DB as the "
+                     "station would.")
     p.add_argument("--db", help="the station's database (its control socket is DB.sock)")
     p.add_argument("--socket", help="the station's control socket, if not DB.sock")
     p.add_argument("--port", help="with no station running: the pyserial URL to open for this command "
@@ -47,7 +50,6 @@ def add_parser(sub) -> argparse.ArgumentParser:
                                metavar=arg.metavar or arg.key.upper())
             else:
                 s.add_argument(_dest(arg.key), type=kind, help=arg.help, metavar=arg.metavar or arg.cli)
-    return p
 
 
 def _dest(key: str) -> str:
@@ -79,10 +81,6 @@ def _order(cmd: Command):
 
 
 def run(args: argparse.Namespace) -> int:
-    import secrets
-
-    from radio import packets as pk
-    from tools.station.command_route import ask
 
     name, cargs = command_of(args)
     try:
@@ -110,7 +108,5 @@ def run(args: argparse.Namespace) -> int:
 def _shown(key: str, value):
     """An answer's value for a person: short floats, clock times in ISO 8601."""
     if key == "time" and isinstance(value, (int, float)):
-        from tools.station.snapshot import iso
-
         return iso(value)
     return f"{value:.6g}" if isinstance(value, float) else value

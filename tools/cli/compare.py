@@ -3,12 +3,15 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 
+import numpy as np
+
+from tools.analysis.radiometry import CLIPPED_REFERENCE, normalise_image, reference_means
 from tools.cli.options import CliError
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("compare", help="correlation, histogram difference, chi2, KS, W1 between two images")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("ref")
     p.add_argument("test")
     p.add_argument("--mask", help="label mask: histogram metrics per region")
@@ -18,16 +21,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
                    help="scale TEST's bands so its mean on mask label L (the grey reference card) matches REF's: "
                         "takes out a change of light or exposure between the two (needs --mask)")
     p.add_argument("--json", action="store_true")
-    return p
 
 
 def _normalise(ref, test, mask, label: int, path: str) -> list[float]:
     """Scales `test` in place so its reference region's mean level per band is `ref`'s; the factors."""
-    import sys
 
-    import numpy as np
-
-    from tools.analysis.radiometry import CLIPPED_REFERENCE, normalise_image, reference_means
 
     if mask is None:
         raise CliError("--reference-label needs --mask (which label is the reference card)")
@@ -50,8 +48,12 @@ def _normalise(ref, test, mask, label: int, path: str) -> list[float]:
 
 
 def run(args: argparse.Namespace) -> int:
+    # heavy (OpenCV, scipy): loaded to run, not for --help
+    from tools.analysis.metrics import (
+        METRICS,
+        compare_bands,
+    )
     from tools.data.images import ImageError, feature_bands, read_image, read_mask
-    from tools.analysis.metrics import METRICS, compare_bands
 
     try:
         ref = read_image(args.ref)

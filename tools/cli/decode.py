@@ -6,23 +6,27 @@ import binascii
 import json
 from pathlib import Path
 
+from cobs import cobs
+
+from radio import FrameError
+from radio import packets as pk
+from radio.auth import MemoryCounterStore
+from radio.frame import CRC_LEN, HEADER, OVERHEAD, Deframer, FrameKind, decode
+from radio.keys import KeyFileError, load_key
+from radio.link import Delivered, Link
 from tools.cli.options import CliError
+from tools.station.receiver import packet_json
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("decode", help="a recorded byte stream of frames as JSON lines")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", help="raw bytes as read from the serial port")
     a = p.add_mutually_exclusive_group(required=True)
     a.add_argument("--key", help="link key file: authenticate frames and decode their packets")
     a.add_argument("--no-auth", action="store_true", help="unauthenticated: frame headers only")
-    return p
 
 
 def headers(bodies: list[bytes]) -> list[dict]:
     """Frame headers without the key: CRC checked, the tag not (marked so)."""
-    from cobs import cobs
-
-    from radio.frame import CRC_LEN, HEADER, OVERHEAD, FrameKind
 
     out = []
     for i, raw in enumerate(bodies):
@@ -51,13 +55,6 @@ def headers(bodies: list[bytes]) -> list[dict]:
 
 def authenticated(bodies: list[bytes], key: bytes) -> list[dict]:
     """Each frame checked with the key; reliable messages reassembled and decoded as packets."""
-    from radio import FrameError
-    from radio import packets as pk
-    from radio.auth import MemoryCounterStore
-    from radio.frame import decode
-    from radio.link import Delivered, Link
-    from tools.station.receiver import packet_json
-
     links: dict[tuple[int, int], Link] = {}
     out: list[dict] = []
     for i, raw in enumerate(bodies):
@@ -82,9 +79,6 @@ def authenticated(bodies: list[bytes], key: bytes) -> list[dict]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from radio.frame import Deframer
-    from radio.keys import KeyFileError, load_key
-
     path = Path(args.file)
     try:
         data = path.read_bytes()

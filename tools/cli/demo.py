@@ -8,8 +8,7 @@ from pathlib import Path
 from tools.cli.options import CliError
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("demo", help="robot fakes over a pty and a lossy radio, database, experiments, report")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="demo-out",
                    help="output directory (created if missing; its scene.db, work/ and report/ are rebuilt)")
     p.add_argument("--force", action="store_true", help="use an --out directory that holds other files too")
@@ -18,7 +17,6 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=1, help="seed of the channel and the synthesis")
     p.add_argument("--json", action="store_true", help="print the results as one JSON document")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
-    return p
 
 
 def _summary(res) -> list[str]:
@@ -62,6 +60,7 @@ def _check_out(out: Path, force: bool) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    # heavy (OpenCV, scipy): loaded to run, not for --help
     from tools.demo.end_to_end import DemoConfig, run_demo
 
     h, w = args.size

@@ -6,13 +6,13 @@ import json
 import time
 
 from tools.cli.options import FEATURE_SPACES, CliError, elevation
+from tools.store.database import CorruptDatabase, Store
 
 ROBOT_ID = "host"
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("fit", help="fit Johnson models per (label, band) of an image",
-                       description="Fit Johnson models per (label, band); without --mask the whole image is label 0.")
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = "Fit Johnson models per (label, band); without --mask the whole image is label 0."
     p.add_argument("image")
     p.add_argument("--mask", help="label mask PNG, same size as the image")
     p.add_argument("--space", choices=FEATURE_SPACES, default="rgb")
@@ -21,13 +21,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print the models document (MODELS.json)")
     p.add_argument("--independent-only", action="store_true",
                    help="skip measuring grain and band correlation (synthesis then draws independent pixels)")
-    return p
 
 
 def _store(args: argparse.Namespace, fitted) -> int:
     """Stores the fit as the next capture of robot 'host'; its sequence number."""
-    from tools.store.database import CorruptDatabase, Store
-
     try:
         with Store.open(args.db) as store:
             seq = store.next_sequence(ROBOT_ID)
@@ -44,8 +41,9 @@ def _store(args: argparse.Namespace, fitted) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.data.images import fit_image
+    # heavy (OpenCV, scipy): loaded to run, not for --help
     from tools.analysis.synth import models_document
+    from tools.data.images import fit_image
 
     if args.db and args.angle is None:
         raise CliError("--db needs --angle: every stored capture has a view angle")

@@ -7,13 +7,12 @@ import sys
 from tools.cli.options import CliError, elevation
 from tools.data.datasets import DatasetError, Layout
 from tools.data.ingest import INGEST_SPACES, NADIR, IngestError, ingest
+from tools.store.database import CorruptDatabase
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser(
-        "ingest", help="fit every image of a dataset folder into a database (resumable)",
-        description="Fit every (image, label, band) of a dataset folder with the robot's fitter and "
-                    "store view and illumination angles. Images already in the database are skipped.")
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = ("Fit every (image, label, band) of a dataset folder with the robot's fitter and store view and "
+                     "illumination angles. Images already in the database are skipped.")
     p.add_argument("dir", help="dataset folder")
     p.add_argument("--layout", required=True, help="curet | utia | folder")
     p.add_argument("--db", required=True)
@@ -29,13 +28,11 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--independent-only", action="store_true",
                    help="skip measuring grain and band correlation (synthesis then draws independent pixels)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    return p
 
 
 def run(args: argparse.Namespace) -> int:
+    # heavy (OpenCV, scipy): loaded to run, not for --help
     from tqdm import tqdm
-
-    from tools.store.database import CorruptDatabase
 
     if args.layout not in {m.value for m in Layout}:
         raise CliError(f"layout {args.layout!r}: expected one of {', '.join(m.value for m in Layout)}")

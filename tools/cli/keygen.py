@@ -9,11 +9,9 @@ from radio.keys import counters_beside, git_work_tree, write_key
 from tools.cli.options import CliError
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("keygen", help="write a fresh 32-byte link key (hex, mode 0600)")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True, help="key file to create (keep it outside the repository)")
     p.add_argument("--force", action="store_true", help="overwrite an existing key file")
-    return p
 
 
 def run(args: argparse.Namespace) -> int:

@@ -7,11 +7,11 @@ import dataclasses
 import json
 
 from radio.channel import ChannelConfig
+from radio.linktest import run_linktest
 from tools.cli.options import CliError
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("linktest", help="exercise the link protocol through a simulated lossy radio")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--loss", type=float, default=0.2, help="mean packet loss (0..1)")
     p.add_argument("--bursty", action="store_true", help="Gilbert-Elliott bursts, not independent loss")
     p.add_argument("--burst-len", type=float, default=4.0, help="mean packets per loss burst")
@@ -25,7 +25,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--forged", type=int, default=50, help="forged frames to inject")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    return p
 
 
 def run(args: argparse.Namespace) -> int:
@@ -42,7 +41,6 @@ def run(args: argparse.Namespace) -> int:
                             packet_size=args.mtu, buffer=4 * args.mtu)
     except ValueError as exc:
         raise CliError(str(exc)) from None
-    from radio.linktest import run_linktest
 
     result = run_linktest(cfg, args.packets, args.seed, forged=args.forged, mtu=args.mtu)
     report = dataclasses.asdict(result)

@@ -3,29 +3,26 @@ and acknowledges; it serves `cmd` clients like `btf-host station`."""
 from __future__ import annotations
 
 import argparse
+import asyncio
 import json
 import sys
 import time
 
 from tools.cli.options import CliError
 from tools.cli.station import add_station_options
+from tools.station.start import open_station, serve
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("listen", help="receive captures over a serial link into a database")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     add_station_options(p, log=False)
     p.add_argument("--until-idle", type=float, default=0.0, metavar="S",
                    help="exit after S seconds without a delivered packet (0: run until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="one JSON object per received packet on stdout")
-    return p
 
 
 def run(args: argparse.Namespace) -> int:
-    import asyncio
-
+    # heavy (OpenCV, scipy): loaded to run, not for --help
     from tqdm import tqdm
-
-    from tools.station.start import open_station, serve
 
     if args.until_idle < 0:
         raise CliError(f"--until-idle {args.until_idle}: must not be negative")

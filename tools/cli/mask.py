@@ -3,18 +3,16 @@ from __future__ import annotations
 
 import argparse
 import math
-from typing import TYPE_CHECKING
+
+import numpy as np
 
 from tools.cli.options import CliError, add_force, check_out
-
-if TYPE_CHECKING:  # numpy and the segmenters load where used: --help builds this parser too
-    import numpy as np
+from tools.data.masks import segment as segment_image
 
 METHODS = ("isodata", "kmeans", "felzenszwalb", "slic")
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("mask", help="segment an image into K clutter classes")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("image")
     p.add_argument("--method", choices=METHODS, required=True)
     p.add_argument("--k", type=int, default=4, help="clutter classes (default 4)")
@@ -23,19 +21,22 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--segments", type=int, default=400, help="slic superpixels")
     p.add_argument("--out", required=True, help="output mask .png (never the input; an existing file needs --force)")
     add_force(p)
-    return p
 
 
 def segment(image: np.ndarray, method: str, k: int, seed: int = 0, scale: float = 100.0,
             segments: int = 400) -> np.ndarray:
     """A uint8 mask, classes darkest first (tools.data.masks: bounded memory, tiled)."""
-    from tools.data.masks import segment as segment_image
-
     return segment_image(image, method, k, seed, scale, segments)
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.data.images import ImageError, read_image, stretched_8bit, write_mask
+    # heavy (OpenCV, scipy): loaded to run, not for --help
+    from tools.data.images import (
+        ImageError,
+        read_image,
+        stretched_8bit,
+        write_mask,
+    )
 
     if not 1 <= args.k <= 255:
         raise CliError(f"--k {args.k}: must lie in 1..255")

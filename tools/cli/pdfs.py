@@ -7,19 +7,18 @@ import json
 from tools.cli.options import FEATURE_SPACES, CliError
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("pdfs", help="histogram error of Johnson vs Gaussian, uniform, Weibull, lognormal")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("image")
     p.add_argument("--mask", required=True)
     p.add_argument("--space", choices=FEATURE_SPACES, default="rgb")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--json", action="store_true")
-    return p
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.data.images import ImageError, feature_bands, read_image, read_mask
+    # heavy (OpenCV, scipy): loaded to run, not for --help
     from tools.analysis.pdfs import PEERS, table
+    from tools.data.images import ImageError, feature_bands, read_image, read_mask
 
     try:
         image = read_image(args.image)

@@ -5,10 +5,10 @@ import argparse
 from pathlib import Path
 
 from tools.cli.options import CliError, add_source_filters, choose_source
+from tools.store.database import CorruptDatabase, Store
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("report", help="an HTML report with images, histograms and tables")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--db", required=True, help="database written by listen, fit, ingest or demo")
     p.add_argument("--out", required=True,
                    help="output directory (created if missing; one holding a report needs --force)")
@@ -16,7 +16,6 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="seed of the synthetic images")
     add_source_filters(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
-    return p
 
 
 def _check_out(out: Path, force: bool) -> None:
@@ -27,10 +26,10 @@ def _check_out(out: Path, force: bool) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.report.capture_views import Frames
+    # heavy (OpenCV, scipy): loaded to run, not for --help
     from tools.data.images import ImageError
+    from tools.report.capture_views import Frames
     from tools.report.document import write_report
-    from tools.store.database import CorruptDatabase, Store
 
     if not Path(args.db).is_file():
         raise CliError(f"database {args.db}: no such file")

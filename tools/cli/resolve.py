@@ -4,7 +4,6 @@ from __future__ import annotations
 import argparse
 import json
 
-from tools.cli.options import CliError
 from tools.analysis.resolve import (
     MIN_GRAINS_PER_PIXEL,
     PAPER_FACET_PER_WAVELENGTH2,
@@ -17,14 +16,12 @@ from tools.analysis.resolve import (
     bounds,
     paper_bounds,
 )
+from tools.cli.options import CliError
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser(
-        "resolve", help="facet-based or statistical modelling for a grain size",
-        description="Bounds relating wavelength, grain size and pixel footprint: the paper's Section 2 "
-                    "derivation (its worked example, sand, by default) and the physical view "
-                    "(diffraction and smoothness).")
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = ("Bounds relating wavelength, grain size and pixel footprint: the paper's Section 2 derivation "
+                     "(its worked example, sand, by default) and the physical view (diffraction and smoothness).")
     p.add_argument("--grain-mm", type=float, default=PAPER_GRAIN_MM,
                    help=f"grain diameter D in mm (default {PAPER_GRAIN_MM:g}, the paper's smallest sand grain)")
     p.add_argument("--wavelength-nm", type=float, default=PAPER_WAVELENGTH_NM,
@@ -39,7 +36,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--incidence-deg", type=float, default=0.0, help="physical view: angle of incidence (default 0)")
     p.add_argument("--na", type=float, default=1.0, help="physical view: numerical aperture (default 1)")
     p.add_argument("--json", action="store_true")
-    return p
 
 
 SYMBOLS = {"grain_mm": ("D", " mm"), "wavelength_nm": ("lambda", " nm"), "pixel_per_facet": ("Kpf", ""),
@@ -65,7 +61,8 @@ def paper_lines(p: PaperView) -> list[str]:
                  if b.name == "facet_diameter" else f"actual {_number(b.actual, b.unit, grain)}")
         lines.append(f"  ({k}) {b.quantity} {sign} {_number(b.value, b.unit, grain)}   "
                      f"[{'rules out facets' if b.rules_out_facets else 'allows facets'}: {given}]")
-        lines.append(f"      {b.formula}; " + ", ".join(f"{SYMBOLS[n][0]} {v:g}{SYMBOLS[n][1]}" for n, v in b.inputs.items()))
+        inputs = ", ".join(f"{SYMBOLS[n][0]} {v:g}{SYMBOLS[n][1]}" for n, v in b.inputs.items())
+        lines.append(f"      {b.formula}; {inputs}")
     ruled = sum(b.rules_out_facets for b in p.bounds)
     lines.append(f"  verdict (paper view): {p.verdict.value} ({ruled} of {len(p.bounds)} bounds rule out facets)")
     return lines

@@ -6,17 +6,15 @@ import argparse
 from pathlib import Path
 
 from tools.cli.options import CliError
+from tools.station.start import open_station, serve_to_exit
 
 DEMO_HTTP = "127.0.0.1:8765"
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("station", help="own the radio: store what the robot sends, serve cmd clients, "
-                       "subscribers and the operator's page",
-                       description="Holds the port for as long as it runs, stores every packet before its "
-                                   "acknowledgement leaves, and serves `btf-host cmd` and `watch` over a local "
-                                   "socket beside the database (DB.sock); logs to DB.log and stderr. With --http, "
-                                   "serves the operator's page too.")
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.description = ("Holds the port for as long as it runs, stores every packet before its acknowledgement leaves, "
+                     "and serves `btf-host cmd` and `watch` over a local socket beside the database (DB.sock); logs to"
+                     " DB.log and stderr. With --http, serves the operator's page too.")
     add_station_options(p, required=False)
     p.add_argument("--status-every", type=float, default=10.0, metavar="S",
                    help="ask the robot for its STATUS every S seconds while the link is up (0: never)")
@@ -33,7 +31,6 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--demo", nargs="?", const="station-demo", metavar="DIR",
                    help="run a fake robot on a pty cable and this station with its page (--http, default "
                         f"{DEMO_HTTP}); key, config and database in DIR (default ./station-demo)")
-    return p
 
 
 def add_station_options(p: argparse.ArgumentParser, required: bool = True, log: bool = True) -> None:
@@ -51,16 +48,17 @@ def add_station_options(p: argparse.ArgumentParser, required: bool = True, log: 
 
 def page_options(args: argparse.Namespace, default: str | None = None):
     """The page's options from --http, --http-public, --http-host and --robot-config (None: no page)."""
+    # heavy (OpenCV, scipy): loaded to run, not for --help
+    from tools.page.guard import host_name
+    from tools.page.server import PageOptions, parse_http
+    from tools.report.capture_views import Frames
+
     given = args.http or default
     if given is None:
         if args.http_public or args.robot_config or args.http_host:
             raise CliError("--http-public, --http-host and --robot-config are options of the page: "
                            "give --http [ADDR:]PORT")
         return None
-    from tools.report.capture_views import Frames
-    from tools.page.guard import host_name
-    from tools.page.server import PageOptions, parse_http
-
     try:
         host, port = parse_http(given)
         hosts = tuple(host_name(name) for name in args.http_host)
@@ -73,15 +71,13 @@ def page_options(args: argparse.Namespace, default: str | None = None):
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.station.start import open_station, serve_to_exit
-
     if args.status_every < 0:
         raise CliError(f"--status-every {args.status_every}: must not be negative")
     if args.demo is not None:
-        from tools.demo.station_demo import run_demo
-
         if any(v is not None for v in (args.port, args.db, args.key)):
             raise CliError("--demo runs its own robot, key and database: leave out --port, --db and --key")
+        from tools.demo.station_demo import run_demo  # the fake robot and its drawing: only with --demo
+
         return run_demo(Path(args.demo), page_options(args, DEMO_HTTP), args.status_every)
     missing = [f"--{k}" for k in ("port", "db", "key") if getattr(args, k) is None]
     if missing:

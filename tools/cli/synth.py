@@ -3,19 +3,37 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-from tools.cli.options import FEATURE_SPACES, CliError, add_force, add_source_filters, check_out, choose_source, elevation
+import numpy as np
 
-if TYPE_CHECKING:
-    import numpy as np
+from btf.fit.features import PcaBasis
+from tools.analysis.interpolation import models_by_direction, requested_direction, synthesize_at_direction
+from tools.analysis.radiometry import check_space, sweep_models
+from tools.analysis.synth import (
+    ExtrapolationWarning,
+    MissingModels,
+    dependence_from_document,
+    models_from_document,
+    synthesize_at,
+)
+from tools.cli.options import (
+    FEATURE_SPACES,
+    CliError,
+    add_force,
+    add_source_filters,
+    check_out,
+    choose_source,
+    elevation,
+)
+from tools.data.images import DEEP_SUFFIXES, ImageError, read_mask, to_rgb, write_image
+from tools.store.database import CorruptDatabase, Store
 
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    p = sub.add_parser("synth", help="synthesize an image from models inside a mask")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--db", help="database of captures")
     src.add_argument("--model", help="MODELS.json: one document of `fit --json`, or a list of them")
@@ -38,13 +56,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p.add_argument("--normalise-reference", action="store_true",
                    help="scale each capture so its reference card's level is the sweep's median (takes out "
                         "drift of the light between captures; --db, rgb or gray)")
-    return p
 
 
 def _from_json(path: str) -> tuple[dict, dict, str, int, dict | None]:
     """(models by angle, dependence by angle, space, levels, pca record) of a models file."""
-    from tools.analysis.synth import dependence_from_document, models_from_document
-
     try:
         raw = json.loads(Path(path).read_text())
     except FileNotFoundError:
@@ -96,8 +111,6 @@ def _source(store, args: argparse.Namespace) -> dict:
 
 def _radiometry(args: argparse.Namespace, space: str) -> bool:
     """Whether --exposure or --normalise-reference asks for anything (checked for this space)."""
-    import math
-
     asked = args.exposure is not None or args.normalise_reference
     if not asked:
         return False
@@ -105,7 +118,6 @@ def _radiometry(args: argparse.Namespace, space: str) -> bool:
         raise CliError(f"--exposure must be a positive number of microseconds, got {args.exposure:g}")
     if not args.db:
         raise CliError("--exposure and --normalise-reference need --db (a models document carries no camera settings)")
-    from tools.analysis.radiometry import check_space
 
     try:
         check_space(space, "--exposure and --normalise-reference")
@@ -116,9 +128,6 @@ def _radiometry(args: argparse.Namespace, space: str) -> bool:
 
 def _load_models(store, source: dict, args: argparse.Namespace, direction=None) -> dict:
     """Models by angle (or by direction), each capture's radiometry applied; warnings printed."""
-    from tools.analysis.interpolation import models_by_direction
-    from tools.analysis.radiometry import sweep_models
-
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
@@ -136,8 +145,6 @@ def _load_models(store, source: dict, args: argparse.Namespace, direction=None) 
 
 
 def _open_db(path: str):
-    from tools.store.database import CorruptDatabase, Store
-
     try:
         return Store.open(path, create=False)
     except CorruptDatabase as exc:
@@ -155,8 +162,6 @@ def _stored_basis(bases: dict, db: str):
 
 
 def _read_mask(path: str) -> np.ndarray:
-    from tools.data.images import ImageError, read_mask
-
     try:
         return read_mask(path)
     except ImageError as exc:
@@ -165,8 +170,6 @@ def _read_mask(path: str) -> np.ndarray:
 
 def _write(args: argparse.Namespace, bands: np.ndarray, space: str, pca=None) -> int:
     """The image at the models' depth: uint8 up to 256 levels, else 16-bit (PNG or TIFF)."""
-    from tools.data.images import ImageError, to_rgb, write_image
-
     try:
         write_image(args.out, to_rgb(bands, space, pca))
     except ImageError as exc:
@@ -176,10 +179,6 @@ def _write(args: argparse.Namespace, bands: np.ndarray, space: str, pca=None) ->
 
 def _run_direction(args: argparse.Namespace, direction) -> int:
     """Several angles: barycentric quantile blending over the stored directions (tools.analysis.interpolation)."""
-    import numpy as np
-
-    from tools.analysis.interpolation import synthesize_at_direction
-    from tools.analysis.synth import ExtrapolationWarning, MissingModels
 
     if not args.db:
         raise CliError("synth: several angles need --db (a models document holds one angle)")
@@ -204,8 +203,6 @@ def _run_direction(args: argparse.Namespace, direction) -> int:
 
 def _check_depth(out: str, levels: int) -> None:
     """Refuses, before any work, an output file that cannot hold the models' depth."""
-    from tools.data.images import DEEP_SUFFIXES
-
     if levels > 256 and Path(out).suffix.lower() not in DEEP_SUFFIXES:
         raise CliError(f"image {out}: 16-bit pixels need a .png or .tif file (the models have {levels} levels)")
 
@@ -216,8 +213,6 @@ def _warn(caught) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.analysis.interpolation import requested_direction
-
     check_out(args.out, (args.db, args.model, args.mask), args.force)
     try:
         direction = requested_direction(args.angle, args.azimuth, args.light_elevation, args.light_azimuth)
@@ -226,10 +221,7 @@ def run(args: argparse.Namespace) -> int:
     if direction is not None:
         return _run_direction(args, direction)
     args.angle = elevation(float(args.angle))
-    import numpy as np
 
-    from btf.fit.features import PcaBasis
-    from tools.analysis.synth import ExtrapolationWarning, MissingModels, synthesize_at
 
     pca = None
     dependence: dict = {}

@@ -6,20 +6,17 @@ import json
 from pathlib import Path
 
 from tools.cli.options import CliError
+from tools.station.control import StationClient, StationGone, socket_path
 
 
-def add_parser(sub) -> argparse.ArgumentParser:
-    p = sub.add_parser("watch", help="follow a running station: its events as they happen, or its snapshot")
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--db", help="the station's database (its control socket is DB.sock)")
     p.add_argument("--socket", help="the station's control socket, if not DB.sock")
     p.add_argument("--snapshot", action="store_true", help="print what the station knows once and exit")
     p.add_argument("--json", action="store_true", help="one JSON object a line")
-    return p
 
 
 def run(args: argparse.Namespace) -> int:
-    from tools.station.control import StationClient, StationGone, socket_path
-
     if not args.db and not args.socket:
         raise CliError("watch needs --db DB (or --socket PATH) of a running station")
     path = Path(args.socket) if args.socket else socket_path(args.db)

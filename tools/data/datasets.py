@@ -22,6 +22,10 @@ import re
 from dataclasses import astuple, dataclass
 from pathlib import Path
 
+from hal.interfaces import ViewAngles
+from hal.scene import SUN, LightAngles, render
+from tools.data.images import write_image, write_mask
+
 IMAGE_EXTENSIONS = frozenset({".png", ".bmp", ".jpg", ".jpeg", ".tif", ".tiff", ".ppm", ".pgm"})
 DEFAULT_TABLES = {"curet": "angles.txt", "folder": "angles.csv"}
 _UTIA = re.compile(r"tl(?P<ti>\d+(?:\.\d+)?)_pl(?P<pi>\d+(?:\.\d+)?)"
@@ -217,10 +221,6 @@ def write_rendered(root: str | Path, layout: str | Layout, views: list[Angles], 
     A view's illumination direction lights the scene (shading and cast shadows); a view
     without one is lit by the renderer's sun, `RENDER_SUN`. All views share one grain layout.
     """
-    from hal.interfaces import ViewAngles
-    from hal.scene import SUN, LightAngles, render
-    from tools.data.images import write_image, write_mask
-
     layout, root = Layout(layout), Path(root)
     root.mkdir(parents=True, exist_ok=True)
     if masks:

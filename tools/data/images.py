@@ -14,6 +14,11 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
+from btf.fit.dependence import measure
+from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
+from btf.fit.fitter import FrameFitter
+from tools.analysis.tiles import row_tiles
+
 if TYPE_CHECKING:
     from btf.fit.features import FeatureFrame, PcaBasis
 
@@ -73,7 +78,6 @@ def stretched_8bit(image: np.ndarray, span: tuple[int, int] | None = None) -> np
     colours keep their order): what segmentation and viewing need, not the absolute levels."""
     if image.dtype == np.uint8:
         return image
-    from tools.analysis.tiles import row_tiles
 
     lo, hi = (int(image.min()), int(image.max())) if span is None else span
     scale = 255.0 / max(1, hi - lo)
@@ -146,20 +150,6 @@ def write_mask(path: str | Path, labels: np.ndarray) -> None:
     _write(p, lab.astype(np.uint8, copy=False), "mask")
 
 
-def encode_png(labels: np.ndarray) -> bytes:
-    ok, buf = cv2.imencode(".png", np.ascontiguousarray(labels.astype(np.uint8)))
-    if not ok:
-        raise ImageError("mask: PNG encoding failed")
-    return buf.tobytes()
-
-
-def decode_png(data: bytes) -> np.ndarray:
-    arr = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-    if arr is None:
-        raise ImageError("mask: stored PNG bytes are damaged")
-    return arr
-
-
 SPACES = ("rgb", "hsv", "gray", "pca")
 DEEP_SPACES = ("rgb", "gray")  # the spaces of 16-bit images
 
@@ -167,8 +157,6 @@ DEEP_SPACES = ("rgb", "gray")  # the spaces of 16-bit images
 def feature_bands(image: np.ndarray, space: str, pca=None):
     """The robot's own feature bands of an RGB image (btf.fit.features); pca fits a basis if none
     is given. A 16-bit image keeps its depth: rgb as it is, gray by OpenCV's weights."""
-    from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
-
     if space not in SPACES:
         raise ImageError(f"feature space {space!r}: expected one of {', '.join(SPACES)}")
     if image.dtype == np.uint16:
@@ -199,9 +187,6 @@ def fit_image(image_path: str | Path, mask_path: str | Path | None, space: str,
               dependence: bool = True) -> FittedImage:
     """Read, convert and fit one image, and measure its dependence (btf.fit.dependence) unless
     `dependence` is False; ImageError (a ValueError) names what is wrong."""
-    from btf.fit.dependence import measure
-    from btf.fit.fitter import FrameFitter
-
     image = read_image(image_path)
     labels = read_mask(mask_path, image.shape[:2]) if mask_path else np.zeros(image.shape[:2], np.uint8)
     feats, pca = feature_bands(image, space)

@@ -18,6 +18,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterator
 
 from tools.data.datasets import Angles, DatasetImage, Layout, scan
+from tools.data.images import ImageError, fit_image, read_mask
+from tools.store.database import Store
 
 if TYPE_CHECKING:  # numpy and the fitter load with the first image, not with the command line
     from concurrent.futures import Executor
@@ -85,8 +87,6 @@ def dataset_robot(root: str | Path) -> str:
 
 def fit_job(job: Job) -> Fitted:
     """Fit one image (runs in a worker). Raises IngestError naming the file."""
-    from tools.data.images import fit_image
-
     try:
         fitted = fit_image(job.path, job.mask, job.space, dependence=job.dependence)
     except ValueError as exc:  # ImageError too
@@ -162,9 +162,6 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
     listed in the report's `damaged`. Each region's grain and band correlation is measured
     and stored with its models unless `dependence` is False.
     """
-    from tools.data.images import ImageError, read_mask
-    from tools.store.database import Store
-
     if space not in INGEST_SPACES:
         raise IngestError(f"feature space {space!r}: ingest stores one of {', '.join(INGEST_SPACES)}")
     if not 0.0 <= default_elevation <= 90.0:

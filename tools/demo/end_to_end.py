@@ -23,10 +23,10 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from btf.fit.fitter import FrameFitter, fit_histogram
 from btf.johnson import Johnson, normal_ppf
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from btf.fit.fitter import FrameFitter, fit_histogram
 from radio import FrameError
 from radio import packets as pk
 from radio.auth import MemoryCounterStore
@@ -39,9 +39,12 @@ from radio.ports import FdPort
 from radio.pump import LinkPump
 from tools.analysis.metrics import compare_bands, correlation, histogram
 from tools.analysis.pdfs import table as pdf_table
+from tools.analysis.synth import synthesize
+from tools.cli.mask import segment
+from tools.data.images import feature_bands
+from tools.report.document import write_report
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
 from tools.store.database import Store
-from tools.analysis.synth import synthesize
 
 ROOT = Path(__file__).resolve().parents[1]
 PLATES = ("black", "white", "mixed")
@@ -315,9 +318,6 @@ def pdf_totals(scene: str, angle: float, size: tuple[int, int]) -> dict[str, flo
 
 def table1(angle: float, size: tuple[int, int], rng: np.random.Generator) -> list[dict]:
     """Correlation per band of the synthetic field for each mask method and feature space."""
-    from tools.cli.mask import segment
-    from tools.data.images import feature_bands
-
     cap = capture("field", angle, size)
     masks = {"true": cap.mask,
              "isodata5": segment(cap.image, "isodata", 5), "isodata8": segment(cap.image, "isodata", 8),
@@ -383,7 +383,6 @@ def run_demo(out: Path, cfg: DemoConfig = DemoConfig(), progress: bool = True) -
         res.table1 = table1(cfg.field_angle, cfg.size, rng)
         steps.update()
         steps.close()
-        from tools.report.document import write_report
 
         # The report states the run time, so it is taken before the report is written.
         res.seconds = time.monotonic() - t0

@@ -13,7 +13,11 @@ import sys
 from pathlib import Path
 
 from onboard.cli.runner import CliError
+from radio.keys import write_key
+from tools.demo.pty_cable import PtyCable
 from tools.page.data import end_with_parent
+from tools.report.capture_views import Frames
+from tools.station.start import open_station, serve_to_exit
 
 ROBOT_CONFIG = """\
 # The fake robot of `btf-host station --demo`.
@@ -44,8 +48,6 @@ azimuths = [0, 90]
 
 def prepare(where: Path) -> tuple[Path, Path, Path]:
     """DIR's key, robot config and database paths, the first two written when absent."""
-    from radio.keys import write_key
-
     try:
         where.mkdir(parents=True, exist_ok=True)
         key, config = where / "robot.key", where / "robot.toml"
@@ -77,10 +79,6 @@ def stop_robot(robot: subprocess.Popen) -> None:
 
 def run_demo(where: Path, page, status_every: float) -> int:
     """The fake robot and the station with its page, until Ctrl-C or SIGTERM."""
-    from tools.report.capture_views import Frames
-    from tools.demo.pty_cable import PtyCable
-    from tools.station.start import open_station, serve_to_exit
-
     key, config, db = prepare(where)
     page.fake = Frames.from_robot_config(config).fake
     cable = PtyCable()

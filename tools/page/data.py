@@ -13,7 +13,11 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
+from tools.analysis.radiometry import describe
+from tools.report.capture_views import Frames, png, views
+from tools.report.look import capture_section
 from tools.station.snapshot import iso
+from tools.store.database import Store
 
 CACHED = 128  # rendered captures kept (thumbnails and sections)
 SHOWN_FIRST = "correlated", "independent", "measured"  # a card's picture: the likest to the surface
@@ -27,8 +31,6 @@ def pose_key(c: Any) -> str:
 
 def card(c: Any) -> dict:
     """A capture as the page lists it."""
-    from tools.analysis.radiometry import describe
-
     return {"id": c.id, "key": pose_key(c), "robot": c.robot, "seq": c.sequence, "scene": c.scene,
             "elevation": round(c.measured[0], 2), "azimuth": round(c.measured[1], 2),
             "commanded": None if c.commanded[0] is None else [c.commanded[0], c.commanded[1]],
@@ -48,8 +50,6 @@ class CaptureIndex:
     def refresh(self) -> list[dict]:
         """The cards that changed (a new latest capture at their pose)."""
         if self.store is None:
-            from tools.store.database import Store
-
             self.store = Store.open(self.db, create=False)
         changed = {}
         for c in sorted(self.store.captures_after(self.last_id), key=lambda c: c.id):
@@ -71,9 +71,6 @@ def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
     "images": {name: png}}) of one capture; {"missing": text} when there is nothing to draw."""
     import numpy as np
 
-    from tools.report.capture_views import Frames, png, views
-    from tools.report.look import capture_section
-    from tools.store.database import Store
 
     store = _worker_store.get(db)
     if store is None:
@@ -107,9 +104,6 @@ def end_with_parent() -> None:
 
 def _warm() -> None:
     """Load the worker's libraries before the first request needs them."""
-    import tools.report.capture_views  # noqa: F401
-    import tools.report.look  # noqa: F401
-
 
 class PageData:
     """The page's reads and drawings, off the station's loop: `cards()`, `refresh()` and

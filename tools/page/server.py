@@ -34,13 +34,13 @@ from typing import Any
 
 from aiohttp import web
 
-from tools.report.look import CSS
 from tools.page.data import PageData, static_dir
 from tools.page.forms import forms_html, parse_form
 from tools.page.guard import BODY_TIMEOUT_S, ConnectionGate, HostCheck, QuietLog, Tally, connection_cap
-from tools.station.station import Station
+from tools.report.look import CSS
 from tools.station.bus import EventBus
 from tools.station.log import event
+from tools.station.station import Station
 
 ANSWER_WAIT_S = 2.0  # a command's POST waits this long for the robot's answer
 SNAPSHOT_EVERY_S = 1.0

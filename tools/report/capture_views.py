@@ -16,12 +16,16 @@ from typing import Any, Callable
 
 import numpy as np
 
+from hal.fakes.camera import REFERENCE_EXPOSURE_US, REFERENCE_KELVIN, kelvin_gains
+from hal.interfaces import ViewAngles
+from hal.scene import render
+from onboard.config import load
 from tools.analysis.level_bins import Grid
-from tools.data.images import ImageError, read_image, stretched_8bit
 from tools.analysis.radiometry import adjusted
+from tools.analysis.synth import MissingModels, synthesize
+from tools.data.images import ImageError, read_image, stretched_8bit
 from tools.station.receiver import mask_key
 from tools.store.database import Store, StoredCapture
-from tools.analysis.synth import MissingModels, synthesize
 
 Measured = Callable[[StoredCapture], "np.ndarray | None"]
 DATASET = "dataset:"  # the robot id `ingest` files a dataset's captures under, before its folder
@@ -157,7 +161,6 @@ class Frames:
     def from_robot_config(cls, path: str | Path | None) -> Frames:
         if path is None:
             return cls()
-        from onboard.config import load
 
         hal = load(path).hal  # ConfigError (one line) for a config the robot would refuse
         return cls(hal if hal.body == "fake" else None)
@@ -173,10 +176,6 @@ class Frames:
         return None
 
     def _render(self, cap: StoredCapture) -> np.ndarray:
-        from hal.fakes.camera import REFERENCE_EXPOSURE_US, REFERENCE_KELVIN, kelvin_gains
-        from hal.interfaces import ViewAngles
-        from hal.scene import render
-
         c, h = cap.camera, self.fake
         exposure = (c.exposure_us if c and c.exposure_us else REFERENCE_EXPOSURE_US) / REFERENCE_EXPOSURE_US
         gain = c.gain if c and c.gain else 1.0

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
+from tools.analysis.radiometry import describe as describe_camera
 from tools.report.capture_views import Measured, png, views
 from tools.report.look import CSS, MODEL_HEAD, capture_section, model_rows, note, table
-from tools.analysis.radiometry import describe as describe_camera
 from tools.store.database import Store
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 from radio.packets.commands import CommandName
 from tools.cli.options import CliError
 from tools.station.control import StationClient, StationGone, socket_path
+from tools.station.start import StationBusy, open_station, serve
 
 
 def ask(args: argparse.Namespace, name: CommandName, cargs: dict, command_id: int) -> dict:
@@ -38,8 +39,6 @@ def ask(args: argparse.Namespace, name: CommandName, cargs: dict, command_id: in
             finally:
                 client.close()
         if args.port:
-            from tools.station.start import StationBusy
-
             try:
                 return _own_station(args, name, cargs, command_id, deadline)
             except StationBusy as busy:
@@ -71,8 +70,6 @@ def _through(client: StationClient, name: CommandName, cargs: dict, cid: int, de
 def _own_station(args: argparse.Namespace, name: CommandName, cargs: dict, cid: int, deadline: float) -> dict:
     """Hold the port for this one command, serving other clients meanwhile, and store what
     arrives exactly as a station would."""
-    from tools.station.start import open_station, serve
-
     parts = open_station(args.port, args.key, args.db, baud=args.baud, sock=args.socket, echo=None,
                          status_every=0)
     station = parts.station

@@ -15,9 +15,16 @@ from pathlib import Path
 from typing import Callable, TextIO
 
 from onboard.cli.runner import CliError, RetryLater
-from tools.station.station import Station
+from radio.auth import FileCounterStore
+from radio.keys import KeyFileError, counters_beside, load_key
+from radio.link import Link
+from radio.ports import PortBusy, open_url
+from radio.pump import LinkPump
 from tools.station.control import ControlServer, check_path, socket_path
 from tools.station.log import StationLog, event
+from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver
+from tools.station.station import Station
+from tools.store.database import CorruptDatabase, Store, StoreUnavailable
 
 
 class StationBusy(CliError):
@@ -73,14 +80,6 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
                  status_every: float = 10.0, on_item=None) -> StationParts:
     """Everything a station needs, checked; CliError (one line) for any problem, StationBusy
     when another station holds the database or the port."""
-    from radio.auth import FileCounterStore
-    from radio.keys import KeyFileError, counters_beside, load_key
-    from radio.link import Link
-    from radio.ports import PortBusy, open_url
-    from radio.pump import LinkPump
-    from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver
-    from tools.store.database import CorruptDatabase, Store, StoreUnavailable
-
     try:
         key = load_key(key_file)
         # Counters survive restarts (replays stay refused, a running robot accepts the next
@@ -166,8 +165,7 @@ async def serve(parts: StationParts, until: Callable[[], bool] | None = None, pa
 
 async def _start_page(parts: StationParts, options, echo: TextIO | None):
     """The page server, started (None when its address cannot be had)."""
-    from tools.page.server import PageServer
-    from tools.station.log import event
+    from tools.page.server import PageServer  # aiohttp and the drawing code: only with --http
 
     web = PageServer(parts.station, parts.station.snapshot.db, options)
     try:

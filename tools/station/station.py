@@ -60,12 +60,12 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable
 
 from radio import packets as pk
-from radio.packets.commands import CommandName, check_args
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale
+from radio.packets.commands import CommandName, check_args
 from radio.pump import LinkPump
-from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json
 from tools.station.bus import EventBus
 from tools.station.log import StationLog, event
+from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json
 from tools.station.refusals import Refusals
 from tools.station.snapshot import StationSnapshot
 from tools.store.database import disk_free

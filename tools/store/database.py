@@ -20,10 +20,11 @@ import numpy as np
 
 from btf.capture_settings import CaptureSettings
 from btf.dependence import Dependence
+from btf.fit.features import PcaBasis
+from btf.fit.png import decode_png, encode_png
 from btf.johnson import Johnson
 from btf.record import FittedModel
-from btf.fit.features import PcaBasis
-from tools.data.images import decode_png, encode_png
+from tools.analysis.radiometry import sweep_models
 from tools.store.rows import CAMERA_COLUMNS, StoredCapture, capture_from_row, mask_png, model_from_row
 from tools.store.schema import SCHEMA_VERSION, CorruptDatabase, StoreUnavailable, connect
 
@@ -214,7 +215,7 @@ class Store:
         cur = self._conn.execute(
             "INSERT OR IGNORE INTO masks (robot, key, height, width, encoding, data)"
             " VALUES (?,?,?,?,?,?)",
-            (robot_id, key, int(lab.shape[0]), int(lab.shape[1]), "png", encode_png(lab)),
+            (robot_id, key, int(lab.shape[0]), int(lab.shape[1]), "png", encode_png(lab.astype(np.uint8, copy=False))),
         )
         return cur.rowcount == 1
 
@@ -225,7 +226,7 @@ class Store:
         if row is None:
             return None
         shape, png = self._checked(lambda r: mask_png(*r), row, f"mask {key!r}")
-        arr = self._checked(decode_png, png, f"mask {key!r}")
+        arr = self._checked(lambda b: decode_png(b).pixels, png, f"mask {key!r}")
         if arr.shape != shape:
             raise CorruptDatabase(f"database {self.path}: mask {key!r} does not match its stored size")
         return arr
@@ -338,8 +339,6 @@ class Store:
                         scene: str | None = None) -> dict[float, dict[tuple[int, int], Johnson]]:
         """For every measured elevation, the models of its latest capture, each region at the
         capture's exposure (a bracketed region's models scaled back, `tools.analysis.radiometry`)."""
-        from tools.analysis.radiometry import sweep_models
-
         return sweep_models(self, self._latest(robot, space, scene))
 
     def levels(self, robot: str | None = None, space: str | None = None, scene: str | None = None) -> int:

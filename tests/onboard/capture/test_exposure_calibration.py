@@ -7,9 +7,9 @@ import pytest
 from hal.interfaces import ViewAngles
 from hal.scene import render
 from onboard import config
+from onboard.capture.exposure import EXPOSURE_FILE, calibrate_exposure, load_exposure, plan_extremes
 from onboard.cli import main as robot
 from onboard.cli.run import _calibrated_exposure
-from onboard.capture.exposure import EXPOSURE_FILE, calibrate_exposure, load_exposure, plan_extremes
 from onboard.sweep.plan import SweepPlan
 
 FIELD = ('state_dir = "state"\n[hal]\nbody = "fake"\nscene = "field"\nsize = [120, 160]\n'

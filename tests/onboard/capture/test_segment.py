@@ -9,12 +9,12 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 from PIL import Image
 
-from onboard.config import SegmentConfig
 from btf.fit.features import FeatureSpace, FeatureSpec, compute
 from btf.fit.isodata import IsodataParams
 from onboard.capture.mask_file import load_mask
 from onboard.capture.palette import Palette
 from onboard.capture.segmentation import Segmenter, SegmentMethod
+from onboard.config import SegmentConfig
 from radio import packets as pk
 from radio.packets.mask import downsample_labels
 

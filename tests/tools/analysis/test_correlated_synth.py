@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from skimage import data
 
-from hal.interfaces import ViewAngles
-from hal.scene import render
 from btf.fit.dependence import measure
 from btf.fit.fitter import FrameFitter
+from hal.interfaces import ViewAngles
+from hal.scene import render
 from radio.packets.dependence import decode_dependence, encode_dependence
 from tools.analysis.fields import empirical_autocorrelation
 from tools.analysis.synth import interpolate, synthesize, synthesize_at
@@ -114,8 +114,8 @@ def test_interpolation_blends_dependence_and_the_flag_turns_it_off():
 
 
 def test_store_keeps_dependence_and_synth_cli_uses_it_unless_independent(tmp_path):
+    from btf.fit.png import decode_png, encode_png
     from tools import cli
-    from tools.data.images import decode_png, encode_png
     from tools.store.database import Store
 
     img, labels = _case("white")
@@ -134,7 +134,7 @@ def test_store_keeps_dependence_and_synth_cli_uses_it_unless_independent(tmp_pat
         out = tmp_path / f"out{len(flag)}.png"
         assert cli.main(["synth", "--db", str(db), "--mask", str(tmp_path / "mask.png"), "--angle", "60",
                          "--out", str(out), *flag]) == 0
-        outs[bool(flag)] = decode_png(out.read_bytes())
+        outs[bool(flag)] = decode_png(out.read_bytes()).pixels
     inside = labels == 2
     want = _autocorr(img, inside)[:, :, 0]
     assert np.abs(_autocorr(outs[False], inside)[:, :, 0] - want).max() <= 0.1

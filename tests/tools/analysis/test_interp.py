@@ -9,10 +9,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from btf.johnson import Johnson
-from tools.cli import main
-from tools.data.datasets import Angles, write_rendered
-from tools.data.images import read_image, read_mask
-from tools.data.ingest import ingest
 from tools.analysis.interpolation import (
     Direction,
     DirectionInterpolator,
@@ -22,8 +18,12 @@ from tools.analysis.interpolation import (
     synthesize_at_direction,
     synthesize_blend,
 )
-from tools.store.database import Store
 from tools.analysis.synth import ExtrapolationWarning, MissingModels, neighbours
+from tools.cli import main
+from tools.data.datasets import Angles, write_rendered
+from tools.data.images import read_image, read_mask
+from tools.data.ingest import ingest
+from tools.store.database import Store
 
 GRID = [Direction(el, az) for el in (20.0, 50.0, 80.0) for az in range(0, 360, 45)] + [Direction(90.0, 0.0)]
 GRID4 = [Direction(el, az, lel, laz) for el in (30.0, 60.0, 90.0) for az in (0.0, 120.0, 240.0)

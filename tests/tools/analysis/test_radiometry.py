@@ -13,9 +13,9 @@ from hal.interfaces import ViewAngles
 from hal.scene import Label, render
 from onboard.link.bodies import models_body
 from radio import packets as pk
+from tools.analysis.radiometry import RadiometryWarning, adjusted
 from tools.cli import main as host
 from tools.data.images import read_image, write_image, write_mask
-from tools.analysis.radiometry import RadiometryWarning, adjusted
 from tools.station.receiver import Receiver
 from tools.store.database import Store
 

@@ -4,10 +4,9 @@ import warnings
 import numpy as np
 import pytest
 
-from btf.johnson import Family, Johnson
 from btf.fit.fitter import fit_histogram
-from tools.analysis import metrics
-from tools.analysis import synth
+from btf.johnson import Family, Johnson
+from tools.analysis import metrics, synth
 
 
 def fit(values):

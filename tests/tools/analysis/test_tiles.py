@@ -6,13 +6,10 @@ import pytest
 from benchmarks.scenes import field, voronoi_labels
 from btf.dependence import Dependence
 from btf.fit.fitter import FrameFitter, fit_histogram
-from tools.data import masks
-from tools.analysis import metrics
-from tools.analysis import pdfs
-from tools.analysis import synth
-from tools.analysis import tiles
+from tools.analysis import metrics, pdfs, synth, tiles
 from tools.analysis.fields import gaussian_fields, latent
 from tools.analysis.interpolation import synthesize_blend
+from tools.data import masks
 
 DEP = Dependence((0.5, 0.3, 0.6), (0.8, 0.6, 0.4, 0.2), (0.7, 0.5, 0.3, 0.1))
 

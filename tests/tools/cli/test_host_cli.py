@@ -4,17 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from tools import cli
 from tools.data.images import read_image, read_mask, write_image, write_mask
-
-MINE = ("fit", "mask", "synth", "compare", "pdfs", "resolve")
-
-
-@pytest.fixture
-def host(host, monkeypatch):
-    # Only these subcommands: others may not exist in every checkout.
-    monkeypatch.setattr(cli, "COMMANDS", MINE)
-    return host
 
 
 def plate(seed, h=60, w=80):

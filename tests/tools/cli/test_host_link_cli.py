@@ -10,10 +10,10 @@ from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.keys import write_key
 from radio.link import Link
+from tests.support import ROOT
 from tests.tools.station.test_receiver import models_body
 from tools.cli import main
 from tools.demo.pty_cable import PtyCable
-from tests.support import ROOT
 
 
 @pytest.fixture
@@ -135,7 +135,6 @@ def robot_port(tmp_path_factory):
     """A running `btf-robot run --hal fake` on one end of a serial cable; yields (other end, key)."""
     import subprocess
     import sys
-    from pathlib import Path
 
     work = tmp_path_factory.mktemp("robot")
     key = write_key(work / "robot.key")

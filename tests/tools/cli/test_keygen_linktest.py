@@ -13,9 +13,9 @@ from tools.cli.options import CliError
 
 def run(module, argv):
     parser = argparse.ArgumentParser()
-    module.add_parser(parser.add_subparsers(dest="command")).set_defaults(_run=module.run)
-    args = parser.parse_args(argv)
-    return args._run(args)
+    module.add_arguments(parser)
+    args = parser.parse_args(argv[1:])
+    return module.run(args)
 
 
 def test_keygen_writes_a_private_key_and_refuses_to_overwrite(tmp_path, capsys):

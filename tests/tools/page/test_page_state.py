@@ -11,8 +11,8 @@ from tests.tools.station.test_receiver import models_body
 from tools.page.data import CaptureIndex
 from tools.station.receiver import Item, ItemKind, Receiver
 from tools.station.snapshot import StationSnapshot
-from tools.store.database import Store
 from tools.station.sweep_grid import grid_json, plan_of_command
+from tools.store.database import Store
 
 
 def report(plan, next_index=0, skipped=(), mode="sweeping"):

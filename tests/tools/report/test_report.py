@@ -4,8 +4,8 @@ import numpy as np
 from radio import packets as pk
 from tests.tools.station.test_receiver import models_body
 from tools.cli import main
-from tools.station.receiver import Receiver
 from tools.report.document import write_report
+from tools.station.receiver import Receiver
 from tools.store.database import Store
 
 
@@ -77,11 +77,11 @@ def test_captures_with_dependence_show_independent_and_correlated_synthesis_besi
 
 def test_a_dataset_capture_is_shown_beside_the_image_it_was_fitted_from(tmp_path):
     """The report and the page find a dataset's frame where ingest found it (`Frames`)."""
+    from btf.fit.fitter import FrameFitter
     from hal.interfaces import ViewAngles
     from hal.scene import render
-    from btf.fit.fitter import FrameFitter
-    from tools.report.capture_views import Frames
     from tools.data.images import read_image, write_image
+    from tools.report.capture_views import Frames
 
     view = render("mixed", ViewAngles(50.0, 0.0), (40, 48), seed=0)
     write_image(tmp_path / "plate.png", view.image)

@@ -18,8 +18,8 @@ from radio.auth import MemoryCounterStore
 from radio.keys import load_key, write_key
 from radio.link import Link
 from radio.packets.camera import decode_camera, encode_camera
-from tools.cli import main as host
 from tools.analysis.radiometry import settings_json
+from tools.cli import main as host
 from tools.station.receiver import Receiver
 from tools.store.database import CorruptDatabase, Store
 

@@ -14,12 +14,11 @@ from radio.keys import load_key, write_key
 from radio.link import Acked, Link, LinkUp
 from radio.ports import FdPort
 from radio.pump import LinkPump
+from tests.support import ROOT
 from tests.tools.station.test_receiver import models_body
 from tools.demo.pty_cable import PtyCable
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver, StoreFailed
 from tools.store.database import Store
-from tests.support import ROOT
-
 
 
 def _db_with_a_bad_model_row(path: Path) -> None:

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
+from btf.fit.fitter import FrameFitter
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from btf.fit.fitter import FrameFitter
 from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.link import Link

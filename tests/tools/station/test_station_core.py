@@ -13,10 +13,10 @@ from radio.channel_port import Cable
 from radio.link import Acked, Link
 from radio.pump import LinkPump
 from tests.tools.station.test_receiver import models_body
-from tools.station.receiver import Receiver
-from tools.station.station import Station
 from tools.station.bus import EventBus
 from tools.station.log import StationLog
+from tools.station.receiver import Receiver
+from tools.station.station import Station
 from tools.store.database import Store
 
 KEY = bytes(range(32))

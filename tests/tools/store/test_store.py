@@ -5,8 +5,8 @@ import sqlite3
 import numpy as np
 import pytest
 
-from btf.johnson import Family
 from btf.fit.fitter import fit_histogram
+from btf.johnson import Family
 from tools.store.database import CorruptDatabase, Store
 
 
