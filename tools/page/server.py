@@ -20,6 +20,10 @@ on stderr only (never logged, never sent over the radio). Viewing needs it unles
 runs with `--http-public`; a state-changing request needs it always (the cookie, or the
 `X-BTF-Token` header), a JSON body, and, when the token comes as a cookie, an `Origin` that is
 this page's own: a page of another site cannot send commands through the operator's browser.
+Every request must name this page in its `Host` header (DNS rebinding). No client can take the
+station's descriptors, memory or loop (`tools.page.guard`): connections are capped and must send
+their headers in time, event streams are capped overall (STREAMS) and per client address
+(STREAMS_PER_CLIENT), each refusal a 503 in one line, counted and said in the station's log.
 """
 from __future__ import annotations
 
