@@ -17,6 +17,7 @@ from btf.johnson import Johnson
 from radio import FrameError
 from radio import packets as pk
 from radio.packets.dependence import decode_dependence, encode_dependence, record_size
+from tests.support.robots import robot_toml
 
 HEADER = dict(robot_id=1, seq=5, time=10.0, commanded=(60.0, 0.0), measured=(60.0, 0.0),
               feature_space="rgb")
@@ -196,7 +197,7 @@ def _pipeline(tmp_path, on: bool):
     from onboard.capture.pipeline import Pipeline
 
     path = tmp_path / "robot.toml"
-    path.write_text(f'[hal]\nbody = "fake"\n[segment]\nmethod = "scene"\n[features]\ndependence = {str(on).lower()}\n')
+    path.write_text(robot_toml({"features": {"dependence": on}}))
     cfg = config.load(path)
     return lambda labels: Pipeline(cfg, None, lambda f, fr, m: (labels, False))
 

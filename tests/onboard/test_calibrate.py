@@ -17,6 +17,7 @@ from hal.geometry import calibrate_arm, calibrate_tracker
 from hal.interfaces import HalError, Orientation, ViewAngles, view_from_orientation
 from hal.orientation import MOUNTS, camera_frame, euler_angles, euler_matrix
 from onboard.cli import main
+from tests.support.robots import robot_toml
 
 
 def hal_with(body: str, **options):
@@ -200,7 +201,8 @@ def test_cli_calibrate_tracker_tells_the_operator_what_to_set(tmp_path, capsys, 
 
 def test_cli_tracker_remap_from_the_config(tmp_path, capsys, monkeypatch):
     cfg = tmp_path / "robot.toml"
-    cfg.write_text('[hal]\nbody = "emulated"\nsize = [16, 16]\ntracker_remap = "P2"\n')
+    cfg.write_text(robot_toml({"hal": {"body": "emulated", "size": [16, 16], "scene": None, "tracker_remap": "P2"},
+                               "segment": None, "skip": None}))
     code, out, _ = run(["calibrate", "tracker", "--config", str(cfg), "--json"], capsys, monkeypatch, tmp_path)
     result = json.loads(out)  # an upright tracker remapped as if turned: the check names P1 back
     assert code == 1 and result["current"].startswith("P2") and result["needed_placement"] == "P1"

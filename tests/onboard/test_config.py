@@ -9,6 +9,7 @@ import pytest
 from onboard import config
 from onboard.config import ConfigError
 from tests.support import ROOT
+from tests.support.robots import SMALL, robot_toml
 
 GOOD = """
 robot_id = 7
@@ -125,8 +126,7 @@ def test_a_failing_state_disk_after_start_is_one_line_and_exit_1(tmp_path, monke
     (tmp_path / "robot.key").write_text("00" * 32)
     (tmp_path / "robot.key").chmod(0o600)
     path = tmp_path / "robot.toml"
-    path.write_text('state_dir = "state"\n[hal]\nbody = "fake"\nsize = [24, 32]\n'
-                    '[link]\nkey_file = "robot.key"\n[segment]\nmethod = "scene"\n')
+    path.write_text(robot_toml(SMALL, {"link": {"key_file": "robot.key"}}, state_dir="state"))
 
     def broken_boot(self):
         raise sqlite3.OperationalError("disk I/O error")
@@ -138,7 +138,7 @@ def test_a_failing_state_disk_after_start_is_one_line_and_exit_1(tmp_path, monke
 
 
 def test_default_paths_resolve_against_the_config_file_even_without_their_section(tmp_path):
-    cfg = config.load(write(tmp_path, '[hal]\nbody = "fake"\n'))
+    cfg = config.load(write(tmp_path, robot_toml()))
     assert cfg.link.key_file == tmp_path.resolve() / "robot.key"
     assert cfg.state_dir == tmp_path.resolve() / "state"
 
@@ -151,7 +151,7 @@ def test_config_types_are_read_from_the_dataclasses():
 
 
 def test_a_value_set_at_run_time_is_read_as_the_file_would_read_it(tmp_path):
-    cfg = config.load(write(tmp_path, '[hal]\nbody = "fake"\n'))
+    cfg = config.load(write(tmp_path, robot_toml()))
     assert config.with_value(cfg, "sweep.azimuths", [0, 90]).sweep.azimuths == (0.0, 90.0)
     assert config.with_value(cfg, "skip.min_pixels", 5).skip.min_pixels == 5
     with pytest.raises(config.ConfigError, match="skip.min_pixels must be an integer"):

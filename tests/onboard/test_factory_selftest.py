@@ -12,6 +12,7 @@ from hal.arm import ArmCalibration
 from hal.factory import Body, HalConfigError, arm_calibration, build_hal
 from hal.interfaces import ViewAngles, view_from_orientation
 from onboard.cli import main
+from tests.support.robots import robot_toml
 
 
 def run_cli(argv, capsys, monkeypatch, env_body=None):
@@ -110,7 +111,7 @@ def test_selftest_without_a_body_is_a_usage_error(capsys, monkeypatch):
 
 def test_selftest_reports_failing_devices_and_exits_1(tmp_path, capsys, monkeypatch):
     cfg = tmp_path / "robot.toml"
-    cfg.write_text('[hal]\nbody = "fake"\nsize = [16, 16]\nfault_rate = 1.0\n')
+    cfg.write_text(robot_toml({"hal": {"size": [16, 16], "scene": None, "fault_rate": 1.0}}))
     code, lines, _ = run_cli(["selftest", "--config", str(cfg)], capsys, monkeypatch)
     assert code == 1
     assert len(lines) == 4 and not any(line["ok"] for line in lines)

@@ -13,7 +13,7 @@ import pytest
 from benchmarks.failsafe_trials import run_trials
 from onboard.runtime import Mode
 from radio.link import LinkDown, LinkUp
-from tests.onboard.test_runtime import PLAN3, make
+from tests.support.runtime import PLAN3, make
 
 WAIT_S = 5.0
 
@@ -75,7 +75,7 @@ def test_the_arm_is_held_while_a_long_step_of_the_pose_still_runs(fake_robot, st
 def test_an_interrupted_pose_is_measured_again_in_full_when_the_link_returns(fake_robot):
     """The pose's processing ended after the interrupt: its result is undone, not half-kept."""
     from radio import packets as pk
-    from tests.onboard.test_runtime import host_view, poses_by_seq, sweep
+    from tests.support.runtime import host_view, poses_by_seq, sweep
 
     rt, tr = make(fake_robot, "black", extra=PLAN3)
     rt.boot()
@@ -95,7 +95,7 @@ def test_a_camera_setting_sent_while_the_worker_takes_the_frame_is_refused_as_bu
     """The link is serviced while the camera takes the pose's frame: a SET camera.* then would
     touch the camera from two threads, so it is refused, and works once the pose is done."""
     from radio import packets as pk
-    from tests.onboard.test_runtime import replies
+    from tests.support.runtime import replies
 
     rt, tr = make(fake_robot, "black", extra=PLAN3)
     rt.boot()

@@ -15,22 +15,8 @@ from onboard.runtime import Mode
 from radio import packets as pk
 from radio.link import Acked, LinkDown, LinkUp
 from tests.support import ROOT
-
-BASE = '[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\nfault_rate = {rate}\nfault_seed = 3\n' \
-       '[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\n{extra}'
-
-
-def make(fake_robot, scene="mixed", rate=0.0, extra="", **kw):
-    """A fake robot on `scene` (fault rate `rate`, more config in `extra`)."""
-    return fake_robot(BASE.format(scene=scene, rate=rate, extra=extra), **kw)
-
-
-def sweep(rt):
-    return rt.run(lambda r: r.progress is not None and r.idle())
-
-
-def decoded(tr):
-    return [pk.decode(body) for _, body in tr.sent]
+from tests.support.robots import IDLE, robot_toml
+from tests.support.runtime import PLAN3, decoded, host_view, make, poses_by_seq, replies, runtime_toml, sweep
 
 
 @pytest.mark.parametrize("scene", ["black", "white", "mixed"])
@@ -49,7 +35,7 @@ def test_sweep_of_each_plate_sends_every_pose_label_band_model(fake_robot, scene
 
 def test_faults_at_ten_percent_still_finish_and_report_every_skipped_pose(fake_robot):
     # A stalled servo moves on only at the settle timeout (real seconds): 2 s, not the default 10.
-    rt, tr = make(fake_robot, "black", rate=0.1, extra="[sweep]\nsettle_timeout_s = 2\n")
+    rt, tr = make(fake_robot, "black", rate=0.1, extra={"sweep": {"settle_timeout_s": 2}})
     sweep(rt)
     packets = decoded(tr)
     measured = [p for p in packets if isinstance(p, pk.ModelsPacket)]
@@ -90,12 +76,8 @@ def command(tr, cid, name, **args):
     tr.receive(pk.encode(pk.CommandPacket(cid, name, args)))
 
 
-def replies(tr):
-    return {p.command_id: p for p in decoded(tr) if isinstance(p, (pk.AckPacket, pk.NackPacket))}
-
-
 def test_commands_are_answered_with_a_result_or_a_reason(fake_robot):
-    rt, tr = make(fake_robot, "black", extra="[sweep]\nautostart = false\n")
+    rt, tr = make(fake_robot, "black", extra=IDLE)
     rt.boot()
     C = pk.CommandName
     command(tr, 1, C.PING)
@@ -153,7 +135,7 @@ def test_failsafe_holds_the_arm_and_is_reported_when_the_link_returns(fake_robot
 
 
 def test_goto_during_failsafe_is_refused_with_a_reason(fake_robot):
-    rt, tr = make(fake_robot, "black", extra="[sweep]\nautostart = false\n")
+    rt, tr = make(fake_robot, "black", extra=IDLE)
     rt.boot()
     tr.deliver(LinkUp())
     rt.step()
@@ -166,8 +148,7 @@ def test_goto_during_failsafe_is_refused_with_a_reason(fake_robot):
 
 
 def test_skip_rules_unchanged_marker_and_small_labels(fake_robot):
-    extra = '[sweep]\nautostart = false\n'
-    rt, tr = make(fake_robot, "black", extra=extra)
+    rt, tr = make(fake_robot, "black", extra=IDLE)
     rt.dispatch.set_keys({"skip.unchanged_tolerance": 50.0})
     rt.boot()
     for cid in (1, 2):
@@ -178,7 +159,7 @@ def test_skip_rules_unchanged_marker_and_small_labels(fake_robot):
 
 
 def test_garbage_from_the_base_never_ends_the_runtime(fake_robot):
-    rt, tr = make(fake_robot, "black", extra="[sweep]\nautostart = false\n")
+    rt, tr = make(fake_robot, "black", extra=IDLE)
     rt.boot()
     for junk in (b"", b"\x00", b"\x93\x01\x04\x00", bytes(range(256))):
         tr.receive(junk)
@@ -188,7 +169,7 @@ def test_garbage_from_the_base_never_ends_the_runtime(fake_robot):
 
 def test_memory_growth_with_frame_size_is_only_the_frame_buffers(tmp_path):
     path = tmp_path / "robot.toml"
-    path.write_text('[hal]\nbody = "fake"\n[segment]\nmethod = "scene"\n')
+    path.write_text(robot_toml())
     cfg = config.load(path)
 
     def peak(n):
@@ -212,7 +193,7 @@ def test_memory_growth_with_frame_size_is_only_the_frame_buffers(tmp_path):
 
 def test_runtime_imports_nothing_from_the_host_and_stays_under_150_mb(tmp_path):
     path = tmp_path / "robot.toml"
-    path.write_text(BASE.format(scene="mixed", rate=0.0, extra=""))
+    path.write_text(runtime_toml())
     code = f"""
 import json, resource, sys
 from onboard import config
@@ -242,23 +223,6 @@ print(json.dumps({{"rss_kb": hwm, "bad": bad}}))
 
 class Crash(BaseException):
     """The process dies here (not an Exception: the loop's guard does not catch it)."""
-
-
-def host_view(*transports):
-    """What a host keeps: packets by (kind, seq), each stored once whatever was re-sent."""
-    kept = {}
-    for tr in transports:
-        for p in decoded(tr):
-            if isinstance(p, (pk.ModelsPacket, pk.UnchangedPacket, pk.MaskPacket)):
-                kept[(type(p).__name__, p.seq)] = p
-    return kept
-
-
-def poses_by_seq(kept):
-    return sorted((round(p.commanded[0]), p.seq) for (kind, _), p in kept.items() if kind == "ModelsPacket")
-
-
-PLAN3 = "[sweep]\nstart = 90\nstop = 70\nstep = 10\n"
 
 
 def counting_commits(rt, kill_at=None, after=False):
@@ -357,7 +321,7 @@ def test_a_sweep_paused_by_a_full_outbox_rests_between_turns_instead_of_spinning
 
 
 def test_commands_are_still_answered_when_captures_have_filled_the_outbox(fake_robot):
-    rt, tr = make(fake_robot, "mixed", extra="[sweep]\nstart = 90\nstop = 0\nstep = 2\n",
+    rt, tr = make(fake_robot, "mixed", extra={"sweep": {"start": 90, "stop": 0, "step": 2}},
                   transport=MemoryTransport(auto_ack=False), quota=8192)
     box = rt.outbox
     rt.boot()
@@ -381,7 +345,7 @@ def test_per_pose_memory_is_bounded_over_a_long_mission(fake_robot):
     remember(table, (2 * MAX_POSES_REMEMBERED, 0), "again")  # re-set: now the newest
     assert len(table) == MAX_POSES_REMEMBERED
     assert list(table)[-1] == (2 * MAX_POSES_REMEMBERED, 0) and (0, 0) not in table
-    rt, tr = make(fake_robot, "black", extra="[sweep]\nautostart = false\n")
+    rt, tr = make(fake_robot, "black", extra=IDLE)
     rt.boot()
     for cid, el in enumerate((90.0, 80.0, 70.0)):
         command(tr, 2 * cid, pk.CommandName.GOTO, elevation=el, azimuth=0.0)

@@ -18,9 +18,15 @@ from onboard.capture.segmentation import Segmentation
 from onboard.config import ConfigError
 from radio import FrameError
 from radio import packets as pk
+from tests.support.robots import IDLE, robot_toml
 
-HAL = '[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\n'
-NO_AUTO = '[sweep]\nautostart = false\n'
+
+def robot(scene: str, *changes: dict, idle: bool = True) -> str:
+    """A fake robot on `scene` at 60 x 80 (no skip rule of its own), waiting for commands unless not `idle`."""
+    return robot_toml({"hal": {"scene": scene, "size": [60, 80]}, "skip": None}, *changes, *((IDLE,) if idle else ()))
+
+
+ISODATA = {"segment": {"method": "isodata", "split_std": 12, "subsample": 2000}}
 
 
 def load(tmp_path, text):
@@ -53,7 +59,7 @@ def test_hal_body_is_never_a_silent_fake(tmp_path, monkeypatch):
 
 
 def test_scene_labels_come_from_the_frame_the_camera_rendered(fake_robot, monkeypatch):
-    rt, tr = fake_robot(HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+    rt, tr = fake_robot(robot("mixed"))
     calls = []
     real = fake_camera.scene_radiance  # the fake camera renders through it (then exposes)
     monkeypatch.setattr(fake_camera, "scene_radiance", lambda *a, **k: calls.append(1) or real(*a, **k))
@@ -67,7 +73,7 @@ def test_scene_labels_come_from_the_frame_the_camera_rendered(fake_robot, monkey
 
 
 def test_mask_is_sent_when_the_label_map_changes_and_on_request(fake_robot):
-    rt, tr = fake_robot(HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+    rt, tr = fake_robot(robot("mixed"))
     rt.boot()
     C = pk.CommandName
     masks = lambda: [p for p in decoded(tr) if isinstance(p, pk.MaskPacket)]
@@ -88,8 +94,7 @@ def test_mask_png_labels_the_frames(fake_robot, tmp_path):
     lab = np.zeros((60, 80), np.uint8)
     lab[:, 40:] = 3
     cv2.imwrite(str(tmp_path / "mask.png"), lab)
-    rt, tr = fake_robot(HAL.format(scene="black") + "[segment]\nmethod = 'mask'\nmask = 'mask.png'\nn_labels = 4\n"
-                  + NO_AUTO)
+    rt, tr = fake_robot(robot("black", {"segment": {"method": "mask", "mask": "mask.png", "n_labels": 4}}))
     rt.boot()
     command(rt, tr, 1, pk.CommandName.CAPTURE)
     models = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
@@ -101,7 +106,7 @@ def test_mask_png_labels_the_frames(fake_robot, tmp_path):
 
 
 def test_isodata_palette_survives_a_restart(fake_robot):
-    text = HAL.format(scene="mixed") + "[segment]\nmethod = 'isodata'\nsplit_std = 12\nsubsample = 2000\n" + NO_AUTO
+    text = robot("mixed", ISODATA)
     rt, tr = fake_robot(text)
     rt.boot()
     command(rt, tr, 1, pk.CommandName.CAPTURE)
@@ -120,13 +125,12 @@ def test_isodata_palette_survives_a_restart(fake_robot):
 
 
 def test_a_palette_saved_for_other_bands_is_replaced_not_matched(fake_robot):
-    isodata = "[segment]\nmethod = 'isodata'\nsplit_std = 12\nsubsample = 2000\n"
-    rt, tr = fake_robot(HAL.format(scene="mixed") + isodata + NO_AUTO)
+    rt, tr = fake_robot(robot("mixed", ISODATA))
     rt.boot()
     assert isinstance(command(rt, tr, 1, pk.CommandName.CAPTURE), pk.AckPacket)
     rt.outbox.close()
     # The same state directory, now fitting gray: 3-band colour entries cannot label it.
-    gray = HAL.format(scene="mixed") + "[features]\nspace = 'gray'\n" + isodata + NO_AUTO
+    gray = robot("mixed", ISODATA, {"features": {"space": "gray"}})
     rt2, tr2 = fake_robot(gray)
     assert rt2.pipeline.segmenter.segmenter.palette.entries == []
     rt2.boot()
@@ -137,7 +141,7 @@ def test_a_palette_saved_for_other_bands_is_replaced_not_matched(fake_robot):
 
 
 def test_sweep_command_takes_start_stop_step_and_optional_azimuths(fake_robot):
-    rt, tr = fake_robot(HAL.format(scene="black") + "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+    rt, tr = fake_robot(robot("black"))
     rt.boot()
     ack = command(rt, tr, 1, pk.CommandName.SWEEP, start=80.0, stop=60.0, step=10.0)
     assert ack.extras["poses"] == 3
@@ -162,7 +166,7 @@ def test_sweep_command_schema_refuses_mixed_or_missing_forms():
 
 
 def test_pca_basis_goes_once_with_the_scene_and_survives_a_restart(fake_robot):
-    text = HAL.format(scene="mixed") + "[features]\nspace = 'pca'\n[segment]\nmethod = 'scene'\n" + NO_AUTO
+    text = robot("mixed", {"features": {"space": "pca"}})
     rt, tr = fake_robot(text)
     rt.boot()
     for cid in (1, 2):
@@ -189,8 +193,8 @@ def test_malformed_pca_extras_are_refused():
 
 
 def test_sixteen_bit_multispectral_bands_through_the_runtime(fake_robot, tmp_path):
-    text = (HAL.format(scene="mixed") + "[features]\nspace = 'raw'\nbands = ['B0', 'B3']\nbins_16bit = 65536\n"
-            "[segment]\nmethod = 'scene'\n" + NO_AUTO)
+    raw = {"space": "raw", "bands": ["B0", "B3"], "bins_16bit": 65536}
+    text = robot("mixed", {"features": raw})
     cfg = load(tmp_path, text)
     hal_ = build_hal(cfg.hal)
     cam = FakeCamera("mixed", hal_.camera.true_view, size=(60, 80), bands="multispectral")
@@ -207,13 +211,13 @@ def test_sixteen_bit_multispectral_bands_through_the_runtime(fake_robot, tmp_pat
         lo, hi = np.percentile(values, [1, 99])
         med = float(model.ppf(0.5))
         assert np.isfinite(med) and lo - 32 <= med <= hi + 32  # within a bin of the data
-    rt_bad, tr_bad = fake_robot(text.replace("['B0', 'B3']", "['B9']"), hal=hal_)
+    rt_bad, tr_bad = fake_robot(robot("mixed", {"features": {**raw, "bands": ["B9"]}}), hal=hal_)
     nack = command(rt_bad, tr_bad, 2, pk.CommandName.CAPTURE)
     assert isinstance(nack, pk.NackPacket) and "unknown band" in nack.text
 
 
 def test_scene_labels_are_a_capability_a_hal_without_ground_truth_lacks(tmp_path):
-    cfg = load(tmp_path, HAL.format(scene="mixed") + "[segment]\nmethod = 'scene'\n")
+    cfg = load(tmp_path, robot("mixed", idle=False))
     hal_ = build_hal(cfg.hal)
     assert hal_.ground_truth is hal_.camera  # the fake camera knows what it rendered
     with pytest.raises(ConfigError, match="segment.method = 'scene' needs ground truth"):

@@ -5,7 +5,7 @@ import pytest
 from onboard.runtime import Mode
 from radio import packets as pk
 from radio.link import Delivered, LinkDown, LinkUp
-from tests.onboard.test_runtime import PLAN3, host_view, make, poses_by_seq, replies, sweep
+from tests.support.runtime import PLAN3, host_view, make, poses_by_seq, replies, sweep
 
 
 def mid_pose(fake_robot, *events):

@@ -10,10 +10,10 @@ from onboard import cli
 from onboard.runtime import Mode
 from onboard.watchdog import Notifier
 from tests.support import ROOT
+from tests.support.robots import robot_toml
 
 UNIT = ROOT / "examples" / "btf-robot.service"
-ROBOT = ('[hal]\nbody = "fake"\nscene = "black"\nsize = [40, 60]\n[segment]\nmethod = "scene"\n'
-         '[sweep]\nstart = 90\nstop = 60\nstep = 10\n[skip]\nmin_pixels = 20\n')
+ROBOT = robot_toml({"hal": {"scene": "black"}, "sweep": {"start": 90, "stop": 60, "step": 10}})
 
 
 @pytest.fixture

@@ -9,6 +9,7 @@ from onboard.link.outbox import OutboxFull
 from onboard.state import Interrupted
 from radio import packets as pk
 from radio.packets.commands import COMMANDS, CommandName
+from tests.support.robots import IDLE, SMALL, robot_toml
 from tools.cli import build_parser
 from tools.cli.cmd import command_of
 
@@ -54,7 +55,7 @@ def test_the_flags_say_which_commands_move_or_free_the_arm():
 
 
 def test_the_robot_has_a_handler_for_every_command(fake_robot):
-    rt, _ = fake_robot('[hal]\nbody = "fake"\nsize = [24, 32]\n[segment]\nmethod = "scene"\n')
+    rt, _ = fake_robot(robot_toml(SMALL))
     assert set(rt.dispatch.handlers) == set(COMMANDS)
 
 
@@ -71,8 +72,7 @@ def test_refusals_are_values_with_their_reason():
 
 
 def test_a_handler_refusal_reaches_the_nack_unchanged(fake_robot):
-    rt, _ = fake_robot('[hal]\nbody = "fake"\nsize = [24, 32]\n[segment]\nmethod = "scene"\n'
-                       '[sweep]\nautostart = false\n')
+    rt, _ = fake_robot(robot_toml(SMALL, IDLE))
     rt.failsafe.link_changed(True)
     rt.failsafe.link_changed(False)
     got = rt.dispatch.run(C.GOTO, {"elevation": 40.0, "azimuth": 0.0})

@@ -13,16 +13,15 @@ from pathlib import Path
 
 from radio.keys import write_key
 from tests.support import ROOT
+from tests.support.robots import EVERY_POSE, IDLE, LINKED, robot_toml
 from tools.demo.pty_cable import PtyCable
 from tools.station.control import StationClient, socket_path
 from tools.store.database import Store
 
-ROBOT = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n'
-         '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
-         '[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\nskip_measured_pose = false\n')
+# The rig's robot: on a real link, measuring every pose.
+ROBOT = (LINKED, EVERY_POSE)
 # The robot's own sweep of the 60 poses, at boot (the others wait for a SWEEP command).
-AUTONOMOUS = '[sweep]\nstart = 90\nstop = 32\nstep = 2\nazimuths = [0, 90]\n'
-IDLE = '[sweep]\nautostart = false\n'
+AUTONOMOUS = {"sweep": {"start": 90, "stop": 32, "step": 2, "azimuths": [0, 90]}}
 
 # 60 poses: 30 elevations at two azimuths
 PLAN = ["--start", "90", "--stop", "32", "--step", "2", "--azimuths", "0,90"]
@@ -34,12 +33,14 @@ def python(module: str) -> list[str]:
 
 
 class Rig:
-    def __init__(self, where: Path, robot_config: str = ROBOT + IDLE) -> None:
+    def __init__(self, where: Path, *changes: dict, **top: object) -> None:
+        """A rig in `where`: the robot is ROBOT with `changes` (IDLE when none are given) and
+        the top-level keys `top`."""
         self.where = where
         self.cable = PtyCable()
         self.key = write_key(where / "robot.key")
         self.db = where / "host.db"
-        (where / "robot.toml").write_text(robot_config)
+        (where / "robot.toml").write_text(robot_toml(*ROBOT, *(changes or (IDLE,)), **top))
         self.procs: list[subprocess.Popen] = []
         self.stations = 0
 

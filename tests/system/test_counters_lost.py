@@ -15,6 +15,7 @@ from radio.link import Delivered, Link, PeerStale
 from radio.ports import FdPort
 from radio.pump import LinkPump
 from tests.support import ROOT
+from tests.support.robots import IDLE, SMALL, robot_toml
 from tools.station.receiver import HostSession, ItemKind, Receiver
 
 KEY = bytes(range(32))
@@ -141,8 +142,7 @@ def _robot_run(tmp_path: Path, *extra: str) -> subprocess.CompletedProcess:
 
 def test_btf_robot_without_a_clock_and_its_counters_exits_2_with_the_remedy_then_runs_with_a_new_key(tmp_path):
     (tmp_path / "robot.toml").write_text(
-        'state_dir = "state"\n[hal]\nbody = "fake"\nsize = [24, 32]\n[link]\nkey_file = "robot.key"\n'
-        'clock = "none"\n[segment]\nmethod = "scene"\n[sweep]\nautostart = false\n')
+        robot_toml(SMALL, IDLE, {"link": {"key_file": "robot.key", "clock": "none"}}, state_dir="state"))
     (tmp_path / "robot.key").write_text(KEY.hex())
     (tmp_path / "robot.key").chmod(0o600)
     proc = _robot_run(tmp_path)
@@ -187,8 +187,7 @@ def test_the_robot_logs_a_stale_peer_once_and_reports_it_in_status(fake_robot):
 
     lines: list[str] = []
     tr = MemoryTransport()
-    rt, _ = fake_robot('[hal]\nbody = "fake"\nsize = [24, 32]\n[segment]\nmethod = "scene"\n'
-                       '[sweep]\nautostart = false\n', transport=tr, log=lines.append)
+    rt, _ = fake_robot(robot_toml(SMALL, IDLE), transport=tr, log=lines.append)
     rt.boot()
     tr.deliver(PeerStale(2, 16, "every frame from node 2 is refused as stale (16 in a row): ..."))
     rt.step()
@@ -200,8 +199,7 @@ def test_status_carries_the_link_s_rejections_by_reason(fake_robot):
     from onboard.link.transport import MemoryTransport
 
     tr = MemoryTransport()
-    rt, _ = fake_robot('[hal]\nbody = "fake"\nsize = [24, 32]\n[segment]\nmethod = "scene"\n'
-                       '[sweep]\nautostart = false\n', transport=tr)
+    rt, _ = fake_robot(robot_toml(SMALL, IDLE), transport=tr)
     rt.boot()
     tr.rejected.update({"tag": 3, "stale": 2})
     extras = rt.dispatch.status({}, None)

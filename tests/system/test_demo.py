@@ -9,10 +9,16 @@ from tools.demo.end_to_end import DemoConfig, run_demo
 
 @pytest.fixture(scope="module")
 def first_run(tmp_path_factory):
-    """The demo's result and its report page, read before a later test runs the demo again there."""
+    """The demo's result, its report page and a copy of its database, taken before a later test
+    runs the demo again there."""
+    import sqlite3
+
     out = tmp_path_factory.mktemp("demo")
     res = run_demo(out, DemoConfig(size=(48, 64), elevations=(30.0, 40.0, 50.0, 60.0)), progress=False)
-    return res, (out / "report" / "index.html").read_text()
+    copy = tmp_path_factory.mktemp("demo-db") / "scene.db"
+    with sqlite3.connect(res.db) as src, sqlite3.connect(copy) as dst:
+        src.backup(dst)
+    return res, (out / "report" / "index.html").read_text(), copy
 
 
 @pytest.fixture(scope="module")
@@ -50,6 +56,53 @@ def test_table1_covers_every_mask_method_in_both_spaces(result):
     assert all(-1.0 <= v <= 1.0 for r in result.table1 for v in r["correlation"].values())
 
 
+def test_the_report_shows_a_btf_section_per_scene_with_its_leave_one_out_table(first_run):
+    page = first_run[1]
+    assert page.index("BTF: the models against angle") < page.index("Captures per angle")
+    for scene in ("black", "white", "mixed"):
+        assert f"BTF of {scene} (robot" in page
+    # 5 elevations: 40, 45 and 50 have measured neighbours on both sides
+    assert page.count("<table class=loo>") == 3 and page.count("Leave one out: the interpolation beats") == 3
+
+
+def test_the_demos_interpolation_beats_the_nearest_angle_or_says_why(host, first_run):
+    import json
+
+    code, out, err = host("btf", "--db", first_run[2], "--json")
+    assert code == 0, err
+    docs = {d["scene"]: d for d in json.loads(out)["btfs"]}
+    assert set(docs) == {"black", "white", "mixed"}
+    for scene, doc in docs.items():
+        s, rows = doc["leave_one_out"]["summary"], doc["leave_one_out"]["rows"]
+        assert s["interior"] == 3 * 3 * (2 if scene == "mixed" else 1), scene
+        assert s["interpolation_better"] > s["interior"] / 2 and s["interpolated_mean_l1"] < s["nearest_mean_l1"], s
+        assert all(r["why_not"] for r in rows if not r["interpolation_better"])
+
+
+def test_the_demos_export_reads_back_one_row_per_stored_model(host, first_run, tmp_path):
+    duckdb = pytest.importorskip("duckdb")
+    pd = pytest.importorskip("pandas")
+    import pyarrow.dataset as ds
+
+    from tools.store.database import Store
+
+    db = first_run[2]
+    assert host("export", "--db", db, "--out", tmp_path / "x")[0] == 0
+    with Store.open(db) as store:
+        truth = {(c.robot, c.id, lab, b): (r.model.family.value, r.model.gamma, r.model.delta, r.model.xi,
+                                           r.model.lam, r.count) for c in store.captures()
+                 for (lab, b), r in store.models(c.id).items()}
+    assert len(truth) == 5 * (3 + 3 + 6)
+    tables = {"pyarrow": ds.dataset(tmp_path / "x", partitioning="hive").to_table().to_pylist(),
+              "duckdb": duckdb.sql(f"SELECT * FROM read_parquet('{tmp_path}/x/**/*.parquet', hive_partitioning = true,"
+                                   " hive_types_autocast = false)").df().to_dict("records"),
+              "pandas": pd.read_parquet(tmp_path / "x").to_dict("records")}
+    for name, rows in tables.items():
+        got = {(str(r["robot"]), r["capture_id"], r["label"], r["band"]):
+               (r["family"], r["gamma"], r["delta"], r["xi"], r["lam"], r["pixels"]) for r in rows}
+        assert len(rows) == len(truth) and got == truth, name
+
+
 def test_a_second_run_in_the_same_directory_starts_from_fresh_robot_state(result):
     # Robot state left by the first run (replay counters, outbox) must not reach the second.
     out = Path(result.db).parent
@@ -78,7 +131,7 @@ def test_a_robot_that_dies_is_reported_with_the_last_lines_of_its_stderr(tmp_pat
 def test_report_and_console_state_the_same_run_time(first_run):
     from tools.cli.demo import _summary
 
-    result, page = first_run
+    result, page, _ = first_run
     console = "\n".join(_summary(result))
     stated = f"run time {result.seconds:.1f} s"
     assert stated in console and stated in page.lower()

@@ -17,6 +17,7 @@ from radio.link import Link
 from radio.ports import FdPort
 from radio.pump import LinkPump
 from tests.support import ROOT
+from tests.support.robots import EVERY_POSE, LINKED, SWEEP_TWO_AZIMUTHS, robot_toml
 from tests.support.small_disk import SmallDisk, python, robot_argv
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
 from tools.store.database import Store
@@ -25,12 +26,8 @@ MiB = 1024 * 1024
 DISK, MIN_FREE, RESERVE = 16 * MiB, 4 * MiB, 2 * MiB
 ELEVATIONS = [90.0 - 2.0 * i for i in range(31)]
 POSES = {(e, a) for a in (0.0, 90.0) for e in ELEVATIONS}
-CONFIG = ('robot_id = 3\nstate_dir = "state"\n'
-          f'disk_min_free_bytes = {MIN_FREE}\ndisk_reserve_bytes = {RESERVE}\n'
-          '[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n'
-          '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
-          '[sweep]\nstep = 2.0\nazimuths = [0, 90]\n[segment]\nmethod = "scene"\n'
-          '[skip]\nmin_pixels = 20\nskip_measured_pose = false\n')
+CONFIG = robot_toml(LINKED, EVERY_POSE, SWEEP_TWO_AZIMUTHS, robot_id=3, state_dir="state",
+                    disk_min_free_bytes=MIN_FREE, disk_reserve_bytes=RESERVE)
 
 
 class Bench:
@@ -211,7 +208,7 @@ def test_listen_started_on_a_full_disk_says_so_in_one_line_and_exits_1(listener)
 
 def test_listen_whose_disk_fills_says_so_in_one_line_and_acknowledges_nothing_it_did_not_store(listener):
     from radio.link import Acked, LinkUp
-    from tests.tools.station.test_receiver import models_body
+    from tests.support.packets import models_body
 
     listener.start()
     assert listener.pump(lambda: any(isinstance(e, LinkUp) for e in listener.events)), "no link"

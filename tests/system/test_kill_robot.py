@@ -23,6 +23,7 @@ from radio.link import Link
 from radio.ports import FdPort
 from radio.pump import LinkPump
 from tests.support import ROOT
+from tests.support.robots import EVERY_POSE, LINKED, SWEEP_TWO_AZIMUTHS, robot_toml
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
 from tools.store.database import Store
 
@@ -31,10 +32,7 @@ from tools.store.database import Store
 ELEVATIONS = [90.0 - 2.0 * i for i in range(31)]
 POSES = [(e, a) for a in (0.0, 90.0) for e in ELEVATIONS]
 # The already-measured rule is off, so that it cannot hide a pose measured a second time.
-CONFIG = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n'
-          '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
-          '[sweep]\nstep = 2.0\nazimuths = [0, 90]\n[segment]\nmethod = "scene"\n'
-          '[skip]\nmin_pixels = 20\nskip_measured_pose = false\n')
+CONFIG = robot_toml(LINKED, EVERY_POSE, SWEEP_TWO_AZIMUTHS)
 
 
 def _robot(config: Path, port: str, limit_s: float) -> subprocess.Popen:

@@ -15,10 +15,10 @@ from radio.channel_port import Cable
 from radio.link import Delivered, Link
 from radio.pump import LinkPump
 from tests.support import ROOT
+from tests.support.robots import IDLE, SMALL, robot_toml
 
 C = pk.CommandName
-ROBOT = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n[segment]\nmethod = "scene"\n'
-         '[skip]\nmin_pixels = 20\n[sweep]\nautostart = false\n{extra}')
+ROBOT = robot_toml(IDLE)
 ISO = r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ"
 
 
@@ -44,7 +44,7 @@ def run_sweep(rt, tr):
 
 
 def test_torque_off_then_goto_and_sweep_are_refused_with_how_to_recover(fake_robot):
-    rt, tr = fake_robot(ROBOT.format(extra=""))
+    rt, tr = fake_robot(ROBOT)
     rt.boot()
     assert isinstance(command(rt, tr, 1, C.TORQUE_OFF), pk.AckPacket)
     for cid, name, args in ((2, C.GOTO, {"elevation": 70.0, "azimuth": 0.0}),
@@ -56,7 +56,7 @@ def test_torque_off_then_goto_and_sweep_are_refused_with_how_to_recover(fake_rob
 
 
 def test_torque_off_torque_on_sweep_measures_every_pose(fake_robot):
-    rt, tr = fake_robot(ROBOT.format(extra=""))
+    rt, tr = fake_robot(ROBOT)
     rt.boot()
     command(rt, tr, 1, C.TORQUE_OFF)
     ack = command(rt, tr, 2, C.TORQUE_ON)
@@ -74,7 +74,7 @@ def linked(fake_robot):
     clock = lambda: t[0]  # noqa: E731
     cable = Cable(ChannelConfig(latency=0.0, bandwidth=1e7, buffer=1 << 20), clock=clock)
     key = bytes(range(32))
-    rt, _ = fake_robot(ROBOT.format(extra="[link]\nheartbeat_s = 0.2\nfailsafe_s = 1.0\n"),
+    rt, _ = fake_robot(robot_toml(IDLE, {"link": {"heartbeat_s": 0.2, "failsafe_s": 1.0}}),
                        transport=LinkPump(Link(1, 2, 1, key, MemoryCounterStore(), heartbeat=0.2,
                                                link_timeout=1.0), cable.ends[0], clock=clock), clock=clock)
     host = LinkPump(Link(2, 1, 1, key, MemoryCounterStore(), heartbeat=0.2, link_timeout=1.0),
@@ -112,7 +112,7 @@ def test_a_clean_boot_and_a_lost_link_leave_no_errors_and_status_times_are_iso(f
 
 
 def test_set_takes_a_list_as_the_packet_carries_it(fake_robot):
-    rt, tr = fake_robot(ROBOT.format(extra=""))
+    rt, tr = fake_robot(ROBOT)
     rt.boot()
     # `btf-host cmd set sweep.azimuths [0,45]` sends a list, which the decoder hands over as a tuple
     ack = command(rt, tr, 1, C.SET, key="sweep.azimuths", value=[0, 45])
@@ -121,7 +121,7 @@ def test_set_takes_a_list_as_the_packet_carries_it(fake_robot):
 
 
 def test_send_mask_sends_the_map_of_the_capture_named_or_refuses(fake_robot):
-    rt, tr = fake_robot(ROBOT.format(extra=""))
+    rt, tr = fake_robot(ROBOT)
     rt.boot()
     seq = command(rt, tr, 1, C.CAPTURE).extras["seq"]
     nack = command(rt, tr, 2, C.SEND_MASK, seq=999)
@@ -149,8 +149,7 @@ def test_a_state_dir_that_cannot_be_used_is_one_line_and_exit_2(tmp_path):
     for where, words in (("a-file", "not a directory"), ("/proc/btf-state", "cannot create it"),
                          ("/proc/self/status/state", "cannot create it")):
         config = tmp_path / "robot.toml"
-        config.write_text(f'state_dir = "{where}"\n[hal]\nbody = "fake"\n[link]\nkey_file = "robot.key"\n'
-                          '[segment]\nmethod = "scene"\n')
+        config.write_text(robot_toml({"link": {"key_file": "robot.key"}}, state_dir=where))
         out = _robot(config, "--max-seconds", "5")
         lines = out.stderr.strip().splitlines()
         assert out.returncode == 2 and len(lines) == 1, out.stderr
@@ -161,8 +160,7 @@ def test_the_robot_says_a_line_per_pose_and_command_on_its_console(tmp_path):
     (tmp_path / "robot.key").write_text("00" * 32)
     (tmp_path / "robot.key").chmod(0o600)
     config = tmp_path / "robot.toml"
-    config.write_text('[hal]\nbody = "fake"\nsize = [24, 32]\n[link]\nkey_file = "robot.key"\n'
-                      '[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\n[sweep]\nstart = 90\nstop = 70\n')
+    config.write_text(robot_toml(SMALL, {"link": {"key_file": "robot.key"}, "sweep": {"start": 90, "stop": 70}}))
     # loop:// hears only itself: nothing is acknowledged, so it runs until it is stopped
     robot = subprocess.Popen([sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())",
                               "run", "--config", str(config), "--port", "loop://", "--max-seconds", "120"],

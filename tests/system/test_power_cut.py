@@ -15,11 +15,11 @@ from pathlib import Path
 import pytest
 
 from tests.support import ROOT
-from tests.support.station_rig import ROBOT, Rig, kill9, robot_log
+from tests.support.station_rig import Rig, kill9, robot_log
 from tools.store.database import Store
 
 # 42 poses: 21 elevations at two azimuths, swept at boot.
-SWEEP = '[sweep]\nstart = 90\nstop = 50\nstep = 2\nazimuths = [0, 90]\n'
+SWEEP = {"sweep": {"start": 90, "stop": 50, "step": 2, "azimuths": [0, 90]}}
 POSES = 42
 
 
@@ -46,7 +46,7 @@ def test_a_power_cut_after_the_robots_outbox_empties_loses_no_acknowledged_captu
     shim = build_shim(tmp_path)
     snapshots = tmp_path / "synced"
     snapshots.mkdir()
-    rig = Rig(tmp_path, ROBOT + SWEEP)
+    rig = Rig(tmp_path, SWEEP)
     try:
         db = rig.db.resolve()
         station = rig.station(env={"LD_PRELOAD": str(shim), "BTF_POWERCUT_DB": str(db),

@@ -14,6 +14,7 @@ from radio.link import Delivered, Link
 from radio.ports import FdPort
 from radio.pump import LinkPump
 from tests.support import ROOT
+from tests.support.robots import LINKED, robot_toml
 
 
 def receive_sweep(tmp_path, scene, rate=0.0, limit_s=120.0, radio=""):
@@ -28,9 +29,8 @@ def receive_sweep(tmp_path, scene, rate=0.0, limit_s=120.0, radio=""):
     # acknowledged). The one wall-clock bound is the settle timeout, which ends a stalled
     # servo (an injected fault) after 3 s; a healthy move takes under 1.5 s however loaded.
     (tmp_path / "robot.toml").write_text(
-        f'[hal]\nbody = "fake"\nscene = "{scene}"\nsize = [60, 80]\nfault_rate = {rate}\n'
-        f'fault_seed = 5\n[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
-        f'[sweep]\nsettle_timeout_s = 3\n[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\n')
+        robot_toml({"hal": {"scene": scene, "size": [60, 80], "fault_rate": rate, "fault_seed": 5}}, LINKED,
+                   {"sweep": {"settle_timeout_s": 3}}))
     robot = subprocess.Popen(
         [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())", "run",
          "--config", str(tmp_path / "robot.toml"), "--hal", "fake",

@@ -12,16 +12,15 @@ from pathlib import Path
 from radio.auth import MemoryCounterStore
 from radio.link import Delivered, Link
 from tests.support import ROOT
-from tests.tools.station.test_receiver import models_body
+from tests.support.packets import models_body
+from tests.support.robots import LINKED, robot_toml
 from tools.cli import main as host_main
 from tools.demo.pty_cable import PtyCable
 from tools.station.receiver import Receiver
 from tools.store.database import Store
 
 KEY = bytes(range(32))
-CONFIG = ('robot_id = 5\nstate_dir = "state"\n[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n'
-          '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
-          '[segment]\nmethod = "scene"\n[skip]\nmin_pixels = 20\n')
+CONFIG = robot_toml(LINKED, robot_id=5, state_dir="state")
 
 
 def _sweep_into(tmp_path: Path, db: Path) -> list[dict]:
@@ -135,12 +134,12 @@ def test_a_bit_rotted_outbox_is_moved_aside_and_the_robot_runs_on_a_new_one(tmp_
 def test_a_schema_7_database_keeps_every_row_and_its_models_when_captures_gain_incarnations(tmp_path):
     """Schema 8 rebuilds the captures table (a UNIQUE constraint changes only so); with foreign
     keys on, dropping the old table would have cascaded to every model."""
-    from tests.tools.data.test_ingest import _SCHEMA_1
+    from tests.support.databases import SCHEMA_1
     from tools.store.schema import _MIGRATIONS, APPLICATION_ID
 
     db = tmp_path / "v7.sqlite"
     con = sqlite3.connect(db)
-    con.executescript(_SCHEMA_1 + "".join(_MIGRATIONS[v] for v in range(1, 7))
+    con.executescript(SCHEMA_1 + "".join(_MIGRATIONS[v] for v in range(1, 7))
                       + f"PRAGMA user_version = 7; PRAGMA application_id = {APPLICATION_ID};")
     con.close()
     with Store.open(tmp_path / "new.sqlite") as fresh:  # the rows a version-7 host wrote

@@ -13,13 +13,13 @@ from collections import Counter
 
 import pytest
 
-from tests.support.station_rig import AUTONOMOUS, POSES, ROBOT, Rig, kill9
+from tests.support.station_rig import AUTONOMOUS, POSES, Rig, kill9
 
-OUTBOX = "outbox_quota_bytes = 4096\n"  # the robot runs at most a few poses ahead of the station
+OUTBOX = 4096  # bytes: the robot runs at most a few poses ahead of the station
 
 
 def kill_during_sweep(tmp_path, kills: int, radio: str = "", clients: int = 1) -> None:
-    rig = Rig(tmp_path, OUTBOX + ROBOT.replace("size = [40, 60]", "size = [80, 100]") + AUTONOMOUS)
+    rig = Rig(tmp_path, {"hal": {"size": [80, 100]}}, AUTONOMOUS, outbox_quota_bytes=OUTBOX)
     rng = random.Random(int(os.environ.get("BTF_KILL_SEED", "15")))
     answers: list = []
     stop = threading.Event()

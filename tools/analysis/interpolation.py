@@ -177,19 +177,30 @@ class DirectionInterpolator:
         return [(int(i), float(w[i])) for i in np.flatnonzero(w)]
 
 
+def capture_direction(c) -> Direction:
+    """A stored capture's measured view (and light) direction, to a millionth of a degree."""
+    lel, laz = c.illumination
+    return Direction(round(c.measured[0], 6), round(c.measured[1] % 360.0, 6),
+                     None if lel is None else round(lel, 6), None if laz is None else round(laz % 360.0, 6))
+
+
+def latest_by_direction(store, robot: str | None = None, space: str | None = None,
+                        scene: str | None = None) -> dict[Direction, object]:
+    """For every measured direction in a Store, its latest capture."""
+    latest: dict[Direction, object] = {}
+    for c in store.captures(robot, space, scene):
+        d = capture_direction(c)
+        if d not in latest or c.id > latest[d].id:
+            latest[d] = c
+    return latest
+
+
 def models_by_direction(store, robot: str | None = None, space: str | None = None,
                         scene: str | None = None, exposure_us: float | None = None,
                         normalise: bool = False) -> dict[Direction, dict[tuple[int, int], Johnson]]:
     """For every measured direction in a Store, the models of its latest capture, at its
     exposure or as `tools.analysis.radiometry.sweep_models` brings them to `exposure_us` or normalises them."""
-    latest: dict[Direction, object] = {}
-    for c in store.captures(robot, space, scene):
-        lel, laz = c.illumination
-        d = Direction(round(c.measured[0], 6), round(c.measured[1] % 360.0, 6),
-                      None if lel is None else round(lel, 6), None if laz is None else round(laz % 360.0, 6))
-        if d not in latest or c.id > latest[d].id:
-            latest[d] = c
-    return sweep_models(store, latest, exposure_us, normalise)
+    return sweep_models(store, latest_by_direction(store, robot, space, scene), exposure_us, normalise)
 
 
 def synthesize_blend(mask: np.ndarray, neighbours: Sequence[tuple[float, Models]],

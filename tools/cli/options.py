@@ -74,3 +74,14 @@ def choose_source(captures, db, robot: str | None, scene: str | None) -> tuple[s
         raise CliError(f"database {db} holds several robots and scenes: {holdings(chosen)}; "
                        "choose one with --robot or --scene")
     return pairs[0]
+
+
+def sources_of(captures, db, robot: str | None, scene: str | None) -> list[tuple[str, str]]:
+    """Every (robot, scene) the filters leave (several allowed); an error when there is none."""
+    if not captures:
+        raise CliError(f"database {db}: no captures")
+    chosen = sorted({(c.robot, c.scene) for c in captures if robot in (None, c.robot) and scene in (None, c.scene)})
+    if not chosen:
+        choose_source(captures, db, robot, scene)  # names what the database holds
+    return chosen
+

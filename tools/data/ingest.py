@@ -80,9 +80,12 @@ class IngestReport:
     damaged: tuple[Damaged, ...] = ()
 
 
+DATASET_PREFIX = "dataset:"  # of the robot ids datasets' captures are stored under, before the folder
+
+
 def dataset_robot(root: str | Path) -> str:
     """The robot id under which a dataset's captures are stored."""
-    return f"dataset:{Path(root).resolve()}"
+    return f"{DATASET_PREFIX}{Path(root).resolve()}"
 
 
 def fit_job(job: Job) -> Fitted:

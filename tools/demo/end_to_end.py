@@ -46,7 +46,7 @@ from tools.report.document import write_report
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
 from tools.store.database import Store
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]  # the repository: the robot processes run from it
 PLATES = ("black", "white", "mixed")
 UNSEEN = 45.0
 PAPER_CORRELATION = 0.97
@@ -346,6 +346,7 @@ def run_demo(out: Path, cfg: DemoConfig = DemoConfig(), progress: bool = True) -
 
     t0 = time.monotonic()
     out.mkdir(parents=True, exist_ok=True)
+    out = out.resolve()  # the robots run from the repository, not from here
     work = out / "work"
     # Robot state from an earlier run (outbox, replay counters, sequence numbers) would be
     # replayed into the new database or make the robots refuse the new host's frames.

@@ -11,9 +11,10 @@ from collections import OrderedDict
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 from tools.analysis.radiometry import describe
+from tools.page.btf_panel import panel
 from tools.report.capture_views import Frames, png, views
 from tools.report.look import capture_section
 from tools.station.snapshot import iso
@@ -105,6 +106,20 @@ def end_with_parent() -> None:
 def _warm() -> None:
     """Load the worker's libraries before the first request needs them."""
 
+
+def btf_query(query: Mapping[str, str]) -> dict:
+    """The BTF panel's parameters from the address's query (text), checked (ValueError: which one)."""
+    out: dict[str, Any] = {k: query.get(k) or None for k in ("robot", "scene", "space")}
+    if query.get("scene") == "":
+        out["scene"] = ""  # a robot's captures without a scene name
+    for name in ("label", "band"):
+        v = query.get(name) or ""
+        if v and (not v.isdigit() or len(v) > 6):
+            raise ValueError(f"{name} must be a small non-negative integer, got {v[:20]!r}")
+        out[name] = int(v) if v else None
+    return out
+
+
 class PageData:
     """The page's reads and drawings, off the station's loop: `cards()`, `refresh()` and
     `drawn(capture_id, what)` are awaited on the loop."""
@@ -114,8 +129,10 @@ class PageData:
         self.index = CaptureIndex(self.db)
         self._reader = ThreadPoolExecutor(1, thread_name_prefix="page-reader")
         self._pool: ProcessPoolExecutor | None = None
+        self._btf_pool: ProcessPoolExecutor | None = None
         self._cache: OrderedDict[tuple[int, str, int], dict] = OrderedDict()
         self.rev = 0  # bumped when a mask arrives: drawings made before it may lack it
+        self._btf: dict[tuple, dict] = {}  # the BTF panel's last answer
 
     async def refresh(self) -> list[dict]:
         return await asyncio.get_running_loop().run_in_executor(self._reader, self.index.refresh)
@@ -132,6 +149,10 @@ class PageData:
             self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
                                              initializer=end_with_parent)
             self._pool.submit(_warm)
+        if self._btf_pool is None:  # its own process: the panel never waits behind a capture's drawing
+            self._btf_pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
+                                                 initializer=end_with_parent)
+            self._btf_pool.submit(_warm)
 
     async def drawn(self, capture_id: int, what: str) -> dict:
         key = (capture_id, what, self.rev)
@@ -150,11 +171,32 @@ class PageData:
             self._cache.popitem(last=False)
         return out
 
+    async def btf(self, query: Mapping[str, str]) -> tuple[int, dict]:
+        """(HTTP status, JSON) of the BTF panel (`tools.page.btf_panel`), computed in a worker and
+        kept until the next capture is stored."""
+        try:
+            params = btf_query(query)
+        except ValueError as exc:
+            return 400, {"error": str(exc)}
+        key = ("btf", self.index.last_id, *sorted(params.items()))
+        if key not in self._btf:
+            self.start_worker()
+            try:
+                out = await asyncio.get_running_loop().run_in_executor(self._btf_pool, panel, self.db, params)
+            except BrokenProcessPool:
+                self._btf_pool = None
+                return 503, {"error": "the drawing worker stopped; it restarts with the next request"}
+            except Exception as exc:  # a BTF the worker cannot compute: said, never a traceback
+                return 500, {"error": f"{type(exc).__name__}: {exc}".splitlines()[0]}
+            self._btf = {key: out}  # the latest capture's only: older ones are stale
+        return 200, self._btf[key]
+
     def close(self) -> None:
         self._reader.submit(self.index.close).result()
         self._reader.shutdown()
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
+        for pool in (self._pool, self._btf_pool):
+            if pool is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
 
 
 def static_dir() -> Path:

@@ -108,7 +108,8 @@ class PageServer:
             web.get("/", self._index), web.get("/static/{name}", self._static), web.get("/events", self._events),
             web.get("/api/state", self._state), web.post("/api/command", self._command),
             web.get("/capture/{id:\\d+}/section", self._section),
-            web.get("/capture/{id:\\d+}/{name:[a-z]+}.png", self._image)])
+            web.get("/capture/{id:\\d+}/{name:[a-z]+}.png", self._image),
+            web.get("/api/btf", self._btf)])
         self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0)
         await self._runner.setup()
         # Listening here rather than through a TCPSite: the gate is the protocol factory, so a
@@ -323,6 +324,11 @@ class PageServer:
         if data is None:
             raise web.HTTPNotFound(text=f"capture {request.match_info['id']} has no {name} image")
         return web.Response(body=data, content_type="image/png", headers={"Cache-Control": "max-age=3600"})
+
+    async def _btf(self, request: web.Request) -> web.Response:
+        """The BTF panel's points, curve and leave-one-out figures (`tools.page.btf_panel`)."""
+        status, body = await self.data.btf(request.query)
+        return web.json_response(body, status=status)
 
 
 async def _send(resp: web.StreamResponse, msg: dict) -> None:

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from tools.analysis.radiometry import describe as describe_camera
+from tools.report.btf_section import btf_sections
 from tools.report.capture_views import Measured, png, views
 from tools.report.look import CSS, MODEL_HEAD, capture_section, model_rows, note, table
 from tools.store.database import Store
@@ -63,6 +64,7 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
     parts = [f"<!doctype html><meta charset=utf-8><title>btfscout report</title><style>{CSS}</style>",
              f"<h1>btfscout report: {html.escape(store.path.name)}"
              + (f" ({html.escape(chosen)})" if chosen else "") + "</h1>",
+             *btf_sections(store, out, robot, scene),
              "<h2>Captures per angle</h2>",
              table(["scene", "robot", "seq", "commanded", "measured", "space", "models", "camera"],
                     [[c.scene, c.robot, c.sequence, "" if c.commanded[0] is None else f"{c.commanded[0]:.1f}",

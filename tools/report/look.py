@@ -21,6 +21,8 @@ td,th{border:1px solid var(--line);padding:2px 6px;text-align:right}th{backgroun
 td.l,th.l{text-align:left}
 img.view{image-rendering:pixelated;width:240px;margin:2px;background:#eee}
 img.hist{width:480px;max-width:100%}
+img.btf{width:891px;max-width:100%}
+table.loo td{white-space:nowrap}
 figure{display:inline-block;margin:2px;vertical-align:top}
 figcaption{font-size:11px;text-align:center;color:var(--idle)}
 .note{color:var(--idle)}.ok{color:var(--ok)}.bad{color:var(--bad)}.warn{color:var(--warn)}

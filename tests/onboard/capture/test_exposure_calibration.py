@@ -11,9 +11,10 @@ from onboard.capture.exposure import EXPOSURE_FILE, calibrate_exposure, load_exp
 from onboard.cli import main as robot
 from onboard.cli.run import _calibrated_exposure
 from onboard.sweep.plan import SweepPlan
+from tests.support.robots import robot_toml
 
-FIELD = ('state_dir = "state"\n[hal]\nbody = "fake"\nscene = "field"\nsize = [120, 160]\n'
-         '[sweep]\nstart = 90\nstop = 30\nstep = 10\nazimuths = [0, 90, 180, 270]\n')
+FIELD = ({"hal": {"scene": "field", "size": [120, 160]}, "segment": None, "skip": None,
+          "sweep": {"start": 90, "stop": 30, "step": 10, "azimuths": [0, 90, 180, 270]}},)
 
 
 def saturated(image: np.ndarray) -> float:
@@ -27,7 +28,7 @@ def test_the_plan_extremes_are_its_first_and_last_elevation_at_each_azimuth():
 
 
 def test_from_a_start_that_saturates_30_percent_every_view_of_the_field_ends_under_1_percent(tmp_path, capsys):
-    (tmp_path / "robot.toml").write_text(FIELD)
+    (tmp_path / "robot.toml").write_text(robot_toml(*FIELD, state_dir="state"))
     start = 60_000.0
     first = render("field", ViewAngles(90.0), size=(120, 160), exposure=start / 10_000).image
     assert 0.28 <= saturated(first) <= 0.34  # the start: 30% of the straight-down view clips
@@ -51,7 +52,7 @@ def test_from_a_start_that_saturates_30_percent_every_view_of_the_field_ends_und
 
 
 def test_run_applies_the_stored_exposure_over_the_config(tmp_path, capsys):
-    (tmp_path / "robot.toml").write_text(FIELD + "[camera]\nexposure = 10000\n")
+    (tmp_path / "robot.toml").write_text(robot_toml(*FIELD, {"camera": {"exposure": 10000}}, state_dir="state"))
     cfg = config.load(tmp_path / "robot.toml")
     assert _calibrated_exposure(cfg) is cfg  # nothing stored yet
     (tmp_path / "state").mkdir()

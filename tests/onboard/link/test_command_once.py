@@ -6,9 +6,9 @@ import pytest
 
 from onboard.link.outbox import REMEMBERED_REPLIES, Outbox, Reply
 from radio import packets as pk
+from tests.support.robots import IDLE, robot_toml
 
-CONFIG = ('[hal]\nbody = "fake"\nscene = "mixed"\nsize = [40, 60]\n[segment]\nmethod = "scene"\n'
-          '[skip]\nmin_pixels = 20\n[sweep]\nautostart = false\n')
+CONFIG = robot_toml(IDLE)
 C = pk.CommandName
 
 

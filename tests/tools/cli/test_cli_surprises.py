@@ -13,7 +13,7 @@ import pytest
 
 from btf.fit.fitter import FrameFitter
 from tests.support import ROOT
-from tests.tools.cli.test_host_cli import plate
+from tests.support.images import plate
 from tools.cli import main
 from tools.data.images import read_image, read_mask, write_image, write_mask
 from tools.store.database import Store

@@ -11,7 +11,8 @@ from radio.auth import MemoryCounterStore
 from radio.keys import write_key
 from radio.link import Link
 from tests.support import ROOT
-from tests.tools.station.test_receiver import models_body
+from tests.support.packets import models_body
+from tests.support.robots import IDLE, LINKED, robot_toml
 from tools.cli import main
 from tools.demo.pty_cable import PtyCable
 
@@ -139,9 +140,7 @@ def robot_port(tmp_path_factory):
     work = tmp_path_factory.mktemp("robot")
     key = write_key(work / "robot.key")
     (work / "robot.toml").write_text(
-        'robot_id = 4\nstate_dir = "state"\n[hal]\nbody = "fake"\nscene = "mixed"\nsize = [48, 64]\n'
-        '[link]\nkey_file = "robot.key"\nheartbeat_s = 0.2\nfailsafe_s = 30\n'
-        '[sweep]\nautostart = false\n[segment]\nmethod = "scene"\n')
+        robot_toml(LINKED, IDLE, {"hal": {"size": [48, 64]}, "skip": None}, robot_id=4, state_dir="state"))
     bridge = PtyCable()
     with open(work / "stderr", "wb") as err:
         robot = subprocess.Popen(

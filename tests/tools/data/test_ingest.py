@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from btf.fit.fitter import FrameFitter
+from tests.support.databases import SCHEMA_1
 from tools.cli import main
 from tools.data.datasets import Angles, write_rendered
 from tools.data.images import read_image, read_mask
@@ -124,23 +125,6 @@ def test_bad_masks_and_spaces_are_named(utia, tmp_path):
         ingest(utia, "utia", tmp_path / "x.db", mask=small, workers=0)
 
 
-# The first released schema, verbatim: what a version-1 database on disk holds.
-_SCHEMA_1 = """
-CREATE TABLE captures (id INTEGER PRIMARY KEY, robot TEXT NOT NULL, sequence INTEGER NOT NULL,
-    time REAL NOT NULL, cmd_elevation REAL, cmd_azimuth REAL, elevation REAL NOT NULL,
-    azimuth REAL NOT NULL, space TEXT NOT NULL, bands TEXT NOT NULL, scene TEXT NOT NULL DEFAULT '',
-    UNIQUE (robot, sequence));
-CREATE TABLE models (capture INTEGER NOT NULL REFERENCES captures(id) ON DELETE CASCADE,
-    label INTEGER NOT NULL, band INTEGER NOT NULL, family TEXT NOT NULL,
-    gamma REAL NOT NULL, delta REAL NOT NULL, xi REAL NOT NULL, lam REAL NOT NULL,
-    p0 REAL, p1 REAL, p2 REAL, p3 REAL, z REAL, count INTEGER NOT NULL, beta1 REAL, beta2 REAL,
-    censored_low INTEGER NOT NULL DEFAULT 0, censored_high INTEGER NOT NULL DEFAULT 0,
-    PRIMARY KEY (capture, label, band));
-CREATE INDEX models_by_region ON models (label, band);
-CREATE TABLE masks (id INTEGER PRIMARY KEY, robot TEXT NOT NULL DEFAULT '', key TEXT NOT NULL,
-    height INTEGER NOT NULL, width INTEGER NOT NULL, encoding TEXT NOT NULL, data BLOB NOT NULL,
-    UNIQUE (robot, key));
-"""
 
 
 def test_schema_1_database_is_upgraded_in_place(utia, tmp_path):
@@ -148,7 +132,7 @@ def test_schema_1_database_is_upgraded_in_place(utia, tmp_path):
 
     db = tmp_path / "old.db"
     con = sqlite3.connect(db)
-    con.executescript(_SCHEMA_1 + f"PRAGMA user_version = 1; PRAGMA application_id = {APPLICATION_ID};"
+    con.executescript(SCHEMA_1 + f"PRAGMA user_version = 1; PRAGMA application_id = {APPLICATION_ID};"
                       "INSERT INTO captures (robot, sequence, time, elevation, azimuth, space, bands)"
                       " VALUES ('rover', 0, 1.0, 45, 10, 'rgb', '[\"R\"]');")
     con.close()

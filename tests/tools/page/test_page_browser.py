@@ -8,10 +8,11 @@ import shutil
 import pytest
 
 from tests.support.browser import chromium, need_chromium, page_address
-from tests.support.station_rig import ROBOT, Rig
+from tests.support.robots import IDLE
+from tests.support.station_rig import Rig
 
 # The robot holds the arm after 1.5 s without the base (the station calls the link down after 5 s).
-CONFIG = ROBOT.replace("failsafe_s = 30", "failsafe_s = 1.5") + "[sweep]\nautostart = false\n"
+QUICK_FAILSAFE = {"link": {"failsafe_s": 1.5}}
 PLAN = "90,70,50,30,10"  # 20° apart (a sixth of a second for the fake servos), at azimuths 0 and 90
 
 # Every value the progress text and the link and mode badges take, in order (the page's DOM).
@@ -30,7 +31,7 @@ WATCH = """() => {
 @pytest.fixture
 def rig(tmp_path):
     need_chromium()
-    r = Rig(tmp_path, CONFIG)
+    r = Rig(tmp_path, QUICK_FAILSAFE, IDLE)
     yield r
     r.close()
 

@@ -7,7 +7,7 @@ import json
 from onboard.link.status import flat
 from onboard.sweep.plan import SweepPlan
 from radio import packets as pk
-from tests.tools.station.test_receiver import models_body
+from tests.support.packets import models_body
 from tools.page.data import CaptureIndex
 from tools.station.receiver import Item, ItemKind, Receiver
 from tools.station.snapshot import StationSnapshot

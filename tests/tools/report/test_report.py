@@ -2,28 +2,18 @@
 import numpy as np
 
 from radio import packets as pk
-from tests.tools.station.test_receiver import models_body
+from tests.support.packets import filled_database, models_body
 from tools.cli import main
 from tools.report.document import write_report
 from tools.station.receiver import Receiver
 from tools.store.database import Store
 
 
-def filled(path):
-    with Store.open(path) as s:
-        rx = Receiver(s, scene="mixed")
-        body, _, mask = models_body(1, 50.0)
-        rx.handle(pk.encode_mask(mask, robot_id=3, seq=1))
-        rx.handle(body)
-        rx.handle(models_body(2, 70.0)[0])  # no mask of its own: uses capture 1's
-    return path
-
-
 def test_report_has_the_captures_models_synthetic_images_and_histograms(tmp_path):
-    db = filled(tmp_path / "scene.db")
+    db = filled_database(tmp_path / "scene.db")
     with Store.open(db) as s:
         html = write_report(s, tmp_path / "rep").read_text()
-    assert html.count("<h3>") == 2
+    assert html.count("<div class=capture ") == 2  # one section per capture
     assert "SU" in html or "SB" in html or "SL" in html or "NORMAL" in html.upper()
     pngs = sorted(p.name for p in (tmp_path / "rep").glob("*.png"))
     assert len([p for p in pngs if p.endswith("_synthetic.png")]) == 2
@@ -41,19 +31,19 @@ def test_report_cli_refuses_missing_corrupt_and_empty_databases(tmp_path, capsys
     assert main(["report", "--db", str(tmp_path / "empty.db"), "--out", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 3 and "no such file" in err[0] and "not an SQLite" in err[1] and "no captures" in err[2]
-    assert main(["report", "--db", str(filled(tmp_path / "ok.db")), "--out", str(tmp_path / "r")]) == 0
+    assert main(["report", "--db", str(filled_database(tmp_path / "ok.db")), "--out", str(tmp_path / "r")]) == 0
     assert (tmp_path / "r" / "index.html").is_file()
 
 
 def test_captures_with_dependence_show_independent_and_correlated_synthesis_beside_measured(tmp_path):
     from hal.interfaces import ViewAngles
     from hal.scene import render
-    from tests.tools.station.test_receiver import _dependence
+    from tests.support.packets import dependence_body
 
     with Store.open(tmp_path / "scene.db") as s:
         rx = Receiver(s, scene="mixed")
         rx.handle(pk.encode_mask(models_body(1, 60.0)[2], robot_id=3, seq=1))
-        rx.handle(_dependence(1, 60.0)[0])
+        rx.handle(dependence_body(1, 60.0)[0])
         rx.handle(models_body(2, 70.0)[0])  # no dependence: independent synthesis only
         page = write_report(s, tmp_path / "rep",
                             measured=lambda c: render(c.scene, ViewAngles(c.elevation, 0.0), (40, 48), seed=0).image)

@@ -18,14 +18,14 @@ from radio.auth import MemoryCounterStore
 from radio.keys import load_key, write_key
 from radio.link import Link
 from radio.packets.camera import decode_camera, encode_camera
+from tests.support.robots import IDLE, robot_toml
 from tools.analysis.radiometry import settings_json
 from tools.cli import main as host
 from tools.station.receiver import Receiver
 from tools.store.database import CorruptDatabase, Store
 
-ROBOT = ('[hal]\nbody = "fake"\nscene = "field"\nsize = [60, 80]\nreference = true\n[segment]\nmethod = "scene"\n'
-         '[skip]\nmin_pixels = 20\n[sweep]\nstart = 90\nstop = 80\nstep = 10\n{camera}')
-LOCKED = '[camera]\nexposure = 20000\ngain = 2\nwhite_balance = "5000K"\nreference_label = 7\n'
+FIELD = {"hal": {"scene": "field", "size": [60, 80], "reference": True}, "sweep": {"start": 90, "stop": 80, "step": 10}}
+LOCKED = {"camera": {"exposure": 20000, "gain": 2, "white_balance": "5000K", "reference_label": 7}}
 CODEC = PercentileCodec.for_levels(256)
 
 
@@ -123,20 +123,20 @@ def test_a_camera_that_keeps_its_automatics_is_refused_unless_allow_auto_then_fl
     def robot(camera, where):
         hal = build_hal({"body": "fake", "scene": "field", "size": (60, 80), "camera_honours_lock": False})
         hal.camera.open(80, 60)
-        return fake_robot(ROBOT.format(camera=camera), where=where, hal=hal)
+        return fake_robot(robot_toml(FIELD, camera), where=where, hal=hal)
 
-    rt, tr = robot("", tmp_path / "strict")
+    rt, tr = robot({}, tmp_path / "strict")
     sweep(rt)
     skipped = [p for p in decoded(tr) if isinstance(p, pk.StatusPacket) and "skipped_index" in p.extras]
     assert not models(tr) and len(skipped) == 2
     assert all("camera does not hold its lock" in p.text and "allow_auto" in p.text for p in skipped)
-    rt, tr = robot("[camera]\nallow_auto = true\n", tmp_path / "lenient")
+    rt, tr = robot({"camera": {"allow_auto": True}}, tmp_path / "lenient")
     sweep(rt)
     assert len(models(tr)) == 2 and all(p.camera.unlocked for p in models(tr))
 
 
 def test_set_changes_the_camera_at_run_time_and_the_next_capture_says_so(fake_robot):
-    rt, tr = fake_robot(ROBOT.format(camera=LOCKED).replace("step = 10\n", "step = 10\nautostart = false\n"))
+    rt, tr = fake_robot(robot_toml(FIELD, LOCKED, IDLE))
     rt.boot()
     for cid, name, args in ((1, pk.CommandName.SET, {"key": "camera.exposure", "value": 5000}),
                             (2, pk.CommandName.SET, {"key": "camera.white_balance", "value": "warm"}),
@@ -154,7 +154,7 @@ def test_set_changes_the_camera_at_run_time_and_the_next_capture_says_so(fake_ro
 # -- the round trip ---------------------------------------------------------------------------
 
 def test_settings_round_trip_robot_packet_database_decode(fake_robot, tmp_path, capsys):
-    rt, tr = fake_robot(ROBOT.format(camera=LOCKED))
+    rt, tr = fake_robot(robot_toml(FIELD, LOCKED))
     taken = []
     shoot = rt.pipeline.shoot
     rt.pipeline.shoot = lambda *a: taken.append(shoot(*a)) or taken[-1]

@@ -15,7 +15,7 @@ from radio.link import Acked, Link, LinkUp
 from radio.ports import FdPort
 from radio.pump import LinkPump
 from tests.support import ROOT
-from tests.tools.station.test_receiver import models_body
+from tests.support.packets import models_body
 from tools.demo.pty_cable import PtyCable
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver, StoreFailed
 from tools.store.database import Store

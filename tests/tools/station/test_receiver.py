@@ -9,22 +9,13 @@ from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.link import Link
 from radio.pump import LinkPump
+from tests.support.packets import dependence_body, models_body
 from tools.station.receiver import HostSession, ItemKind, Receiver, mask_key
 from tools.store.database import Store
 
 KEY = bytes(range(32))
 
 
-def models_body(seq, elevation=60.0, scene="mixed", extras=None, space="rgb", dependence=None):
-    view = render(scene, ViewAngles(elevation, 0.0), (40, 48), seed=0)
-    f = FrameFitter(4, 3)
-    f.add(view.image, view.mask)
-    fits = f.fit()
-    bands = ("R", "G", "B") if space == "rgb" else ("P1", "P2", "P3")
-    body = pk.encode_models(fits, robot_id=3, seq=seq, time=100.0 + seq, commanded=(elevation, 0.0),
-                            measured=(elevation + 0.2, 0.1), feature_space=space, bands=bands,
-                            extras=extras, dependence=dependence)
-    return body, fits, view.mask
 
 
 @pytest.fixture
@@ -153,18 +144,10 @@ def test_over_the_link_captures_are_stored_before_acknowledgement_and_commands_a
     assert host.answers[cid].text.startswith("ACK")
 
 
-def _dependence(seq, elevation=60.0):
-    """A MODELS body carrying the dependence measured on its own view, and that dependence."""
-    from btf.fit.dependence import measure
-
-    view = render("mixed", ViewAngles(elevation, 0.0), (40, 48), seed=0)
-    _, fits, _ = models_body(seq, elevation)
-    deps = measure(view.image, view.mask, {k: r.model for k, r in fits.items()})
-    return models_body(seq, elevation, dependence=deps)[0], deps
 
 
 def test_dependence_in_a_models_packet_is_stored_and_reused_by_unchanged_markers(store):
-    body, deps = _dependence(1)
+    body, deps = dependence_body(1)
     assert deps
     rx = Receiver(store)
     assert "dependence" in rx.handle(body).text

@@ -14,6 +14,7 @@ from urllib.request import urlopen
 import pytest
 
 from tests.support.browser import page_address
+from tests.support.robots import robot_toml
 from tests.support.station_rig import PLAN, POSES, ROBOT, ROOT, Rig, kill9, python, robot_log
 
 
@@ -167,7 +168,7 @@ def test_a_wrong_key_is_said_in_one_line_and_the_station_goes_on_listening(rig, 
 
 
 def test_a_restarted_station_says_the_robots_resync_as_such_and_not_as_refused_frames(rig):
-    (rig.where / "robot.toml").write_text(ROBOT + "[sweep]\nstart = 90\nstop = 40\nstep = 2\n")  # autonomous
+    (rig.where / "robot.toml").write_text(robot_toml(*ROBOT, {"sweep": {"start": 90, "stop": 40, "step": 2}}))
     robot = rig.robot()
     first = rig.station()
     rig.wait_up(first)
@@ -195,7 +196,8 @@ def restarted(log: list[dict]) -> int:
 
 def test_cmd_without_a_station_stores_what_arrives_and_acknowledges_nothing_it_drops(rig):
     """Issue 15, item 1: `cmd capture` used to ACK the robot's captures and discard them."""
-    (rig.where / "robot.toml").write_text(ROBOT + "[sweep]\nstart = 90\nstop = 60\nstep = 10\n")  # autonomous
+    autonomous = {"sweep": {"start": 90, "stop": 60, "step": 10}}
+    (rig.where / "robot.toml").write_text(robot_toml(*ROBOT, autonomous))
     robot = rig.robot("--exit-when-idle")
     acked = []
     for _ in range(2):

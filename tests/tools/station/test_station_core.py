@@ -12,7 +12,7 @@ from radio.channel import ChannelConfig
 from radio.channel_port import Cable
 from radio.link import Acked, Link
 from radio.pump import LinkPump
-from tests.tools.station.test_receiver import models_body
+from tests.support.packets import models_body
 from tools.station.bus import EventBus
 from tools.station.log import StationLog
 from tools.station.receiver import Receiver

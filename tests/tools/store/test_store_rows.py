@@ -4,7 +4,7 @@ import sqlite3
 
 import pytest
 
-from tests.tools.report.test_report import filled
+from tests.support.packets import filled_database
 from tools.cli import main
 from tools.station.receiver import mask_key
 from tools.store.database import CorruptDatabase, Store
@@ -28,7 +28,7 @@ BAD_ROWS = {
 
 
 def _spoiled(tmp_path, sql):
-    db = filled(tmp_path / "scene.db")
+    db = filled_database(tmp_path / "scene.db")
     conn = sqlite3.connect(db)
     conn.execute(sql)
     conn.commit()
@@ -58,7 +58,7 @@ def test_the_store_names_the_capture_and_model_of_a_nan_row(tmp_path):
 
 
 def test_a_mask_row_is_checked_before_its_png_is_decoded(tmp_path):
-    db = filled(tmp_path / "scene.db")
+    db = filled_database(tmp_path / "scene.db")
     with Store.open(db) as s:
         good = s.mask(mask_key(1), "3")
     conn = sqlite3.connect(db)

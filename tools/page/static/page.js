@@ -205,6 +205,111 @@ $("grid").addEventListener("click", (ev) => {
 });
 $("follow").onclick = () => { if (state.newest) select(state.newest.key, true); };
 
+// -- the BTF -------------------------------------------------------------------------------
+// One region and band of one sweep against its main angle: the measured points, the curve the
+// interpolation draws between them and leave one out, fetched again after every stored capture.
+const btf = {source: "", region: "", stat: "mean", busy: false, again: false, data: null};
+const SERIES = ["#0969da", "#cf222e", "#1a7f37", "#8250df", "#bf8700", "#57606a"];
+const STAT_AXIS = {mean: "mean (level)", sd: "standard deviation (levels)", skewness: "skewness (no unit)",
+  kurtosis: "kurtosis β2 (no unit)"};
+const num = (v) => (Math.abs(v) >= 100 ? v.toFixed(0) : Math.abs(v) >= 10 ? v.toFixed(1) : v.toFixed(2));
+
+async function fetchBtf() {
+  if (btf.busy) { btf.again = true; return; }  // one request at a time; the latest state after it
+  btf.busy = true;
+  const q = new URLSearchParams();
+  if (btf.source) {
+    const [robot, scene, space] = JSON.parse(btf.source);
+    q.set("robot", robot); q.set("scene", scene); q.set("space", space);
+  }
+  if (btf.region) { const [label, band] = btf.region.split(","); q.set("label", label); q.set("band", band); }
+  try {
+    const resp = await fetch(`api/btf?${q}`);
+    const body = await resp.json();
+    if (resp.ok) { btf.data = body; drawBtf(); } else $("btf-loo").innerHTML = `<p class=bad>BTF: ${esc(body.error || resp.status)}</p>`;
+  } catch (e) {
+    $("btf-loo").innerHTML = `<p class=bad>BTF: ${esc(e)}</p>`;
+  } finally {
+    btf.busy = false;
+    if (btf.again) { btf.again = false; fetchBtf(); }
+  }
+}
+
+function options(select, html, value) {
+  if (select.dataset.opts !== html) { select.innerHTML = html; select.dataset.opts = html; }
+  select.value = value;
+}
+
+function drawBtf() {
+  const d = btf.data;
+  options($("btf-source"), `<option value="">newest capture's</option>` + (d.sources || []).map((s) =>
+    `<option value="${esc(JSON.stringify([s.robot, s.scene, s.space]))}">${esc(s.scene || "no scene")} · robot ${esc(s.robot)} · ${esc(s.space)}</option>`).join(""), btf.source);
+  if (d.empty) {
+    $("btf-plot").innerHTML = "";
+    $("btf-title").textContent = "";
+    $("btf-loo").innerHTML = `<p class=note>${esc(d.empty)}</p>`;
+    return;
+  }
+  options($("btf-region"), d.regions.map(([l, b]) => `<option value="${l},${b}">region ${l}, band ${esc(d.bands[b] ?? b)}</option>`).join(""),
+    `${d.label},${d.band}`);
+  $("btf-title").textContent = `${d.scene || "robot " + d.robot}, region ${d.label}, band ${d.band_name}: ${d.points} point${d.points === 1 ? "" : "s"}`;
+  plotBtf(d);
+  looBtf(d);
+}
+
+function ticks(lo, hi, n) {
+  const span = hi - lo, mag = 10 ** Math.floor(Math.log10(span / n));
+  const step = [1, 2, 2.5, 5, 10].map((f) => f * mag).find((s) => span / s <= n) || span;
+  const out = [];
+  for (let v = Math.ceil(lo / step) * step; v <= hi + 1e-9 * span; v += step) out.push(v);
+  return out;
+}
+
+function plotBtf(d) {
+  const W = 600, H = 230, L = 58, R = 12, T = 10, B = 38, stat = btf.stat;
+  const has = (p) => p[stat] !== null && p[stat] !== undefined;
+  const pts = d.series.flatMap((s) => s.points), all = [...pts, ...d.series.flatMap((s) => s.curve)].filter(has);
+  if (!all.length) { $("btf-plot").innerHTML = `<text x=${W / 2} y=${H / 2} text-anchor=middle>no ${stat} to draw</text>`; return; }
+  let [x0, x1] = [Math.min(...pts.map((p) => p.angle)), Math.max(...pts.map((p) => p.angle))];
+  let [y0, y1] = [Math.min(...all.map((p) => p[stat])), Math.max(...all.map((p) => p[stat]))];
+  const px = Math.max((x1 - x0) * 0.03, 1), py = Math.max((y1 - y0) * 0.08, Math.abs(y1) * 0.02, 1e-3);
+  [x0, x1, y0, y1] = [x0 - px, x1 + px, y0 - py, y1 + py];
+  const sx = (v) => (L + ((v - x0) / (x1 - x0)) * (W - L - R)).toFixed(1);
+  const sy = (v) => (H - B - ((v - y0) / (y1 - y0)) * (H - T - B)).toFixed(1);
+  const out = ticks(y0, y1, 5).map((t) => `<line class=gridline x1=${L} x2=${W - R} y1=${sy(t)} y2=${sy(t)}></line>` +
+    `<text x=${L - 4} y=${+sy(t) + 4} text-anchor=end>${num(t)}</text>`);
+  out.push(...ticks(x0, x1, 8).map((t) => `<line class=axis x1=${sx(t)} x2=${sx(t)} y1=${H - B} y2=${H - B + 4}></line>` +
+    `<text x=${sx(t)} y=${H - B + 16} text-anchor=middle>${num(t)}°</text>`));
+  out.push(`<line class=axis x1=${L} x2=${W - R} y1=${H - B} y2=${H - B}></line><line class=axis x1=${L} x2=${L} y1=${T} y2=${H - B}></line>`,
+    `<text x=${(L + W - R) / 2} y=${H - 4} text-anchor=middle>${esc(d.axis_title)} (°)</text>`,
+    `<text transform="translate(13 ${(T + H - B) / 2}) rotate(-90)" text-anchor=middle>${esc(STAT_AXIS[stat])}</text>`);
+  d.series.forEach((s, k) => {
+    const c = SERIES[k % SERIES.length], line = s.curve.filter(has).map((p) => `${sx(p.angle)},${sy(p[stat])}`).join(" ");
+    if (line) out.push(`<polyline class=curve stroke="${c}" points="${line}"></polyline>`);
+    out.push(...s.points.filter(has).map((p) => `<circle class=pt cx=${sx(p.angle)} cy=${sy(p[stat])} r=3.5 fill="${c}">` +
+      `<title>${esc(p.angles)} (seq ${p.seq}): ${stat} ${num(p[stat])}, ${p.family}, ${p.pixels} pixels</title></circle>`));
+    if (d.series.length > 1) out.push(`<text x=${W - R - 4} y=${T + 12 + 13 * k} text-anchor=end style="fill:${c}">${esc(s.name)}</text>`);
+  });
+  $("btf-plot").innerHTML = out.join("");
+}
+
+function looBtf(d) {
+  const s = d.loo.summary;
+  const key = "<p class=note>● measured, — interpolated as <code>synth --angle</code> does. Leave one out: exact L1 between " +
+    "an angle's level probabilities and those predicted from the other angles, beside the nearest angle alone.</p>";
+  if (!s.interior) { $("btf-loo").innerHTML = key + "<p class=note>No angle has measured neighbours on both sides yet.</p>"; return; }
+  const rows = d.loo.rows.map((r) => `<tr><td class=l>${esc(r.angle)}</td><td class=${r.interpolation_better ? "ok" : "bad"}>` +
+    `${r.interpolated_l1.toFixed(4)}</td><td>${r.nearest_l1.toFixed(4)}</td><td class=l>${esc(r.nearest_angle)}</td></tr>` +
+    (r.why_not ? `<tr><td></td><td colspan=3 class="l note">${esc(r.why_not)}</td></tr>` : "")).join("");
+  $("btf-loo").innerHTML = key + `<p class=${s.interpolation_better === s.interior ? "ok" : "warn"}>Interpolation beats the nearest ` +
+    `angle at ${s.interpolation_better} of ${s.interior} (mean L1 ${s.interpolated_mean_l1.toFixed(4)} against ${s.nearest_mean_l1.toFixed(4)})</p>` +
+    `<div class=loo-rows><table><tr><th class=l>left out</th><th>interpolated L1</th><th>nearest L1</th><th class=l>nearest</th></tr>${rows}</table></div>`;
+}
+
+$("btf-source").onchange = (e) => { btf.source = e.target.value; btf.region = ""; fetchBtf(); };
+$("btf-region").onchange = (e) => { btf.region = e.target.value; fetchBtf(); };
+$("btf-stat").onchange = (e) => { btf.stat = e.target.value; if (btf.data && !btf.data.empty) plotBtf(btf.data); };
+
 // -- events --------------------------------------------------------------------------------
 const LOG_KEPT = 80;
 function logEvent(ev) {
@@ -299,9 +404,10 @@ function connect() {
     $("conn").textContent = "live";
     $("conn").className = "note ok";
     if (!window.btfPage.hello) { window.btfPage.hello = Date.now(); performance.mark("btf-first-data"); }
+    fetchBtf();
   });
   es.addEventListener("snapshot", (m) => { state.snap = JSON.parse(m.data).snapshot; state.received = Date.now(); drawAll(); });
-  es.addEventListener("cards", (m) => drawCards(JSON.parse(m.data).cards, true));
+  es.addEventListener("cards", (m) => { drawCards(JSON.parse(m.data).cards, true); fetchBtf(); });
   es.addEventListener("event", (m) => logEvent(JSON.parse(m.data).event));
   es.addEventListener("rev", (m) => {
     state.rev = JSON.parse(m.data).rev;
