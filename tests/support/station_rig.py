@@ -2,6 +2,7 @@
 station's tests (tests/test_station*.py)."""
 from __future__ import annotations
 
+import http.client
 import json
 import os
 import signal
@@ -10,9 +11,11 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from radio.keys import write_key
 from tests.support import ROOT
+from tests.support.browser import page_address
 from tests.support.robots import EVERY_POSE, IDLE, LINKED, robot_toml
 from tools.demo.pty_cable import PtyCable
 from tools.station.control import StationClient, socket_path
@@ -134,3 +137,21 @@ def robot_log(where: Path) -> list[str]:
 def kill9(p: subprocess.Popen) -> None:
     os.kill(p.pid, signal.SIGKILL)
     p.wait(timeout=30)
+
+def served(rig, *argv):
+    """A station serving the page on a free port: (process, host, port, token)."""
+    station = rig.station("--http", "127.0.0.1:0", *argv)
+    url = urlsplit(page_address(rig.where / f"station-{rig.stations}.err"))
+    token = url.query.removeprefix("token=")
+    return station, url.hostname, url.port, token
+
+
+def request(host, port, method, path, body=None, headers=None):
+    """One HTTP request: (status, headers, body)."""
+    conn = http.client.HTTPConnection(host, port, timeout=30)
+    try:
+        conn.request(method, path, body=body, headers=headers or {})
+        resp = conn.getresponse()
+        return resp.status, dict(resp.getheaders()), resp.read()
+    finally:
+        conn.close()

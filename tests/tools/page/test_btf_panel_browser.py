@@ -7,9 +7,8 @@ import shutil
 
 import pytest
 
-from tests.support.browser import chromium, need_chromium, page_address
+from tests.support.browser import answer_of, chromium, need_chromium, page_address
 from tests.support.station_rig import Rig
-from tests.tools.page.test_page_browser import answer_of
 
 PLAN = "90,10,80,20,70,30"  # long moves between poses: a capture about every half second
 
@@ -27,7 +26,7 @@ WATCH = """() => {
 @pytest.fixture
 def rig(tmp_path):
     need_chromium()
-    r = Rig(tmp_path)  # its robot waits for a SWEEP command
+    r = Rig(tmp_path)
     yield r
     r.close()
 

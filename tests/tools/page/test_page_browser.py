@@ -7,7 +7,7 @@ import shutil
 
 import pytest
 
-from tests.support.browser import chromium, need_chromium, page_address
+from tests.support.browser import answer_of, chromium, need_chromium, page_address
 from tests.support.robots import IDLE
 from tests.support.station_rig import Rig
 
@@ -34,13 +34,6 @@ def rig(tmp_path):
     r = Rig(tmp_path, QUICK_FAILSAFE, IDLE)
     yield r
     r.close()
-
-
-def answer_of(page, command):
-    out = page.locator(f"form[data-command={command}] output.answer")
-    page.wait_for_function(f"() => /^(ACK|NACK)/.test(document.querySelector("
-                           f"'form[data-command={command}] output.answer').textContent)", timeout=60_000)
-    return out.text_content()
 
 
 def test_the_page_follows_a_sweep_commands_the_robot_and_shows_the_link_lost_and_recovered(rig, tmp_path):

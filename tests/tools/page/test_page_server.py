@@ -1,7 +1,6 @@
 """The page's server without a browser: the token guards viewing (unless --http-public) and
 every command, a cross-site request is refused, forms come from the command table and a bad
 form is one line; the station's page options are checked at start."""
-import http.client
 import json
 import subprocess
 from urllib.parse import urlsplit
@@ -10,33 +9,9 @@ import pytest
 
 from radio.packets.commands import COMMANDS, CommandName
 from tests.support.browser import page_address
-from tests.support.station_rig import ROOT, Rig, python
+from tests.support.station_rig import ROOT, python, request, served
 from tools.page.forms import forms_html, parse_form
 from tools.page.server import parse_http
-
-
-@pytest.fixture
-def rig(tmp_path):
-    r = Rig(tmp_path)  # no robot on the cable: commands wait, the page still serves
-    yield r
-    r.close()
-
-
-def served(rig, *argv):
-    station = rig.station("--http", "127.0.0.1:0", *argv)
-    url = urlsplit(page_address(rig.where / f"station-{rig.stations}.err"))
-    token = url.query.removeprefix("token=")
-    return station, url.hostname, url.port, token
-
-
-def request(host, port, method, path, body=None, headers=None):
-    conn = http.client.HTTPConnection(host, port, timeout=30)
-    try:
-        conn.request(method, path, body=body, headers=headers or {})
-        resp = conn.getresponse()
-        return resp.status, dict(resp.getheaders()), resp.read()
-    finally:
-        conn.close()
 
 
 def command(host, port, headers, name="PING", fields=None):
