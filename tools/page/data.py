@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import multiprocessing
+import os
 from collections import OrderedDict
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -91,16 +92,20 @@ def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
     return {"html": html, "images": {k: png(img) for k, img in v.images.items()}}
 
 
-def end_with_parent() -> None:
+def end_with_parent(parent: int | None = None) -> None:
     """In a child process of the station: SIGTERM when the station dies, even by SIGKILL
-    (Linux's PR_SET_PDEATHSIG), so no drawing worker or demo robot outlives it."""
+    (Linux's PR_SET_PDEATHSIG), so no drawing worker or demo robot outlives it. `parent`: the
+    station's pid, for a child that starts slowly (a spawned worker): if the station died before
+    this ran, no signal would come, so the child ends now."""
     import ctypes
     import signal
 
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
     except (OSError, AttributeError):
-        pass  # not Linux: the station's own exit path ends them
+        return  # not Linux: the station's own exit path ends them
+    if parent is not None and os.getppid() != parent:
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
 def _warm() -> None:
@@ -147,11 +152,11 @@ class PageData:
     def start_worker(self) -> None:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=end_with_parent)
+                                             initializer=end_with_parent, initargs=(os.getpid(),))
             self._pool.submit(_warm)
         if self._btf_pool is None:  # its own process: the panel never waits behind a capture's drawing
             self._btf_pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=end_with_parent)
+                                                 initializer=end_with_parent, initargs=(os.getpid(),))
             self._btf_pool.submit(_warm)
 
     async def drawn(self, capture_id: int, what: str) -> dict:
