@@ -27,7 +27,7 @@ from onboard.failsafe import Failsafe
 from onboard.link import bodies as wire
 from onboard.link.outbox import Outbox, OutboxFull, Reply
 from onboard.link.service import LinkService
-from onboard.link.status import Status, flat
+from onboard.link.status import Status
 from onboard.state import Interrupted, RuntimeState
 from onboard.sweep.control import SweepControl
 from onboard.sweep.plan import SweepPlan
@@ -64,7 +64,7 @@ class Effect:
     undo: Callable[[], None] = lambda: None
 
 
-Result = dict | Refusal
+Result = dict | pk.StatusReport | Refusal
 
 
 # What the operator can do about each refusal, said in the NACK itself.
@@ -197,7 +197,7 @@ class Dispatcher:
         return {"time": self.wall()}
 
     def status(self, args: dict, effect: Effect) -> Result:
-        return flat(self.status_report.report())
+        return self.status_report.report()
 
     def goto(self, args: dict, effect: Effect) -> Result:
         view = ViewAngles(float(args["elevation"]), float(args.get("azimuth", 0.0)))

@@ -36,6 +36,7 @@ from hal.interfaces import CameraSettings, HalError, ViewAngles, view_from_orien
 from onboard.capture import skip
 from onboard.capture.camera_lock import CameraLock, reference_level
 from onboard.config import Config
+from radio.packets.schema import Recent
 
 T = TypeVar("T")
 MAX_POSES_REMEMBERED = 512  # previous models kept per pose for the UNCHANGED rule
@@ -102,7 +103,7 @@ class Pipeline:
         self.pca_pending = False  # fitted, not yet attached to a capture
         self._fitter: FrameFitter | None = None
         self._previous: dict[tuple[int, int], dict[tuple[int, int], FittedModel]] = {}
-        self.faults: list[str] = []  # every retried fault, for STATUS
+        self.faults: Recent = Recent(32)  # every retried fault, for STATUS
         self.lock = CameraLock(hal.camera, cfg.camera) if hal is not None else None
 
     @property
@@ -151,7 +152,6 @@ class Pipeline:
             except (HalError, OSError, TimeoutError, ValueError) as exc:
                 last = f"{type(exc).__name__}: {exc}"
                 self.faults.append(f"{step}: {last}")
-                del self.faults[:-32]
                 self.pump()
         raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}")
 

@@ -75,14 +75,17 @@ BROKEN_PIPE = 141
 
 
 def main(prog: str, package: str, commands: tuple[Subcommand, ...], description: str,
-         argv: list[str] | None) -> int:
-    """Parse `argv` (sys.argv when None) and run the subcommand it names; the exit status."""
+         argv: list[str] | None, bad_input: tuple[type[Exception], ...] = ()) -> int:
+    """Parse `argv` (sys.argv when None) and run the subcommand it names; the exit status.
+    `bad_input`: more exceptions that are one line and status 2 wherever a subcommand meets them
+    (the host's damaged database)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     parser = build_parser(prog, package, commands, description, chosen_command(argv, commands))
-    return run_cli(parser, argv)
+    return run_cli(parser, argv, bad_input)
 
 
-def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None) -> int:
+def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None,
+            bad_input: tuple[type[Exception], ...] = ()) -> int:
     try:
         try:
             args = parser.parse_args(argv)
@@ -92,7 +95,7 @@ def run_cli(parser: argparse.ArgumentParser, argv: list[str] | None) -> int:
         code = int(args._run(args) or 0)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
         return code
-    except CliError as exc:
+    except (CliError, *bad_input) as exc:
         print(f"{parser.prog}: error: {exc}", file=sys.stderr)
         return 2
     except RetryLater as exc:

@@ -7,7 +7,6 @@ outbox database so a restart never reuses one.
 from __future__ import annotations
 
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -16,11 +15,8 @@ import numpy as np
 from hal.interfaces import ViewAngles
 from onboard.capture.pipeline import FittedView
 from radio import packets as pk
-
-
-def iso_time(t: float) -> str:
-    """A wall-clock time as STATUS shows it to a person: ISO 8601 in UTC, to the second."""
-    return datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+from radio.packets.base import iso_time  # noqa: F401  (the robot's log lines show times with it)
+from radio.packets.commands import fit_answer
 
 
 class SeqCounter:
@@ -82,29 +78,20 @@ def mask_body(robot_id: int, seq: int, labels: np.ndarray) -> tuple[int, bytes]:
 
 def status_body(robot_id: int, now: float, state: pk.RobotState, pose: ViewAngles | None,
                 pending: int, used: int, last_seq: int | None, text: str,
-                extras: dict | None = None) -> tuple[int, bytes]:
+                report: pk.StatusReport | None = None) -> tuple[int, bytes]:
     packet = pk.StatusPacket(robot_id, now, state, None if pose is None else _pose(pose),
-                             pending, used, last_seq, text[:500], _extras(extras or {}))
+                             pending, used, last_seq, text, report=report or pk.StatusReport())
     return int(pk.Kind.STATUS), pk.encode(packet)
 
 
-def reply_body(command_id: int, ok: bool, text: str, extras: dict | None = None,
+def reply_body(command_id: int, ok: bool, text: str, answer: dict | pk.StatusReport | None = None,
                reason: pk.Reason = pk.Reason.INTERNAL) -> tuple[int, bytes]:
-    if ok:
-        packet: Any = pk.AckPacket(command_id, text[:500], _extras(extras or {}))
-        return int(pk.Kind.ACK), pk.encode(packet)
-    return int(pk.Kind.NACK), pk.encode(pk.NackPacket(command_id, reason, text[:500]))
-
-
-def _extras(d: dict) -> dict:
-    """Fit a result map into the packet's extension fields (16 keys, scalars or short lists)."""
-    out: dict[str, Any] = {}
-    for k, v in list(d.items())[:16]:
-        if isinstance(v, (list, tuple)):
-            v = [x if isinstance(x, (int, float, str, bool)) or x is None else str(x) for x in v][:64]
-        elif not (isinstance(v, (int, float, str, bool)) or v is None):
-            v = str(v)
-        if isinstance(v, str):
-            v = v[:500]
-        out[str(k)[:32]] = v
-    return out
+    """The ACK (text: the command's name; `answer`: its values, or STATUS's report) or the NACK
+    of a command. The encoder cuts a long text visibly."""
+    if not ok:
+        return int(pk.Kind.NACK), pk.encode(pk.NackPacket(command_id, reason, text))
+    if isinstance(answer, pk.StatusReport):
+        return int(pk.Kind.ACK), pk.encode(pk.AckPacket(command_id, text, status=answer))
+    name = pk.CommandName.__members__.get(text)
+    values = fit_answer(name, dict(answer or {})) if name is not None else dict(answer or {})
+    return int(pk.Kind.ACK), pk.encode(pk.AckPacket(command_id, text, values))

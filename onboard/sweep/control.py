@@ -14,7 +14,7 @@ import logging
 from onboard.capture.filing import Captures
 from onboard.capture.pipeline import FittedView, Pipeline, PoseSkipped
 from onboard.link.outbox import DiskFull, Outbox, OutboxFull
-from onboard.link.status import Status
+from onboard.link.status import Status, skipped_pose, sweep_report
 from onboard.state import Interrupted, Mode, RuntimeState
 from onboard.sweep.plan import Boot, SweepPlan, SweepProgress, SweepStore
 from onboard.watchdog import Notifier
@@ -106,10 +106,8 @@ class SweepControl:
         """Commit the pose's packets (or its skip) with the progress past it."""
         if cap is None:
             skipped = nxt.record_skipped(reason)
-            packets = [self.status.packet(f"skipped pose: {skipped.reason}", {
-                "sweep": p.sweep_id, "skipped_index": skipped.index,
-                "skipped_elevation": skipped.commanded.elevation,
-                "skipped_azimuth": skipped.commanded.azimuth})]
+            packets = [self.status.packet(f"skipped pose: {skipped.reason}", pk.StatusReport(
+                sweep=sweep_report(p, skipped=pk.Kept((skipped_pose(skipped),)))))]
             state: dict[str, str] = {}
             result = "skipped"
         else:
@@ -119,8 +117,8 @@ class SweepControl:
             result = "measured"
         if nxt.done:
             nxt.active = False
-            packets.append(self.status.packet("sweep done", {
-                "sweep": p.sweep_id, "measured": len(nxt.measured), "skipped": len(nxt.skipped)},
+            packets.append(self.status.packet("sweep done", pk.StatusReport(sweep=sweep_report(
+                p, active=False, measured=len(nxt.measured), skipped=pk.Kept((), len(nxt.skipped)))),
                 pk.RobotState.IDLE))
         try:
             self.outbox.commit(packets, {**state, **self.sweeps.entry(nxt)}, reserve=self.reserve)

@@ -13,14 +13,28 @@ from typing import Any, ClassVar
 import numpy as np
 
 from radio import FrameError
-from radio.packets.base import MAX_FRAME_SIDE, MAX_MASK_SIDE, UINT32, Kind, want_bin, want_int
+from radio.packets.base import MAX_FRAME_SIDE, MAX_MASK_SIDE, UINT32, Kind
+from radio.packets.schema import Bin, Declared, Field, Int
 
 MAX_SIDE = MAX_MASK_SIDE
 
 
 @dataclass(frozen=True, slots=True)
-class MaskPacket:
+class MaskPacket(Declared):
+    """A capture's label map, mode-pooled to at most 64 x 64, as runs: row-major, adjacent runs of
+    different labels, their lengths summing to the map's cells."""
+
     KIND: ClassVar[Kind] = Kind.MASK
+    WIRE: ClassVar[tuple[Field, ...]] = (
+        Field("robot_id", Int(0, 0xFFFF), "the robot", label="robot id"),
+        Field("seq", Int(0, UINT32), "the capture's number", label="capture seq"),
+        Field("frame_height", Int(1, MAX_FRAME_SIDE), "the camera frame's height"),
+        Field("frame_width", Int(1, MAX_FRAME_SIDE), "its width"),
+        Field("mask_height", Int(1, MAX_SIDE), "the pooled map's height (at most the frame's)"),
+        Field("mask_width", Int(1, MAX_SIDE), "its width (at most the frame's)"),
+        Field("values", Bin(), "the label of each run", label="mask values"),
+        Field("runs", Bin(), "each run's length, big-endian uint16", label="mask runs"),
+    )
     robot_id: int
     seq: int
     frame_shape: tuple[int, int]  # the camera frame (height, width) the map was taken from
@@ -40,23 +54,20 @@ class MaskPacket:
         (fh, fw), (h, w) = self.frame_shape, self.shape
         return small[cell_of(fh, h)[:, None], cell_of(fw, w)[None, :]]
 
-    def _wire(self) -> list:
+    def wire_values(self) -> dict[str, Any]:
         runs = np.asarray(self.runs, dtype=np.int64)
         if runs.size and (runs.min() < 1 or runs.max() > 0xFFFF):
             raise ValueError("mask runs must be 1..65535 long")
-        return [
-            self.robot_id, self.seq, *self.frame_shape, *self.shape,
-            bytes(self.values), runs.astype(">u2").tobytes(),
-        ]
+        (fh, fw), (h, w) = self.frame_shape, self.shape
+        return {"robot_id": self.robot_id, "seq": self.seq, "frame_height": fh, "frame_width": fw,
+                "mask_height": h, "mask_width": w, "values": bytes(self.values), "runs": runs.astype(">u2").tobytes()}
 
     @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> MaskPacket:
-        robot = want_int(f[0], "robot id", 0, 0xFFFF)
-        seq = want_int(f[1], "capture seq", 0, UINT32)
-        fh = want_int(f[2], "frame height", 1, MAX_FRAME_SIDE)
-        fw = want_int(f[3], "frame width", 1, MAX_FRAME_SIDE)
-        h, w = want_int(f[4], "mask height", 1, min(MAX_SIDE, fh)), want_int(f[5], "mask width", 1, min(MAX_SIDE, fw))
-        values, raw_runs = want_bin(f[6], "mask values"), want_bin(f[7], "mask runs")
+    def from_values(cls, f: dict[str, Any], extras: dict, version: int, compute: bool = True) -> MaskPacket:
+        robot, seq, fh, fw = f["robot_id"], f["seq"], f["frame_height"], f["frame_width"]
+        h, w, values, raw_runs = f["mask_height"], f["mask_width"], f["values"], f["runs"]
+        if h > fh or w > fw:
+            raise FrameError(f"mask {h} x {w} is larger than its frame {fh} x {fw}")
         if len(raw_runs) != 2 * len(values) or not values:
             raise FrameError("mask needs one 2-byte run length per label value")
         runs = np.frombuffer(raw_runs, dtype=">u2").astype(np.int64)

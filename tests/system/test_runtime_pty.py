@@ -71,9 +71,9 @@ def test_fake_robot_sweep_reaches_the_receiver_over_a_pty(tmp_path, scene, label
 def test_with_faults_every_skipped_pose_reaches_the_receiver_with_its_reason(tmp_path):
     packets = receive_sweep(tmp_path, "black", rate=0.1)
     models = [p for p in packets if isinstance(p, pk.ModelsPacket)]
-    skipped = [p for p in packets if isinstance(p, pk.StatusPacket) and "skipped_index" in p.extras]
+    skipped = [p for p in packets if isinstance(p, pk.StatusPacket) and p.report.sweep and p.report.sweep.skipped]
     done = [p for p in packets if isinstance(p, pk.StatusPacket) and p.text == "sweep done"]
-    assert done and done[-1].extras["skipped"] == len(skipped)
+    assert done and done[-1].report.sweep.skipped.total == len(skipped)
     assert len(models) + len(skipped) == 7
     assert all(p.text.startswith("skipped pose:") and "failed" in p.text for p in skipped)
 

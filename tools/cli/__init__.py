@@ -11,6 +11,7 @@ import argparse
 
 from onboard.cli import runner
 from onboard.cli.runner import Subcommand
+from tools.store.schema import CorruptDatabase
 
 PROG = "btf-host"
 # The subcommands, in the order --help lists them: what each does, and one example.
@@ -63,4 +64,5 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return runner.main(PROG, "tools.cli", COMMANDS, DESCRIPTION, argv)
+    # A damaged row met by any reader (synth, report, ...) is one line and status 2, as at opening.
+    return runner.main(PROG, "tools.cli", COMMANDS, DESCRIPTION, argv, bad_input=(CorruptDatabase,))

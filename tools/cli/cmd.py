@@ -9,10 +9,10 @@ import json
 import secrets
 
 from radio import packets as pk
+from radio.packets.base import iso_time
 from radio.packets.commands import COMMANDS, Command, CommandName
 from tools.cli.options import CliError
 from tools.station.command_route import ask
-from tools.station.snapshot import iso
 
 
 def _cli_type(parse):
@@ -102,11 +102,26 @@ def run(args: argparse.Namespace) -> int:
         verdict = "ACK" if ok else f"NACK {answer.get('reason')}"
         extras = ", ".join(f"{k}={_shown(k, v)}" for k, v in (answer.get("extras") or {}).items())
         print(f"{verdict}: {answer.get('text', '')}" + (f" ({extras})" if extras else ""))
+        for key, value in (answer.get("status") or {}).items():  # STATUS's report, a field a line
+            print(f"  {key}: {_brief(value)}")
     return 0 if ok else 1
 
 
 def _shown(key: str, value):
     """An answer's value for a person: short floats, clock times in ISO 8601."""
-    if key == "time" and isinstance(value, (int, float)):
-        return iso(value)
+    if key in ("time", "since", "until") and isinstance(value, (int, float)):
+        return iso_time(value)
     return f"{value:.6g}" if isinstance(value, float) else value
+
+
+def _brief(value, key: str = "") -> str:
+    """A field of the robot's report (its JSON form) for a person: lists with how many older
+    items they left out, records as key=value."""
+    if isinstance(value, dict) and set(value) == {"items", "left_out"}:
+        items = ", ".join(_brief(v) for v in value["items"]) or "none"
+        return items + (f" (+{value['left_out']} older)" if value["left_out"] else "")
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}={_brief(v, k)}" for k, v in value.items()) + "}"
+    if isinstance(value, list):
+        return "[" + ", ".join(_brief(v) for v in value) + "]"
+    return str(_shown(key, value))

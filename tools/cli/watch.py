@@ -7,6 +7,7 @@ from pathlib import Path
 
 from tools.cli.options import CliError
 from tools.station.control import StationClient, StationGone, socket_path
+from tools.station.events import line
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -34,7 +35,10 @@ def run(args: argparse.Namespace) -> int:
             return 0
         while True:
             ev = client.receive()["event"]
-            print(json.dumps(ev) if args.json else f"{ev['time']} {ev['kind']}: {ev['text']}", flush=True)
+            if args.json:
+                print(json.dumps(ev), flush=True)
+            elif ev.get("shown", True):  # as its declaration says (tools.station.events)
+                print(line(ev, timed=True), flush=True)
     except StationGone:
         raise CliError("the station stopped") from None
     finally:
@@ -43,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
 
 def summary(s: dict) -> str:
     """The snapshot in a few lines, for a person."""
-    from tools.station.refusals import wrong_key_line  # the station's modules: not at btf-host's start
+    from tools.station.rejected_frames import wrong_key_line  # the station's modules: not at btf-host's start
 
     ln, r, sw = s["link"], s["robot"], s["sweep"]
     pose = "?" if r["pose"] is None else f"{r['pose']['elevation']:.1f}°/{r['pose']['azimuth']:.1f}°"
@@ -53,12 +57,20 @@ def summary(s: dict) -> str:
              f"link {'up' if ln['up'] else 'down'}, heard {heard}; frames sent {ln['frames_sent']}, "
              f"accepted {ln['frames_accepted']}, retransmitted {ln['retransmissions']}, rejected: {rejected}",
              f"robot {r['id']}: {r['mode'] or '?'} at {pose}, outbox {r['outbox']}, "
-             f"faults {len(r['faults'])}, errors {len(r['errors'])}"]
+             f"faults {_count(r, 'faults')}, errors {_count(r, 'errors')}"
+             + (f", {r['dead_letters']['count']} messages refused" if (r.get("dead_letters") or {}).get("count") else "")]
     if wrong := wrong_key_line(ln["rejected"].get("tag", 0), ln["frames_accepted"]):
         lines.append(wrong)
     if sw["id"] is not None:
         lines.append(f"sweep {sw['id']}: pose {sw['next']} of {sw['poses']}, {len(sw['skipped'])} skipped"
                      + ("" if sw["active"] else " (not running)"))
     c = s["captures"]
-    lines.append(f"captures stored {c['stored']}, duplicates {c['duplicates']}, masks {c['masks']}")
+    lines.append(f"captures stored {c['stored']}, duplicates {c['duplicates']}, masks {c['masks']}"
+                 + (f", refused {c['bad']}" if c.get("bad") else ""))
     return "\n".join(lines)
+
+
+def _count(robot: dict, name: str) -> str:
+    """How many the robot listed, and how many older ones it left out."""
+    older = (robot.get("left_out") or {}).get(name, 0)
+    return f"{len(robot[name])}" + (f" (+{older} older)" if older else "")

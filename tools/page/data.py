@@ -14,11 +14,11 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any, Mapping
 
+from radio.packets.base import iso_time
 from tools.analysis.radiometry import describe
 from tools.page.btf_panel import panel
 from tools.report.capture_views import Frames, png, views
 from tools.report.look import capture_section
-from tools.station.snapshot import iso
 from tools.store.database import Store
 
 CACHED = 128  # rendered captures kept (thumbnails and sections)
@@ -36,7 +36,7 @@ def card(c: Any) -> dict:
     return {"id": c.id, "key": pose_key(c), "robot": c.robot, "seq": c.sequence, "scene": c.scene,
             "elevation": round(c.measured[0], 2), "azimuth": round(c.measured[1], 2),
             "commanded": None if c.commanded[0] is None else [c.commanded[0], c.commanded[1]],
-            "time": iso(c.time), "space": c.space, "camera": describe(c.camera),
+            "time": iso_time(c.time), "space": c.space, "camera": describe(c.camera),
             "unlocked": bool(c.camera is not None and c.camera.unlocked)}
 
 

@@ -43,7 +43,7 @@ from tools.page.forms import forms_html, parse_form
 from tools.page.guard import BODY_TIMEOUT_S, ConnectionGate, HostCheck, QuietLog, Tally, connection_cap
 from tools.report.look import CSS
 from tools.station.bus import EventBus
-from tools.station.log import event
+from tools.station.events import LostEvent, StationEvent
 from tools.station.station import Station
 
 ANSWER_WAIT_S = 2.0  # a command's POST waits this long for the robot's answer
@@ -91,7 +91,7 @@ class PageServer:
         self._dirty = False  # events since the last snapshot
         self._streams: set[Any] = set()
         self._stream_clients: Counter[str] = Counter()  # open event streams by client address
-        self._tally = Tally(lambda text: station.emit(event("station", text, station.wall())), time.monotonic)
+        self._tally = Tally(lambda text: station.emit(StationEvent(station.wall(), text)), time.monotonic)
         self._quiet = QuietLog(self._tally)
         self._hosts = HostCheck(options.host, options.hosts)  # and the addresses bound, at start
         self._gate: ConnectionGate | None = None
@@ -145,7 +145,7 @@ class PageServer:
         sub = self.station.bus.subscribe(4096)
         try:
             while True:
-                ev = await sub.get()
+                ev = (await sub.get()).to_json()  # as its declaration renders it (tools.station.events)
                 kind = ev.get("kind")
                 if kind in ("capture", "unchanged") and ev.get("stored") or kind == "lost":
                     cards = await self.data.refresh()
@@ -273,7 +273,7 @@ class PageServer:
             await _send(resp, self.hello(request))
             while True:
                 msg = await sub.get()
-                await _send(resp, self.hello(request) if msg["kind"] == "lost" else msg)
+                await _send(resp, self.hello(request) if isinstance(msg, LostEvent) else msg)  # fell behind
         except (ConnectionError, EOFError):
             pass
         finally:

@@ -21,7 +21,8 @@ from radio.link import Link
 from radio.ports import PortBusy, open_url
 from radio.pump import LinkPump
 from tools.station.control import ControlServer, check_path, socket_path
-from tools.station.log import StationLog, event
+from tools.station.events import StationEvent
+from tools.station.log import StationLog
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver
 from tools.station.station import Station
 from tools.store.database import CorruptDatabase, Store, StoreUnavailable
@@ -116,7 +117,7 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
                           StationLog(Path(log) if log else Path(str(db) + ".log"), echo),
                           port=port_url, db=str(db), status_every=status_every, on_item=on_item)
         if counters.note:  # the counters file was lost (or this base's first run with a key not from keygen)
-            station.emit(event("station", counters.note, time.time()))
+            station.emit(StationEvent(time.time(), counters.note))
     except BaseException:
         for step in reversed(undo):
             step()
@@ -174,7 +175,7 @@ async def _start_page(parts: StationParts, options, echo: TextIO | None):
         await web.close()
         return None
     who = "anyone who can reach it watches; commands need the token" if options.public else "it needs the token"
-    parts.station.emit(event("station", f"page at {url} ({who})", parts.station.wall()))
+    parts.station.emit(StationEvent(parts.station.wall(), f"page at {url} ({who})"))
     if echo is not None:  # the token goes to the operator's terminal only, never to the log file
         print(f"page: {url}?token={options.token}", file=echo, flush=True)
     return web

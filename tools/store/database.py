@@ -25,10 +25,22 @@ from btf.fit.png import decode_png, encode_png
 from btf.johnson import Johnson
 from btf.record import FittedModel
 from tools.analysis.radiometry import sweep_models
-from tools.store.rows import CAMERA_COLUMNS, StoredCapture, capture_from_row, mask_png, model_from_row
+from tools.store.rows import (
+    CAMERA_COLUMNS,
+    RejectedPacket,
+    StoredCapture,
+    capture_from_row,
+    mask_png,
+    model_from_row,
+    rejected_from_row,
+)
 from tools.store.schema import SCHEMA_VERSION, CorruptDatabase, StoreUnavailable, connect
 
-__all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "SCHEMA_VERSION", "disk_free"]
+__all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "RejectedPacket", "SCHEMA_VERSION",
+           "disk_free"]
+
+REJECTED_KEPT = 1000  # rejected packets kept for a person; older ones are deleted
+
 
 def disk_free(path: str | Path) -> str:
     """The room left on the disk holding `path`, for a line saying why a write failed."""
@@ -218,6 +230,26 @@ class Store:
             (robot_id, key, int(lab.shape[0]), int(lab.shape[1]), "png", encode_png(lab.astype(np.uint8, copy=False))),
         )
         return cur.rowcount == 1
+
+    def add_rejected(self, received: float, sender: int | None, incarnation: str, msg_id: int | None,
+                     reason: str, body: bytes) -> int:
+        """Keep a packet the station could not use, raw, for a person (the newest REJECTED_KEPT);
+        its row id."""
+        with self._write():
+            cur = self._conn.execute(
+                "INSERT INTO rejected_packets (received, sender, incarnation, msg_id, reason, body)"
+                " VALUES (?,?,?,?,?,?)", (float(received), sender, str(incarnation),
+                                           msg_id if msg_id is None or msg_id <= 2**63 - 1 else None,
+                                           str(reason), bytes(body)))
+            rid = int(cur.lastrowid)
+            self._conn.execute("DELETE FROM rejected_packets WHERE id <= ?", (rid - REJECTED_KEPT,))
+        return rid
+
+    def rejected(self, limit: int = 100) -> list[RejectedPacket]:
+        """The newest rejected packets, newest first."""
+        rows = self._conn.execute("SELECT id, received, sender, incarnation, msg_id, reason, body"
+                                  " FROM rejected_packets ORDER BY id DESC LIMIT ?", (int(limit),)).fetchall()
+        return [self._checked(rejected_from_row, r, f"rejected packet {r[0]!r}") for r in rows]
 
     def mask(self, key: str, robot_id: str = "") -> np.ndarray | None:
         row = self._conn.execute(

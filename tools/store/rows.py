@@ -169,3 +169,28 @@ def johnson(family: Any, gamma: Any, delta: Any, xi: Any, lam: Any) -> Johnson:
 def _shown(v: Any) -> str:
     s = repr(v)
     return s if len(s) <= 40 else s[:37] + "..."
+
+
+@dataclass(frozen=True, slots=True)
+class RejectedPacket:
+    """A packet the station could not use, as it arrived (`Store.add_rejected`)."""
+
+    id: int
+    received: float
+    sender: int | None
+    incarnation: str
+    msg_id: int | None
+    reason: str
+    body: bytes
+
+
+def rejected_from_row(row: tuple) -> RejectedPacket:
+    rid, received, sender, incarnation, msg_id, reason, body = row
+    for name, v in (("id", rid), ("sender", sender), ("msg_id", msg_id)):
+        if v is not None and type(v) is not int:
+            raise ValueError(f"{name} is {v!r}, not an integer")
+    if type(received) not in (int, float) or not math.isfinite(received):
+        raise ValueError(f"received is {received!r}, not a time")
+    if type(reason) is not str or type(incarnation) is not str or type(body) is not bytes:
+        raise ValueError("reason, incarnation or body of the wrong type")
+    return RejectedPacket(rid, float(received), sender, incarnation, msg_id, reason, body)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-SCHEMA_VERSION = 8
+SCHEMA_VERSION = 9
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -62,6 +62,19 @@ CREATE TABLE {name} (
     UNIQUE (robot, incarnation, sequence)
 );
 """
+# Packets the station could not use (undecodable, or refused by the store), raw, for a person
+# to look at: the robot was told (a NACK UNUSABLE) and set them aside.
+_REJECTED = """
+CREATE TABLE IF NOT EXISTS rejected_packets (
+    id INTEGER PRIMARY KEY,
+    received REAL NOT NULL,
+    sender INTEGER,
+    incarnation TEXT NOT NULL DEFAULT '',
+    msg_id INTEGER,
+    reason TEXT NOT NULL,
+    body BLOB NOT NULL
+);
+"""
 _BEFORE_INCARNATIONS = ("id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space, bands,"
                         " scene, light_elevation, light_azimuth, source, levels")
 _SCHEMA = _CAPTURES.format(name="captures") + """
@@ -89,7 +102,7 @@ CREATE TABLE masks (
     data BLOB NOT NULL,
     UNIQUE (robot, key)
 );
-""" + _DEPENDENCE + _PCA + _CAMERA
+""" + _DEPENDENCE + _PCA + _CAMERA + _REJECTED
 _TABLES = {"captures", "models", "masks"}
 # Upgrades from the keyed version to the next; each keeps every existing row.
 _MIGRATIONS: dict[int, str] = {
@@ -117,6 +130,8 @@ _MIGRATIONS: dict[int, str] = {
        + f"INSERT INTO captures_new ({_BEFORE_INCARNATIONS}) SELECT {_BEFORE_INCARNATIONS} FROM captures;"
        "DROP TABLE captures; ALTER TABLE captures_new RENAME TO captures;"
        "CREATE INDEX captures_by_source ON captures (robot, source);",
+    # the packets the station could not use, kept raw
+    8: _REJECTED,
 }
 
 

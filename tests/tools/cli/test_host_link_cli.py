@@ -168,7 +168,7 @@ def test_cmd_against_a_running_robot_gets_its_answers(robot_port, capsys):
     port, key = robot_port
     code, ans = _cmd(port, key, capsys, "status")
     assert code == 0 and ans["type"] == "ACK" and ans["ok"] and ans["text"] == "STATUS"
-    assert ans["extras"]["mode"] == "idle" and ans["extras"]["faults"] == []
+    assert ans["status"]["mode"] == "idle" and ans["status"]["faults"]["items"] == []
     code, ans = _cmd(port, key, capsys, "goto", "--elevation", "50", "--azimuth", "0")
     assert code == 0 and ans["type"] == "ACK"
     assert abs(ans["extras"]["elevation"] - 50.0) < 2.0  # the measured angle, not the commanded one

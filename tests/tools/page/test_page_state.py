@@ -2,10 +2,10 @@
 advanced by captures between reports; the failsafe assumed while the link is silent; the robot's
 disk and rejections; goodput; the latest capture per pose."""
 import dataclasses
-import json
 
-from onboard.link.status import flat
-from onboard.sweep.plan import SweepPlan
+from hal.interfaces import ViewAngles
+from onboard.link.status import sweep_report
+from onboard.sweep.plan import SkippedPose, SweepPlan, SweepProgress
 from radio import packets as pk
 from tests.support.packets import models_body
 from tools.page.data import CaptureIndex
@@ -17,17 +17,17 @@ from tools.store.database import Store
 
 def report(plan, next_index=0, skipped=(), mode="sweeping"):
     """The robot's STATUS report (onboard.link.status.Status.report), as its answer carries it."""
-    return {"mode": mode, "outbox": 2, "paused": "", "disk": "ok", "disk_free": 10**9, "rejected": {},
-            "failsafe": [], "failsafe_s": 1.5, "torque": True,
-            "faults": ["servo 2: overload (retried)"], "errors": [],
-            "sweep": {"id": 4, "next": next_index, "poses": plan.count, "active": True, "plan": plan.to_record(),
-                      "skipped": [list(s) for s in skipped]}}
+    progress = SweepProgress(4, plan, next_index, skipped=[SkippedPose(i, ViewAngles(e, a), r) for i, e, a, r in skipped])
+    return pk.StatusReport(mode=mode, outbox=2, paused="", disk=pk.Disk("ok", 10**9), rejected=pk.Kept(),
+                           failsafe=pk.Kept(), failsafe_s=1.5, torque=True,
+                           faults=pk.Kept(("servo 2: overload (retried)",)), errors=pk.Kept(),
+                           sweep=sweep_report(progress, whole=True))
 
 
-def answer_extras(rep):
-    """The extras as they arrive: through the ACK packet's encoder and decoder."""
-    body = pk.encode(pk.AckPacket(7, "STATUS", flat(rep)))
-    return dict(pk.decode(body).extras)
+def answer_report(rep):
+    """The report as it arrives: through the ACK packet's encoder and decoder."""
+    body = pk.encode(pk.AckPacket(7, "STATUS", status=rep))
+    return pk.decode(body).status
 
 
 def capture_item(seq, elevation, azimuth):
@@ -40,7 +40,7 @@ def capture_item(seq, elevation, azimuth):
 def test_the_grid_comes_from_the_robots_plan_and_advances_with_each_capture():
     plan = SweepPlan(80.0, 60.0, 10.0, (0.0, 90.0))  # 80, 70, 60 at 0 then at 90
     snap = StationSnapshot("pty", "db", 0.0)
-    snap.note_status_answer(answer_extras(report(plan, 1, [(2, 60.0, 0.0, "servo 1: no answer")])), 10.0)
+    snap.note_status_answer(answer_report(report(plan, 1, [(2, 60.0, 0.0, "servo 1: no answer")])), 10.0)
     grid = snap.to_json(10.0)["sweep"]["grid"]
     assert grid["elevations"] == [80.0, 70.0, 60.0] and grid["azimuths"] == [0.0, 90.0]
     # row by row (azimuth 0, then 90): 80 done, pending; 70 measuring, pending; 60 skipped, pending
@@ -50,7 +50,7 @@ def test_the_grid_comes_from_the_robots_plan_and_advances_with_each_capture():
     snap.note_capture(capture_item(6, 80.0, 90.0), 12.0)
     assert snap.to_json(12.0)["sweep"]["grid"]["cells"] == "dddmsp"
     # the robot's next report says the same: nothing counted twice
-    snap.note_status_answer(answer_extras(report(plan, 4, [(2, 60.0, 0.0, "servo 1: no answer")])), 13.0)
+    snap.note_status_answer(answer_report(report(plan, 4, [(2, 60.0, 0.0, "servo 1: no answer")])), 13.0)
     js = snap.to_json(13.0)
     assert js["sweep"]["grid"]["cells"] == "dddmsp" and js["sweep"]["next"] == 4
     assert js["robot"]["failsafe_s"] == 1.5 and js["robot"]["torque"] is True
@@ -66,12 +66,14 @@ def test_a_sweep_this_station_sent_has_its_grid_before_the_robot_reports_it():
                                                     "cells": "pppdpp", "reasons": {}}
 
 
-def test_a_plan_too_long_for_a_status_string_is_left_out_and_the_answer_still_encodes():
-    plan = SweepPlan(0.0, 0.0, 1.0, tuple(float(a) for a in range(64)), tuple(80.0 - i * 0.37 for i in range(64)))
-    extras = answer_extras(report(plan))
-    assert "plan" not in extras and extras["poses"] == 64 * 64
-    short = answer_extras(report(SweepPlan(90.0, 30.0, 10.0, (0.0,))))
-    assert json.loads(short["plan"])["step"] == 10.0
+def test_a_plan_too_long_for_a_status_is_left_out_saying_so_and_the_answer_still_encodes():
+    plan = SweepPlan(0.0, 0.0, 1.0, tuple(float(a) for a in range(300)), (80.0,))
+    sweep = answer_report(report(plan)).sweep
+    assert sweep.plan is None and sweep.plan_left_out and sweep.poses == 300
+    listed = SweepPlan(0.0, 0.0, 1.0, tuple(float(a) for a in range(64)), tuple(80.0 - i * 0.37 for i in range(64)))
+    assert answer_report(report(listed)).sweep.plan.elevations == listed.elevations  # 64 x 64 travels whole now
+    short = answer_report(report(SweepPlan(90.0, 30.0, 10.0, (0.0,))))
+    assert short.sweep.plan.step == 10.0
 
 
 def test_a_silent_link_past_the_robots_failsafe_is_shown_as_the_failsafe():
@@ -79,7 +81,7 @@ def test_a_silent_link_past_the_robots_failsafe_is_shown_as_the_failsafe():
     assert snap.to_json(0.0)["robot"]["failsafe_assumed"] is False  # never heard: nothing assumed
     snap.note_link(True, 1.0)
     snap.link.last_heard = 1.0
-    snap.note_status_answer({"mode": "idle", "failsafe_s": 3.0}, 1.0)
+    snap.note_status_answer(pk.StatusReport(mode="idle", failsafe_s=3.0), 1.0)
     snap.note_link(False, 6.0)
     assert snap.to_json(3.5)["robot"]["failsafe_assumed"] is False
     assert snap.to_json(6.0)["robot"]["failsafe_assumed"] is True
@@ -89,7 +91,8 @@ def test_a_silent_link_past_the_robots_failsafe_is_shown_as_the_failsafe():
 
 def test_the_robots_disk_and_rejections_and_the_goodput_are_in_the_snapshot():
     snap = StationSnapshot("pty", "db", 0.0)
-    snap.note_status_answer({"mode": "idle", "disk": "low", "disk_free": 123456, "rejected": ["crc:3", "tag:1"]}, 1.0)
+    snap.note_status_answer(pk.StatusReport(mode="idle", disk=pk.Disk("low", 123456), rejected=pk.Kept(
+        (pk.Rejection("crc", 3), pk.Rejection("tag", 1)))), 1.0)
     for t in range(10):
         snap.note_delivered(100, 100.0 + t)
     js = snap.to_json(109.0)

@@ -1,59 +1,124 @@
-"""What the station says about refused frames: a likely wrong key in one line, another
-transmitter once the robot is heard, the re-sync after a start as a re-sync, at most one event a
-second per reason."""
-from radio.events import LinkStats
-from tools.station.refusals import EVERY_S, RESYNC_S, WRONG_KEY_FRAMES, Refusals
+"""A packet the station cannot use never ends it: it is kept raw in rejected_packets, counted,
+logged, and refused to the robot with a NACK UNUSABLE naming the message, which the robot sets
+aside for good (the loop of "store, crash, restart, receive it again" is gone)."""
+import asyncio
+import time
+
+import msgpack
+
+from radio import packets as pk
+from radio.auth import MemoryCounterStore
+from radio.channel import ChannelConfig
+from radio.channel_port import Cable
+from radio.link import Link
+from radio.pump import LinkPump
+from tests.support.packets import models_body
+from tests.support.robots import IDLE, SMALL, robot_toml
+from tests.support.station_cable import KEY, drive, station_log, station_on_cable
+from tools.station.log import StationLog
+from tools.station.receiver import Receiver
+from tools.station.station import Station
+from tools.store.database import Store
+
+ROBOT = robot_toml(SMALL, IDLE, {"link": {"heartbeat_s": 0.1}})
 
 
-def stats(accepted: int = 0, **rejected: int) -> LinkStats:
-    return LinkStats(0, 0, accepted, 0, 0, 0, 0, 0, dict(rejected))
+def old_status(extras: dict) -> bytes:
+    """A STATUS in the schema-3 layout older robots sent: their state in free-form extras."""
+    return msgpack.packb([3, int(pk.Kind.STATUS), 1, 1.7e9, 0, None, None, 0, 0, None, "boot", extras])
 
 
-def test_frames_failing_authentication_with_none_passing_are_said_as_a_wrong_key_with_the_fix():
-    r = Refusals(started=0.0)
-    (early,) = r.update(stats(tag=WRONG_KEY_FRAMES - 1), 1.0)
-    assert "tag mismatch: wrong key?" in early[0] and not early[1].get("wrong_key")
-    assert r.wrong_key(stats(tag=WRONG_KEY_FRAMES - 1)) == ""
-    (said,) = r.update(stats(tag=WRONG_KEY_FRAMES + 5), 2.0)
-    text, fields = said
-    assert text.startswith(f"wrong key? {WRONG_KEY_FRAMES + 5} frames failed authentication and none passed")
-    assert "--key must hold the same key as the robot's link.key_file" in text and "still listening" in text
-    assert fields == {"reason": "tag", "count": 6, "total": WRONG_KEY_FRAMES + 5, "cause": fields["cause"],
-                      "wrong_key": True}
-    assert len(text.splitlines()) == 1
+def nacks(robot) -> dict[int, pk.NackPacket]:
+    return {p.msg_id: p for p in robot.commands if isinstance(p, pk.NackPacket)}
 
 
-def test_once_the_robots_frames_pass_failing_ones_are_another_transmitters():
-    r = Refusals(started=0.0)
-    ((text, fields),) = r.update(stats(accepted=50, tag=40), 1.0)
-    assert "another transmitter" in text and "wrong key" not in text and "wrong_key" not in fields
-    assert r.wrong_key(stats(accepted=50, tag=40)) == ""
+def test_an_old_status_whose_extras_say_sweep_abc_is_used_and_the_station_goes_on(tmp_path):
+    station, robot, store = station_on_cable(tmp_path)
+    mid = robot.pump.send(old_status({"sweep": "abc", "mode": "idle", "disk": 5}), msg_id=3)
+    asyncio.run(drive(station, robot, lambda: mid in robot.acked))
+    assert station.failure is None and mid in robot.acked and not nacks(robot)
+    assert station.snapshot_json()["robot"]["mode"] == "idle"  # what it said well is read; the rest is not
+    (status,) = [e for e in station_log(tmp_path) if e["kind"] == "status"]
+    assert status["packet"]["extras"]["sweep"] == "abc"
 
 
-def test_each_reason_is_said_at_most_once_a_second_with_what_came_meanwhile():
-    r = Refusals(started=0.0)
-    assert [f["count"] for _, f in r.update(stats(crc=3), 100.0)] == [3]
-    assert r.update(stats(crc=9), 100.0 + EVERY_S / 2) == []
-    ((text, fields),) = r.update(stats(crc=10), 100.0 + EVERY_S)
-    assert (fields["count"], fields["total"]) == (7, 10) and "CRC error" in text
-    assert r.update(stats(crc=10), 200.0) == []  # nothing new: nothing said
+def test_a_hostile_report_is_kept_raw_refused_by_its_id_and_the_station_goes_on(tmp_path):
+    station, robot, store = station_on_cable(tmp_path)
+    good = msgpack.unpackb(pk.encode(pk.StatusPacket(1, 1.7e9, pk.RobotState.IDLE, None, 0, 0, None, "boot")))
+    hostile = msgpack.packb([*good[:-1], {11: {1: "abc"}}])  # the sweep's id a string
+    huge_time = msgpack.unpackb(models_body(7)[0])
+    huge_time[4] = 1e300
+    bodies = {11: hostile, 12: msgpack.packb(huge_time), 13: models_body(8)[0]}
+    for mid, body in bodies.items():
+        robot.pump.send(body, msg_id=mid)
+    asyncio.run(drive(station, robot, lambda: {11, 12} <= set(nacks(robot)) and 13 in robot.acked))
+    assert station.failure is None and {11, 12, 13} <= robot.acked
+    said = nacks(robot)
+    assert said[11].reason is pk.Reason.UNUSABLE and "sweep id must be an integer" in said[11].text
+    assert "time = 1e+300 outside" in said[12].text
+    kept = {r.msg_id: r for r in store.rejected()}
+    assert set(kept) == {11, 12} and kept[11].body == hostile and kept[12].sender == 1
+    assert [c.sequence for c in store.captures()] == [8]  # the huge time was never stored
+    bad = [e for e in station_log(tmp_path) if e["kind"] == "bad"]
+    assert {e["msg_id"] for e in bad} == {11, 12} and all(e["told"] and e["tone"] == "bad" for e in bad)
+    assert station.snapshot_json()["captures"]["bad"] == 2 and station.refused == 2
 
 
-def test_the_robots_old_session_after_a_start_is_a_resync_said_with_the_link_up_not_refusals():
-    r = Refusals(started=0.0)
-    assert r.update(stats(stale_session=5), 0.5) == []
-    up = r.link_up(stats(accepted=3, stale_session=7), 0.8)
-    assert up == " (re-synced after this station's start: 7 frames of the robot's earlier session set aside)"
-    assert r.view(stats(accepted=3, stale_session=7, crc=1)).rejected == {"crc": 1}  # not refused frames
-    assert r.link_up(stats(accepted=9, stale_session=7), 5.0) == ""  # said once
-    # later frames of an old session are refusals again, said as such
-    ((text, fields),) = r.update(stats(accepted=9, stale_session=9), 6.0)
-    assert fields["count"] == 2 and "old session" in text
-    assert r.view(stats(accepted=9, stale_session=9)).rejected == {"stale_session": 2}
+def test_a_value_the_store_refuses_is_refused_but_a_store_that_fails_still_ends_the_station(tmp_path):
+    class Picky(Store):
+        def add_capture(self, *a, **k):
+            raise ValueError("levels 3: expected ...")
+
+    from tools.store.schema import connect
+    picky = Picky(connect(tmp_path / "host.db", True), tmp_path / "host.db")
+    station, robot, _ = station_on_cable(tmp_path, store=picky)
+    robot.pump.send(models_body(7)[0], msg_id=21)
+    asyncio.run(drive(station, robot, lambda: 21 in nacks(robot)))
+    assert station.failure is None and "MODELS not stored: levels 3" in nacks(robot)[21].text
+    assert [r.msg_id for r in picky.rejected()] == [21]
 
 
-def test_old_session_frames_long_after_the_start_are_refusals_not_a_resync():
-    r = Refusals(started=0.0)
-    ((text, fields),) = r.update(stats(stale_session=4), RESYNC_S + 1.0)
-    assert fields["count"] == 4 and r.link_up(stats(accepted=1, stale_session=4), RESYNC_S + 2.0) == ""
-    assert r.view(stats(stale_session=4)).rejected == {"stale_session": 4}
+def test_a_fault_handling_a_decoded_packet_refuses_it_and_is_counted(tmp_path, monkeypatch):
+    station, robot, store = station_on_cable(tmp_path)
+    monkeypatch.setattr(station.snapshot, "note_status", lambda *a: 1 / 0)
+    robot.pump.send(pk.encode(pk.StatusPacket(1, 1.7e9, pk.RobotState.IDLE, None, 0, 0, None, "boot")), msg_id=31)
+    robot.pump.send(models_body(9)[0], msg_id=32)
+    asyncio.run(drive(station, robot, lambda: 31 in nacks(robot) and 32 in robot.acked))
+    assert station.failure is None and station.faults == 1
+    assert "could not handle status: ZeroDivisionError" in nacks(robot)[31].text
+    assert [c.sequence for c in store.captures()] == [9]
+
+
+def test_the_robot_sets_aside_the_status_the_station_refused_and_never_sends_it_again(tmp_path, fake_robot):
+    cable = Cable(ChannelConfig(latency=0.0, bandwidth=1e7, buffer=1 << 20))
+    rt, _ = fake_robot(ROBOT, transport=LinkPump(Link(1, 2, 1, KEY, MemoryCounterStore(), heartbeat=0.1,
+                                                      link_timeout=5.0), cable.ends[0]))
+    good = msgpack.unpackb(pk.encode(pk.StatusPacket(1, 1.7e9, pk.RobotState.IDLE, None, 0, 0, None, "boot")))
+    hostile = msgpack.packb([*good[:-1], {11: {1: "abc"}}])
+    mid = rt.outbox.put(int(pk.Kind.STATUS), hostile)  # as a robot of another build might have queued it
+    store = Store.open(tmp_path / "host.db")
+
+    def station():
+        pump = LinkPump(Link(2, 1, 1, KEY, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), cable.ends[1])
+        return Station(pump, Receiver(store), StationLog(tmp_path / "host.db.log", echo=None), port="sim",
+                       db=str(tmp_path / "host.db"), status_every=0)
+
+    async def run(st, until, limit_s=20.0):
+        task = asyncio.ensure_future(st.run())
+        end = time.monotonic() + limit_s
+        while not until() and time.monotonic() < end:
+            rt.step()
+            await asyncio.sleep(0.002)
+        st.stop()
+        await task
+
+    first = station()
+    asyncio.run(run(first, lambda: rt.outbox.dead_letters()[0] == 1))
+    count, (letter,) = rt.outbox.dead_letters()
+    assert first.failure is None and count == 1 and letter.msg_id == mid
+    assert letter.body in (hostile, None)  # kept when the refusal came before the acknowledgement
+    assert [r.body for r in store.rejected()] == [hostile]
+    assert mid not in [m for m, _ in rt.outbox.pending(100)]
+    second = station()  # a restart: the refused message is not sent again, nothing crashes
+    asyncio.run(run(second, lambda: False, limit_s=1.5))
+    assert second.failure is None and len(store.rejected()) == 1

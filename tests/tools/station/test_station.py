@@ -115,7 +115,7 @@ def test_torque_off_torque_on_sweep_completes_through_the_station(rig):
     assert code == 0 and ack["extras"]["poses"] == 3
     rig.wait_for_poses([(80.0, 0.0), (60.0, 0.0), (40.0, 0.0)], robot=robot)
     code, (status,), _ = rig.cmd("status")
-    assert status["extras"]["skipped"] == [] and status["extras"]["next"] == 3
+    assert status["status"]["sweep"]["skipped"]["items"] == [] and status["status"]["sweep"]["next"] == 3
     assert rig.stop(station) == 0 and rig.stop(robot) == 0
 
 

@@ -8,18 +8,11 @@ import pytest
 
 from radio import packets as pk
 from radio.auth import MemoryCounterStore
-from radio.channel import ChannelConfig
-from radio.channel_port import Cable
-from radio.link import Acked, Link
-from radio.pump import LinkPump
+from radio.link import Link
 from tests.support.packets import models_body
+from tests.support.station_cable import drive, station_log, station_on_cable
 from tools.station.bus import EventBus
-from tools.station.log import StationLog
-from tools.station.receiver import Receiver
-from tools.station.station import Station
 from tools.store.database import Store
-
-KEY = bytes(range(32))
 
 
 def test_a_slow_subscriber_loses_the_oldest_events_and_is_told_how_many():
@@ -39,47 +32,8 @@ def test_a_slow_subscriber_loses_the_oldest_events_and_is_told_how_many():
 
     got_fast, lost, got_slow, subscribers, last = asyncio.run(go())
     assert got_fast == list(range(10)) and last["i"] == 10
-    assert lost["kind"] == "lost" and lost["count"] == 7 and got_slow == [7, 8, 9]
+    assert lost.KIND == "lost" and lost.count == 7 and got_slow == [7, 8, 9]
     assert subscribers == 1
-
-
-class Robot:
-    """The robot's end of the cable: a link that sends packets and answers commands."""
-
-    def __init__(self, end, key=KEY):
-        self.pump = LinkPump(Link(1, 2, 1, key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), end)
-        self.acked: set[int] = set()
-        self.commands: list[pk.CommandPacket] = []
-
-    def turn(self):
-        for ev in self.pump.step():
-            if isinstance(ev, Acked):
-                self.acked.add(ev.msg_id)
-            elif hasattr(ev, "payload"):
-                cmd = pk.decode(ev.payload)
-                self.commands.append(cmd)
-                if [c.command_id for c in self.commands].count(cmd.command_id) == 1:  # as the robot: once
-                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, {"n": len(self.commands)})))
-
-
-def station_on_cable(tmp_path, store=None, host_key=KEY, robot_key=KEY):
-    cable = Cable(ChannelConfig(latency=0.0, bandwidth=1e7, buffer=1 << 20))
-    store = store or Store.open(tmp_path / "host.db")
-    pump = LinkPump(Link(2, 1, 1, host_key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), cable.ends[1])
-    station = Station(pump, Receiver(store), StationLog(tmp_path / "host.db.log", echo=None),
-                      port="sim", db=str(tmp_path / "host.db"), status_every=0)
-    return station, Robot(cable.ends[0], robot_key), store
-
-
-async def drive(station, robot, until, limit_s=20.0):
-    """Run the station, turning the robot beside it, until `until()`."""
-    task = asyncio.ensure_future(station.run())
-    end = time.monotonic() + limit_s
-    while not until() and not task.done() and time.monotonic() < end:
-        robot.turn()
-        await asyncio.sleep(0.002)
-    station.stop()
-    await task
 
 
 def test_a_packet_is_acknowledged_only_once_it_is_stored(tmp_path):
@@ -89,11 +43,6 @@ def test_a_packet_is_acknowledged_only_once_it_is_stored(tmp_path):
     assert mid in robot.acked and [c.sequence for c in store.captures()] == [7]
     events = [e for e in station_log(tmp_path) if e["kind"] == "capture"]
     assert events[0]["stored"] and events[0]["seq"] == 7 and events[0]["capture"]["regions"] == 2
-
-
-def station_log(tmp_path):
-    import json
-    return [json.loads(line) for line in (tmp_path / "host.db.log").read_text().splitlines()]
 
 
 def test_a_store_that_fails_ends_the_station_and_nothing_is_acknowledged(tmp_path):
@@ -170,8 +119,8 @@ def test_the_station_survives_frames_of_another_key_before_and_after_hearing_its
 def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path):
     station, robot, _ = station_on_cable(tmp_path)
     status = pk.StatusPacket(1, 1_700_000_000.0, pk.RobotState.SWEEPING, (60.0, 0.0), 3, 900, 6,
-                             "skipped pose: settle failed", {"sweep": 2, "skipped_index": 4,
-                                                             "skipped_elevation": 50.0, "skipped_azimuth": 0.0})
+                             "skipped pose: settle failed", report=pk.StatusReport(sweep=pk.SweepReport(
+                                 2, skipped=pk.Kept((pk.SkippedPose(4, 50.0, 0.0, "settle failed"),)))))
     robot.pump.send(pk.encode(status))
     answers = []
 
@@ -184,7 +133,7 @@ def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path)
         await drive_task
         kinds = []
         while (e := sub.get_nowait()) is not None:
-            kinds.append(e["kind"])
+            kinds.append(e.KIND)
         return kinds
 
     kinds = asyncio.run(go())

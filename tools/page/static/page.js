@@ -313,12 +313,9 @@ $("btf-stat").onchange = (e) => { btf.stat = e.target.value; if (btf.data && !bt
 // -- events --------------------------------------------------------------------------------
 const LOG_KEPT = 80;
 function logEvent(ev) {
-  if (ev.kind === "status" && !ev.stored && ev.text === "the robot's report") return;  // the station's own poll
-  const bad = (ev.kind === "link" && !ev.up) || ev.kind === "failsafe" || ev.kind === "rejected" ||
-    (ev.kind === "answer" && !ev.ok) || (ev.kind === "station" && /failed/.test(ev.text));
-  const good = (ev.kind === "link" && ev.up) || (ev.kind === "answer" && ev.ok);
+  if (ev.shown === false) return;  // e.g. the station's own STATUS poll (tools/station/events.py)
   const li = document.createElement("li");
-  li.className = bad ? "bad" : good ? "ok" : "";
+  li.className = ev.tone || "";
   li.innerHTML = `<span class=t>${clock(ev.time)}</span> ${esc(ev.kind)}: ${esc(ev.text)}`;
   $("log").prepend(li);
   while ($("log").children.length > LOG_KEPT) $("log").lastChild.remove();

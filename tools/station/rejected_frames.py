@@ -38,7 +38,7 @@ def wrong_key_line(failed: int, accepted: int) -> str:
             "key as the robot's link.key_file")
 
 
-class Refusals:
+class RejectedFrames:
     """Fed the link's counters after each turn (`update`); `wall` is the wall clock in seconds."""
 
     def __init__(self, started: float) -> None:
