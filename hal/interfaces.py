@@ -126,7 +126,8 @@ class CameraSettings:
     """What the camera reports it captures with, read back from the device (None: not reported).
 
     `lock_held` is False when a manual control asked for was not granted, or the device
-    still reports the automatic mode for it; `problems` says which, one line each.
+    still reports the automatic mode for it; `problems` says which, one line each. `source`
+    names the file the last frame was read from, for a camera that plays files.
     """
 
     exposure_us: float | None
@@ -139,6 +140,7 @@ class CameraSettings:
     auto_white_balance: bool = False
     lock_held: bool = True
     problems: tuple[str, ...] = field(default=())
+    source: str | None = None
 
     @property
     def locked(self) -> bool:

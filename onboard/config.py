@@ -39,10 +39,14 @@ class HalConfig:
     servo_port: str = ""
     servo_baud: int = 1_000_000
     tracker_bus: int = 1
-    camera: str = ""  # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0
+    # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0.
+    # Fake and emulated bodies: "replay:DIR_OR_GLOB" plays PNG/JPEG files as the frames (hal.replay),
+    # at their own size (hal.size must match them); a relative path is against the config file
+    camera: str = ""
     seed: int = 0
     tracker_remap: str = ""  # BNO055 axis remap, P0..P7 or "0x24/0x03"; `btf-robot calibrate tracker` names it
     reference: bool = False  # fake and emulated scenes: lay the grey reference card (label 7) in the plate
+    replay_loop: bool = False  # replay camera: start over after the last file; false: the poses after it are skipped
 
 
 @dataclass(frozen=True, slots=True)
@@ -252,6 +256,14 @@ def _section(cls: type, table: Any, prefix: str, base: Path) -> Any:
     return obj
 
 
+def _replay_against(hal: HalConfig, base: Path) -> HalConfig:
+    """A replay camera's relative folder or glob, resolved against the config file's directory."""
+    kind, colon, where = hal.camera.partition(":")
+    if kind != "replay" or not colon or not where.strip() or Path(where.strip()).expanduser().is_absolute():
+        return hal
+    return replace(hal, camera=f"replay:{os.path.normpath(base / where.strip())}")
+
+
 def from_mapping(data: Mapping[str, Any], base: Path = Path(".")) -> Config:
     """Build and check a `Config` from parsed TOML; raises ConfigError on any problem."""
     top: dict[str, Any] = {}
@@ -266,6 +278,7 @@ def from_mapping(data: Mapping[str, Any], base: Path = Path(".")) -> Config:
     for key, cls in _SECTIONS.items():
         if key not in top:  # absent sections still resolve their default paths against base
             top[key] = _section(cls, {}, key, base)
+    top["hal"] = _replay_against(top["hal"], base)
     top.setdefault("state_dir", base / "state")
     cfg = Config(**top)
     check(cfg)
@@ -315,6 +328,9 @@ def check(cfg: Config) -> None:
         raise ConfigError(f"segment.refit_drift must be >= 0, got {sg.refit_drift}")
     if sg.method == "scene" and (cfg.hal.body or os.environ.get("BTF_HAL", "")) != "fake":
         raise ConfigError("segment.method = 'scene' needs hal.body = 'fake' (ground truth)")
+    if sg.method == "scene" and cfg.hal.camera.startswith("replay:"):
+        raise ConfigError("segment.method = 'scene' needs the fake scene camera; a replay camera has no "
+                          "ground truth (use isodata or mask)")
     if cfg.outbox_quota_bytes < 4096:
         raise ConfigError("outbox_quota_bytes must be at least 4096")
     if cfg.disk_min_free_bytes < 0 or cfg.disk_reserve_bytes < 0:

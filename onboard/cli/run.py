@@ -17,12 +17,12 @@ import tempfile
 import time
 from pathlib import Path
 
-from hal.factory import build_hal
+from hal.factory import HalConfigError, build_hal
 from hal.interfaces import HalError
 from onboard import config as config_mod
 from onboard.capture.exposure import EXPOSURE_FILE, load_exposure
 from onboard.capture.segmentation import Segmentation
-from onboard.cli.runner import CliError, RetryLater
+from onboard.cli.runner import CliError, RetryLater, bounded
 from onboard.config import CameraValue, ConfigError
 from onboard.link.outbox import OutboxError
 from onboard.runtime import Runtime, open_state
@@ -40,12 +40,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", help="override link.url (a device, pty path, loop://, socket://, btfsim://?port=...)")
     p.add_argument("--exit-when-idle", action="store_true",
                    help="exit 0 once no sweep is running and every packet is acknowledged")
-    p.add_argument("--max-seconds", type=float, default=0.0, help="stop after this long (0: never)")
+    p.add_argument("--max-seconds", type=bounded(float, 0, None, "seconds"), default=0.0,
+                   help="stop after this many seconds (0: never)")
     p.add_argument("--new-sweep", action="store_true",
                    help="start a new sweep of the config's plan even if its last sweep finished "
                         "(by default an interrupted sweep resumes and a finished one is not repeated)")
     p.add_argument("--new-key", action="store_true",
-                   help="link.key_file holds a key never used before (just made by `btf-host keygen`): "
+                   help="link.key_file holds a key never used before (just made by 'btf-host keygen'): "
                         "start its link counters afresh; only needed with [link] clock = \"none\"")
 
 
@@ -176,7 +177,9 @@ def run(args: argparse.Namespace) -> int:
     cfg = _calibrated_exposure(cfg)
     try:
         hal = build_hal(cfg.hal, state_dir=cfg.state_dir)  # with the arm calibration stored there
-    except HalError as exc:
+    except HalConfigError as exc:  # no body chosen, an unknown option: restarting cannot mend it
+        raise CliError(f"hal: {exc}") from None
+    except HalError as exc:  # a device not there yet
         raise RetryLater(f"hal: {exc}") from None
     try:
         port = _open_port(cfg.link.url, cfg.link.baud)

@@ -8,12 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
-from radio.packets.base import iso_time
 from radio import packets as pk
 from radio.auth import MemoryCounterStore
 from radio.channel import ChannelConfig
 from radio.channel_port import Cable
 from radio.link import Delivered, Link
+from radio.packets.base import iso_time
 from radio.pump import LinkPump
 from tests.support import ROOT
 from tests.support.robots import IDLE, SMALL, robot_toml

@@ -33,6 +33,7 @@ import json
 import secrets
 import time
 from collections import Counter, deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -100,8 +101,10 @@ class PageServer:
         self._cookie = f"btf_token_{options.port}"
 
     # -- start and stop ------------------------------------------------------------------------
-    async def start(self) -> str:
-        """Serve; the page's address (without the token). OSError when the address is taken."""
+    async def start(self, on_ready: Callable[[str], None] | None = None) -> str:
+        """Serve; the page's address (without the token). OSError when the address is taken.
+        `on_ready(url)` is called once its drawing worker has loaded (about a second later), so a page
+        opened at the address it announces draws its first capture at once."""
         await self.data.refresh()  # every capture stored so far, before the first page asks
         app = web.Application(middlewares=[self._guard], client_max_size=64 * 1024)
         app.add_routes([
@@ -110,7 +113,8 @@ class PageServer:
             web.get("/capture/{id:\\d+}/section", self._section),
             web.get("/capture/{id:\\d+}/{name:[a-z]+}.png", self._image),
             web.get("/api/btf", self._btf)])
-        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0)
+        # a request whose page went away is cancelled: its drawing, if not begun, is not made
+        self._runner = web.AppRunner(app, access_log=None, shutdown_timeout=1.0, handler_cancellation=True)
         await self._runner.setup()
         # Listening here rather than through a TCPSite: the gate is the protocol factory, so a
         # connection past the cap is closed before it holds a descriptor for long.
@@ -125,7 +129,13 @@ class PageServer:
         self.url = f"http://{host if ':' not in host else f'[{host}]'}:{port}/"
         self._tasks = [asyncio.ensure_future(self._follow()), asyncio.ensure_future(self._tick())]
         self.data.start_worker()
+        if on_ready is not None:
+            self._tasks.append(asyncio.ensure_future(self._announce(on_ready)))
         return self.url
+
+    async def _announce(self, on_ready: Callable[[str], None]) -> None:
+        await self.data.warm()
+        on_ready(self.url)
 
     async def close(self) -> None:
         if self._listener is not None:
@@ -319,8 +329,9 @@ class PageServer:
 
     async def _image(self, request: web.Request) -> web.Response:
         name = request.match_info["name"]
-        out = await self._drawn(request, "thumb" if name == "thumb" else "section")
-        data = out["png"] if name == "thumb" else out["images"].get(name)
+        what = name if name in ("thumb", "histograms") else "section"  # drawings of their own
+        out = await self._drawn(request, what)
+        data = out["png"] if what != "section" else out["images"].get(name)
         if data is None:
             raise web.HTTPNotFound(text=f"capture {request.match_info['id']} has no {name} image")
         return web.Response(body=data, content_type="image/png", headers={"Cache-Control": "max-age=3600"})

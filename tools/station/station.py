@@ -82,6 +82,11 @@ SENT_KEPT = 1024  # commands remembered until answered (for the snapshot)
 POLLS_KEPT = 16  # the station's own STATUS requests it recognises the answers of
 
 
+def empty(value: Any) -> bool:
+    """An answer's value not worth a word: '', None, an empty list or mapping."""
+    return value is None or (isinstance(value, (str, list, tuple, dict)) and not value)
+
+
 class StationFailure(Exception):
     """The station cannot go on; `status` is the exit status its CLI gives (2: fix the setup)."""
 
@@ -322,7 +327,8 @@ class Station:
                 self._poll = None
             self.emit(ev_.StatusEvent(wall, "the robot's report", packet=answer, poll=True), logged=False)
             return
-        said = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items())
+        said = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items()
+                        if not empty(v))  # "paused=" says nothing: a field left empty is left out
         said = said if len(said) <= 160 else said[:157] + "..."
         verdict = f"ACK {said}".strip() if ok else f"NACK {p.reason.name}: {p.text}"
         named = name or (p.name if ok else None)

@@ -19,6 +19,9 @@ from btf.record import FittedModel
 from radio.packets.base import MAX_BANDS, MAX_FRAME_SIDE, MAX_LABELS
 
 MAX_ROW_INT = 2**63 - 1
+# A dataset's captures are stored under the robot id `dataset:<its absolute folder>`, each with
+# its file name inside that folder as `source` (tools.data.ingest).
+DATASET_PREFIX = "dataset:"
 
 
 @dataclass(frozen=True, slots=True)
@@ -43,6 +46,18 @@ class StoredCapture:
     @property
     def elevation(self) -> float:
         return self.measured[0]
+
+    @property
+    def dataset(self) -> str | None:
+        """The folder of the dataset an ingest fitted this capture from (None: not a dataset's)."""
+        return self.robot[len(DATASET_PREFIX):] if self.robot.startswith(DATASET_PREFIX) else None
+
+    @property
+    def source_file(self) -> str | None:
+        """The image file this capture was fitted from, where the database says (a dataset's item)."""
+        if self.source is None:
+            return None
+        return f"{self.dataset.rstrip('/')}/{self.source}" if self.dataset else self.source
 
 
 def capture_from_row(r: tuple) -> StoredCapture:

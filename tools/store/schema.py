@@ -165,7 +165,11 @@ def connect(p: Path, create: bool = True) -> sqlite3.Connection:
         if magic != _SQLITE_MAGIC:
             raise CorruptDatabase(f"database {p}: not an SQLite file; left untouched")
     elif not create:
-        raise CorruptDatabase(f"database {p}: no such database")
+        if p.exists():  # a 0-byte file: what a failed copy, or a typo in a redirection, leaves
+            raise CorruptDatabase(f"database {p}: an empty file, not a btfscout database; give the one station, "
+                                  "listen, fit, ingest or demo wrote")
+        raise CorruptDatabase(f"database {p}: no such database; give the one station, listen, fit, ingest or "
+                              "demo wrote")
     if not p.parent.exists():
         raise CorruptDatabase(f"database {p}: directory {p.parent} does not exist")
     try:

@@ -146,3 +146,17 @@ def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path)
     assert snap["robot"]["state"] == "sweeping" and snap["robot"]["pose"] == {"elevation": 60.0, "azimuth": 0.0}
     assert snap["sweep"]["id"] == 2 and snap["sweep"]["skipped"] == [
         {"index": 4, "elevation": 50.0, "azimuth": 0.0, "reason": "settle failed"}]
+
+
+def test_an_answer_is_logged_without_the_fields_the_robot_left_empty(tmp_path):
+    station, robot, _ = station_on_cable(tmp_path)
+    robot.extras = {"set": "skip.min_pixels", "camera": ""}
+
+    async def go():
+        _, fut = station.submit(pk.CommandName.SET, {"key": "skip.min_pixels", "value": 50}, command_id=78)
+        await drive(station, robot, fut.done)
+        return await fut
+
+    assert asyncio.run(go())["extras"]["camera"] == ""  # the answer itself as the robot sent it
+    said = [e["text"] for e in station_log(tmp_path) if e["kind"] == "answer"]
+    assert said == ["SET (command 78): ACK set=skip.min_pixels"], said
