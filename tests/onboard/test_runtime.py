@@ -187,9 +187,10 @@ def test_memory_growth_with_frame_size_is_only_the_frame_buffers(tmp_path):
         return top
 
     small, large = peak(500), peak(2000)
-    # Feature bands (3 bytes/pixel) are the only frame-sized buffer the pipeline makes.
+    # Feature bands (3 bytes/pixel) are the only frame-sized buffer the pipeline makes; what else
+    # differs between the two calls does not grow with the frame (a cache entry, a log record).
     frame_buffers = (2000 * 2000 - 500 * 500) * 3
-    assert large - small <= frame_buffers
+    assert large - small <= frame_buffers + 64 * 1024
 
 
 def test_runtime_imports_nothing_from_the_host_and_stays_under_150_mb(tmp_path):

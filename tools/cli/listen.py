@@ -30,6 +30,8 @@ def run(args: argparse.Namespace) -> int:
     def show(item) -> None:
         if args.json:
             print(json.dumps(item.to_json()), flush=True)
+        elif item.kind.value == "link":  # the link itself (a wrong key, stale counters): its line alone
+            tqdm.write(f"{item.kind.value:>9}: {item.text}")
         else:
             tqdm.write(f"{item.kind.value:>9} robot {item.robot} seq {item.seq}: {item.text}"
                        + ("" if item.stored or item.kind.value not in ("capture", "mask", "unchanged")
@@ -64,4 +66,7 @@ def run(args: argparse.Namespace) -> int:
     if station.failure is not None:
         print(f"btf-host: error: {station.failure}", file=sys.stderr)
         return station.failure.status
+    if station.wrong_key:  # it listened to the end; nothing it heard could be read
+        print(f"btf-host: error: {station.wrong_key}", file=sys.stderr)
+        return 2
     return 0

@@ -25,6 +25,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "one); its address with the token is printed on stderr")
     p.add_argument("--http-public", action="store_true",
                    help="anyone who reaches the page may watch without the token (commands still need it)")
+    p.add_argument("--http-host", action="append", default=[], metavar="NAME",
+                   help="a name the page is reached by, besides its address (repeat for more): a request "
+                        "whose Host header names anything else is refused")
     p.add_argument("--robot-config", metavar="ROBOT_TOML",
                    help="the robot's config, when it is a fake one: the page shows its renders as measured frames")
     p.add_argument("--demo", nargs="?", const="station-demo", metavar="DIR",
@@ -47,25 +50,27 @@ def add_station_options(p: argparse.ArgumentParser, required: bool = True, log: 
 
 
 def page_options(args: argparse.Namespace, default: str | None = None):
-    """The page's options from --http, --http-public and --robot-config (None: no page)."""
+    """The page's options from --http, --http-public, --http-host and --robot-config (None: no page)."""
     # heavy (OpenCV, scipy): loaded to run, not for --help
+    from tools.page.guard import host_name
     from tools.page.server import PageOptions, parse_http
     from tools.report.capture_views import Frames
 
     given = args.http or default
     if given is None:
-        if args.http_public or args.robot_config:
-            raise CliError("--http-public and --robot-config are options of the page: give --http [ADDR:]PORT")
+        if args.http_public or args.robot_config or args.http_host:
+            raise CliError("--http-public, --http-host and --robot-config are options of the page: "
+                           "give --http [ADDR:]PORT")
         return None
-
     try:
         host, port = parse_http(given)
+        hosts = tuple(host_name(name) for name in args.http_host)
         fake = Frames.from_robot_config(args.robot_config).fake
     except ValueError as exc:  # onboard.config.ConfigError too
         raise CliError(str(exc)) from None
     if args.robot_config and fake is None:
         raise CliError(f"--robot-config {args.robot_config}: not a fake robot's ([hal] body = \"fake\")")
-    return PageOptions(host, port, public=args.http_public, fake=fake)
+    return PageOptions(host, port, public=args.http_public, fake=fake, hosts=hosts)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -51,6 +51,8 @@ def run(args: argparse.Namespace) -> int:
 
 def summary(s: dict) -> str:
     """The snapshot in a few lines, for a person."""
+    from tools.station.rejected_frames import wrong_key_line  # the station's modules: not at btf-host's start
+
     ln, r, sw = s["link"], s["robot"], s["sweep"]
     pose = ("an unknown pose" if r["pose"] is None
             else f"{r['pose']['elevation']:.1f}°/{azimuth_shown(r['pose']['azimuth']):.1f}°")
@@ -60,6 +62,8 @@ def summary(s: dict) -> str:
              f"link {'up' if ln['up'] else 'down'}, heard {heard}; frames sent {ln['frames_sent']}, "
              f"accepted {ln['frames_accepted']}, retransmitted {ln['retransmissions']}, rejected: {rejected}",
              _robot_line(r, pose)]
+    if wrong := wrong_key_line(ln["rejected"].get("tag", 0), ln["frames_accepted"]):
+        lines.append(wrong)
     if sw["id"] is not None and sw.get("missing") is not None:  # it ended: what it could not measure
         missing = sw["missing"]
         lines.append(f"sweep {sw['id']} done: {sw['measured']} measured, "

@@ -13,6 +13,7 @@ import contextlib
 import heapq
 import itertools
 import multiprocessing
+import os
 import warnings
 from collections import OrderedDict
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
@@ -116,25 +117,29 @@ def _histograms(store: Store, cap: Any, fake: Any) -> dict:
                                  cap.levels)}
 
 
-def end_with_parent() -> None:
+def end_with_parent(parent: int | None = None) -> None:
     """In a child process of the station: SIGTERM when the station dies, even by SIGKILL
-    (Linux's PR_SET_PDEATHSIG), so no drawing worker or demo robot outlives it."""
+    (Linux's PR_SET_PDEATHSIG), so no drawing worker or demo robot outlives it. `parent`: the
+    station's pid, for a child that starts slowly (a spawned worker): if the station died before
+    this ran, no signal would come, so the child ends now."""
     import ctypes
     import signal
 
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
     except (OSError, AttributeError):
-        pass  # not Linux: the station's own exit path ends them
+        return  # not Linux: the station's own exit path ends them
+    if parent is not None and os.getppid() != parent:
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
-def _worker_start() -> None:
-    """The drawing worker's start: it ends with the station, and leaves Ctrl-C (which the terminal
-    sends its whole process group) to the station, which shuts it down."""
+def _worker_start(station: int) -> None:
+    """The drawing worker's start: it ends with the station (pid `station`), and leaves Ctrl-C
+    (which the terminal sends its whole process group) to the station, which shuts it down."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    end_with_parent()
+    end_with_parent(station)
 
 
 def _loaded() -> None:
@@ -195,11 +200,11 @@ class PageData:
     def start_worker(self) -> None:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=_worker_start)
+                                             initializer=_worker_start, initargs=(os.getpid(),))
             self._warmed = self._pool.submit(_warm)
         if self._btf_pool is None:  # its own process: the panel never waits behind a capture's drawing
             self._btf_pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_worker_start)
+                                                 initializer=_worker_start, initargs=(os.getpid(),))
             self._btf_pool.submit(_loaded)
 
     async def warm(self) -> None:

@@ -96,5 +96,6 @@ def _own_station(args: argparse.Namespace, name: CommandName, cargs: dict, cid: 
     if station.failure is not None:
         raise CliError(str(station.failure))
     if "answer" not in got:
-        raise CliError(f"no answer from the robot within {args.timeout:g} s")
+        said = f": {station.wrong_key}" if station.wrong_key else ""
+        raise CliError(f"no answer from the robot within {args.timeout:g} s{said}")
     return got["answer"]
