@@ -20,10 +20,10 @@ from hal.interfaces import ViewAngles
 from hal.state_file import write_state
 from onboard.capture.mask_file import load_mask
 from onboard.capture.palette import Palette
-from onboard.capture.pipeline import PoseSkipped
+from onboard.capture.pipeline import PoseSkipped, Segmented
 from onboard.config import Config, ConfigError, SegmentConfig
 from radio.packets.base import MAX_LABELS
-from radio.packets.mask import MAX_SIDE, downsample_labels
+from radio.packets.mask import MAX_SIDE, pool_labels
 
 
 class SegmentMethod(enum.Enum):
@@ -76,7 +76,8 @@ class Segmenter:
         self.refit_drift = refit_drift
         self.drift_sample = drift_sample
         self.changed = False
-        self.small: np.ndarray | None = None
+        self.small: np.ndarray | None = None  # the last map noted, pooled as the MASK packet pools it
+        self.counts: np.ndarray | None = None  # its pixels per label 0..255
         self._sent: np.ndarray | None = None
         self.palette: Palette | None = None
         self._mask: np.ndarray | None = None
@@ -138,8 +139,9 @@ class Segmenter:
 
     def note(self, labels: np.ndarray) -> None:
         """Record this frame's label map (from any source) and set `changed`: the map compared
-        is the one the MASK packet carries (radio.packets.mask.downsample_labels)."""
-        small = downsample_labels(labels, self.mask_side)
+        is the one the MASK packet carries (radio.packets.mask.downsample_labels), pooled in the
+        same count that gives each label's pixels (`counts`)."""
+        small, self.counts = pool_labels(labels, self.mask_side)
         sent = self._sent
         self.changed = (
             sent is None or sent.shape != small.shape
@@ -148,6 +150,11 @@ class Segmenter:
         if self.changed:
             self._sent = small
         self.small = small
+
+    def segmented(self, labels: np.ndarray) -> Segmented:
+        """The pipeline's view of the map just noted: the pooled map only when it is the one a
+        MASK packet carries (`mask_side` at its most)."""
+        return Segmented(labels, self.changed, self.small if self.mask_side == MAX_SIDE else None, self.counts)
 
 
 class Segmentation:
@@ -204,7 +211,7 @@ class Segmentation:
         """The next capture sends its label map whether or not it changed."""
         self.segmenter.force_send()
 
-    def __call__(self, feats: Any, frame: Any, measured: ViewAngles) -> tuple[Any, bool]:
+    def __call__(self, feats: Any, frame: Any, measured: ViewAngles) -> Segmented:
         method = self.cfg.segment.method
         if method == "scene":
             labels = self.truth.true_labels()
@@ -217,4 +224,4 @@ class Segmentation:
             except ValueError as exc:
                 raise PoseSkipped(f"segment: {exc}") from None
             self._save_palette()
-        return labels, self.segmenter.changed
+        return self.segmenter.segmented(labels)
