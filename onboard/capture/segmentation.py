@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from btf.fit.features import FeatureFrame
-from btf.fit.isodata import IsodataParams, Labeller, fit_centres, spread, subsample
+from btf.fit.isodata import IsodataParams, Labeller, fit_centres, light_gain, spread, subsample
 from hal.devices import Hal
 from hal.interfaces import ViewAngles
 from hal.state_file import write_state
@@ -36,9 +36,11 @@ class Segmenter:
 
     ISODATA centres belong to the scene, not the frame: they are fitted once, matched to
     the palette, and baked into a `Labeller`; later frames are only looked up. A cheap
-    drift check on a small sample refits when the centres no longer fit the view.
-    Centres are refitted when the mean distance to the nearest centre on `drift_sample`
-    pixels grows past (1 + refit_drift) times its value when they were fitted; 0: every frame.
+    drift check on a small sample refits when the centres no longer fit the view: when the
+    mean distance to the nearest centre on `drift_sample` pixels grows past (1 + refit_drift)
+    times its value when they were fitted, even with the view's light level allowed for (one
+    gain over all bands: a sweep over one scene sees it brighter or darker by view angle and
+    exposure, and that is what a BTF measures, not a new scene); 0: every frame.
     A map is changed when more than `change_fraction` of the MASK map's cells differ
     from the last one sent (`mask_side`: the longest side of that map).
     """
@@ -124,14 +126,18 @@ class Segmenter:
         self._frames += 1
         check = subsample(x, self.drift_sample, p.seed + self._frames)
         lab = self._labeller
-        if (lab is None or lab.bands != x.shape[1] or self.refit_drift == 0
-                or spread(check, lab.centres) > self._fit_spread * (1 + self.refit_drift)):
+        if lab is None or lab.bands != x.shape[1] or self.refit_drift == 0 or self._drifted(check, lab.centres):
             centres = fit_centres(subsample(x, p.subsample, p.seed), p)
             lab = self._labeller = Labeller(centres, self.palette.match(centres))
             # One level of slack keeps a near-perfect fit from refitting on noise.
             self._fit_spread = spread(check, centres) + 1.0
             self.refits += 1
         return lab.assign(data)
+
+    def _drifted(self, check: np.ndarray, centres: np.ndarray) -> bool:
+        """Whether the scene's centres no longer fit the sample, at its own light level."""
+        limit = self._fit_spread * (1 + self.refit_drift)
+        return spread(check, centres) > limit and spread(check / light_gain(check, centres), centres) > limit
 
     def force_send(self) -> None:
         """The next map counts as changed (the host asked for the mask)."""

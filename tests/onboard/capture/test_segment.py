@@ -282,3 +282,18 @@ def test_the_segmenter_hands_on_the_map_it_pooled_and_the_mask_packet_carries_it
     coarse = Segmenter(SegmentMethod.ISODATA, n_labels=8, mask_side=16)
     coarse.note(lab)
     assert coarse.segmented(lab).small is None  # not the map a MASK packet carries
+
+
+def test_centres_are_refitted_when_the_scene_changes_not_when_the_view_is_brighter():
+    seg = Segmenter(SegmentMethod.ISODATA, isodata=IsodataParams(k=4), palette_threshold=30)
+    truth, spec = _labels(), FeatureSpec(FeatureSpace.RGB)
+    base = _scene(truth, 1).astype(float)
+    seg.labels_for(compute(base.astype(np.uint8), spec))
+    assert seg.refits == 1
+    for gain in (0.7, 0.85, 1.15, 1.25):  # the same clutter seen from views that catch more or less light
+        seg.labels_for(compute(np.clip(base * gain, 0, 255).astype(np.uint8), spec))
+    assert seg.refits == 1
+    other = np.array([[120, 30, 160], [20, 120, 120], [230, 200, 40], [90, 90, 10]], np.uint8)  # other clutter
+    seg.labels_for(compute(np.clip(np.random.default_rng(5).normal(other[truth].astype(float), 6), 0, 255)
+                           .astype(np.uint8), spec))
+    assert seg.refits == 2
