@@ -242,6 +242,12 @@ def _read_all(counts: np.ndarray, cum: np.ndarray, live: list[int], plans: dict,
         if (low or high) and not where.fallback:
             z[j, TEMPLATE + 1] = where.z
             ok[j, TEMPLATE + 1] = True
+    # A fallback reads the middle of the uncensored mass (its pa and pe) where a side is uncensored,
+    # the censor limit where it is censored (btf.fit.censor)
+    fallbacks = [(j, k, *plans[live[j]][1:]) for j, k in zip(*np.nonzero(ok & fallback))]
+    for j, k, low, high in fallbacks:
+        pa, pe = fallback_probs(low, high)
+        probs[j, k] = (pa, pa, pe, pe)
     every = n == counts.shape[0]
     c, cm = (counts, cum) if every else (counts[live], cum[live])
     targets = probs.reshape(n, -1) * cm[:, -1:]
@@ -250,10 +256,13 @@ def _read_all(counts: np.ndarray, cum: np.ndarray, live: list[int], plans: dict,
     here = c[r, at].astype(np.float64)
     below = cm[r, at] - here
     frac = np.minimum(np.maximum((targets - below) / np.maximum(here, 1.0), 0.0), 1.0)
-    pct = codec.snap_array(lo + bin_width * (at - 0.5 + frac)).reshape(n, WIDTH, 4)
-    for j, k in zip(*np.nonzero(ok & fallback)):
-        i = live[j]
-        pct[j, k] = _fallback_points(counts[i], cum[i], *plans[i][1:], lo, bin_width, codec)
+    points = (lo + bin_width * (at - 0.5 + frac)).reshape(n, WIDTH, 4)
+    for j, k, low, high in fallbacks:
+        if low > 0.0:
+            points[j, k, :2] = lo + bin_width * 0.5
+        if high > 0.0:
+            points[j, k, 2:] = lo + bin_width * (counts.shape[1] - 1.5)
+    pct = codec.snap_array(points)
     # the banded plain read only where the band decides its family (elsewhere it is column 0)
     ok[:, 1] = in_band(pct[:, 0], sl_bands(total.astype(np.float64)))
     return _Reads(z, code, exact, fallback, ok, pct)
@@ -275,16 +284,6 @@ def _bins_below(counts: np.ndarray, cum: np.ndarray, targets: np.ndarray) -> np.
         for j in range(rows):
             at[j] = np.searchsorted(cum[j], targets[j], side="left")
     return np.minimum(at, bins - 1, out=at)
-
-
-def _fallback_points(counts: np.ndarray, cum: np.ndarray, low: float, high: float, lo: float,
-                     bin_width: float, codec: PercentileCodec) -> tuple[float, float, float, float]:
-    """The fallback's four points a, a, e, e: the censor limits, or where a side is uncensored
-    the middle of the uncensored mass (btf.fit.censor)."""
-    mid = _percentiles_one(counts, cum, fallback_probs(low, high), lo, bin_width)
-    a = lo + bin_width * 0.5 if low > 0.0 else mid[0]
-    e = lo + bin_width * (counts.size - 1.5) if high > 0.0 else mid[1]
-    return codec.snap([a, a, e, e])
 
 
 def _choose(counts: np.ndarray, reads: _Reads, plans: dict, live: list[int], totals: list[int],

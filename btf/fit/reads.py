@@ -194,42 +194,35 @@ def phi(z: np.ndarray) -> np.ndarray:
 def z_at(fam, gamma, delta, xi, lam, x: np.ndarray, counts: np.ndarray) -> np.ndarray:
     """z of each read's model (`fam` sorted, so that each family is one block of reads) at its
     `counts` points, laid end to end in x, clipped to +-37, in float32 (u = (x - xi) / lam taken
-    in float64). One family's points at a time: the temporaries are a block's, not the batch's."""
-    out = np.empty(x.shape, dtype=np.float32)
+    in float64)."""
+    u = np.subtract(x, np.repeat(xi, counts))
+    u /= np.repeat(lam, counts)
+    u32 = u.astype(np.float32)
+    del u
+    out = np.repeat(delta.astype(np.float32), counts)  # each point's delta, then its transform times it
     ends = np.cumsum(counts).tolist()
     bounds = (np.flatnonzero(fam[1:] != fam[:-1]) + 1).tolist()
     with np.errstate(all="ignore"):
         for a, b in zip([0, *bounds], [*bounds, fam.size]):
-            family, n = int(fam[a]), counts[a:b]
-            lo, hi = (ends[a - 1] if a else 0), ends[b - 1]
-            xf, zf = x[lo:hi], out[lo:hi]
-            xi_f = np.repeat(xi[a:b], n)
-            if family == CONST:  # a step at xi
-                np.copyto(zf, np.where(xf >= xi_f, np.float32(np.inf), np.float32(-np.inf)))
-                continue
-            u = np.subtract(xf, xi_f, out=xi_f)
-            u /= np.repeat(lam[a:b], n)
-            uf = u.astype(np.float32)
-            del u, xi_f
-            d = np.repeat(delta[a:b].astype(np.float32), n)
+            family, lo, hi = int(fam[a]), (ends[a - 1] if a else 0), ends[b - 1]
+            uf, zf = u32[lo:hi], out[lo:hi]
             if family == SN:
-                np.multiply(d, uf, out=zf)
+                zf *= uf
             elif family == SU:
-                np.arcsinh(uf, out=zf)
-                zf *= d
+                zf *= np.arcsinh(uf)
             elif family == SB:
-                np.log(uf / (np.float32(1.0) - uf), out=zf)
-                zf *= d
+                zf *= np.log(uf / (np.float32(1.0) - uf))
                 zf[uf <= 0.0] = -np.inf
                 zf[uf >= 1.0] = np.inf
-            else:  # SL
-                sign = np.repeat(np.sign(lam[a:b]).astype(np.float32), n)
-                np.log(uf, out=zf)
-                zf *= d
+            elif family == SL:
+                sign = np.repeat(np.sign(lam[a:b]).astype(np.float32), counts[a:b])
+                zf *= np.log(uf)
                 zf *= sign
                 zf[uf <= 0.0] = -np.inf
                 zf *= np.where(uf <= 0.0, sign, np.float32(1.0))
-            np.add(np.repeat(gamma[a:b].astype(np.float32), n), zf, out=zf)
+            else:  # CONST: a step at xi
+                zf[:] = np.where(x[lo:hi] >= np.repeat(xi[a:b], counts[a:b]), np.float32(np.inf), np.float32(-np.inf))
+        out += np.repeat(gamma.astype(np.float32), counts)
     np.clip(out, -_Z_CLIP, _Z_CLIP, out=out)
     out[np.isnan(out)] = 0.0
     return out
@@ -258,18 +251,16 @@ def rank_grid(counts: np.ndarray, lo: float, bin_width: float) -> tuple[np.ndarr
 def l1(fam, gamma, delta, xi, lam, row: np.ndarray, grid) -> np.ndarray:
     """Histogram L1 of each read's model against its row of the rank grid: the occupied span
     bin by bin plus the model's mass outside it. All reads in one pass over their spans laid
-    end to end (grouped by family); each read's bins are then summed in order down its column
-    of a zero-padded table, so a row gets the same figures alone or in a batch."""
+    end to end (grouped by family); each read's terms are then summed by one reduction over its
+    own stretch, so a row gets the same figures alone or in a batch."""
     edges, probs, first, span = grid
     order = np.argsort(fam, kind="stable")
     cols = row[order]
     n_edges = span[cols] + 1
     ends = np.cumsum(n_edges)
     starts = ends - n_edges
-    j = np.arange(int(ends[-1]))
-    j -= np.repeat(starts, n_edges)  # each point's edge index in its read, 0..span
-    bins = np.repeat(first[cols], n_edges)
-    bins += j  # the bin it is the lower edge of
+    bins = np.arange(int(ends[-1]))
+    bins += np.repeat(first[cols] - starts, n_edges)  # each read's edges: the lower edges of bins first..
     cdf = phi(z_at(fam[order], gamma[order], delta[order], xi[order], lam[order], edges[bins], n_edges))
     # bin j of a read lies between its edges j and j + 1; the term after its last edge is no bin
     n_bins = probs.shape[1]
@@ -279,10 +270,7 @@ def l1(fam, gamma, delta, xi, lam, row: np.ndarray, grid) -> np.ndarray:
     del bins
     np.abs(dev, out=dev)
     dev[ends[:-1] - 1] = 0.0
-    table = np.zeros((int(n_edges.max()), cols.size))
-    table[j[:-1], np.repeat(np.arange(cols.size), n_edges)[:-1]] = dev
-    del dev, j
-    errors = np.add.reduce(table, axis=0) + cdf[starts] + (1.0 - cdf[ends - 1])
+    errors = np.add.reduceat(dev, starts) + cdf[starts] + (1.0 - cdf[ends - 1])
     out = np.empty_like(errors)
     out[order] = errors
     return out
