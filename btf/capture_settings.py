@@ -82,7 +82,7 @@ def bounded_source(path: str) -> str | None:
         return None
     if len(text.encode("utf-8")) <= MAX_SOURCE:
         return text
-    room = MAX_SOURCE - len("…".encode("utf-8"))
+    room = MAX_SOURCE - len("…".encode())
     tail = text.encode("utf-8")[-room:].decode("utf-8", errors="ignore")
     return "…" + tail
 

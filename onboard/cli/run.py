@@ -31,8 +31,8 @@ from onboard.watchdog import Notifier
 from radio.auth import CounterFileLost, FileCounterStore, write_fresh
 from radio.keys import KeyFileError, load_key
 from radio.link import Link
-from radio.ports import open_url
 from radio.packets.base import iso_time
+from radio.ports import open_url
 from radio.pump import LinkPump
 
 

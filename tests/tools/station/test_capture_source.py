@@ -13,7 +13,7 @@ from radio import FrameError
 from radio import packets as pk
 from radio.packets.camera import decode_camera, encode_camera
 from radio.packets.models import ModelsPacket
-from tests.hal.test_replay_camera import models, robot_text, run_sweep, shots  # noqa: F401  (fixture)
+from tests.support.replay import models, robot_text, run_sweep, write_shots
 from tools.report.look import capture_source
 from tools.store.database import Store
 
@@ -73,7 +73,8 @@ def test_a_models_body_from_before_schema_five_still_decodes_with_its_camera(mon
     assert len(pk.encode(packet)) == len(old)  # flags below 0x80: the same byte at either schema
 
 
-def test_each_replayed_capture_carries_its_file_to_the_host_and_the_report(fake_robot, shots, tmp_path):  # noqa: F811
+def test_each_replayed_capture_carries_its_file_to_the_host_and_the_report(fake_robot, tmp_path):
+    shots = write_shots(tmp_path / "shots")
     packets, sources = run_sweep(fake_robot, robot_text(f"replay:{shots}", loop=True))
     sent = models(packets)
     assert [p.camera.source.rsplit("/", 1)[-1] for p in sent] == [sources[round(p.commanded[0])] for p in sent]
