@@ -25,6 +25,16 @@ class LimitError(HalError):
     """A requested move lies outside a joint's limits; nothing was moved."""
 
 
+class DeviceGone(HalError):
+    """The device is not there (unplugged, its port vanished, powered off): every call fails
+    until it returns. No retry can help now; the robot pauses and asks again until it answers."""
+
+
+class DeviceSpent(HalError):
+    """A device with nothing more to give (a replay that played its last file): trying again,
+    now or later, cannot help."""
+
+
 @dataclass(frozen=True, slots=True)
 class ViewAngles:
     """Where the camera looks from, over the sample: elevation 90° is straight down."""

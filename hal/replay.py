@@ -27,13 +27,13 @@ import cv2
 import numpy as np
 
 from hal.controls import EXACT, with_lock_check
-from hal.interfaces import CameraControls, CameraSettings, HalError
+from hal.interfaces import CameraControls, CameraSettings, DeviceSpent, HalError
 
 SUFFIXES = (".png", ".jpg", ".jpeg")
 STANDING = CameraSettings(10_000.0, 1.0, white_balance_kelvin=5500.0)  # what it reports before any controls
 
 
-class ReplayEnded(HalError):
+class ReplayEnded(DeviceSpent):
     """Every file was played and the camera does not loop."""
 
 

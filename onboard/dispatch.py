@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 from hal.arm import Arm
 from hal.controls import describe
-from hal.interfaces import ServoBus, ViewAngles
+from hal.interfaces import DeviceGone, ServoBus, ViewAngles
 from onboard import config as config_mod
 from onboard.capture.filing import Captures
 from onboard.capture.pipeline import Pipeline, PoseSkipped
@@ -79,8 +79,8 @@ TORQUE_IS_OFF = "torque is off (torque-off released the servos): send torque-on,
 
 def refusal(exc: Exception) -> Refusal:
     """The NACK for a handler that raised, with what the operator can do about it."""
-    if isinstance(exc, PoseSkipped):
-        reason, text = pk.Reason.HARDWARE, exc.reason
+    if isinstance(exc, (PoseSkipped, DeviceGone)):
+        reason, text = pk.Reason.HARDWARE, exc.reason if isinstance(exc, PoseSkipped) else str(exc)
     elif isinstance(exc, Interrupted):
         return Refusal(pk.Reason.BUSY, f"interrupted by {exc}")
     elif isinstance(exc, OutboxFull):

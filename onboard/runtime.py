@@ -17,6 +17,7 @@ from typing import Callable
 
 from hal.controls import describe
 from hal.devices import Hal
+from hal.interfaces import DeviceGone
 from onboard.capture.filing import PCA_KEY, Captures, read_pca
 from onboard.capture.pipeline import Pipeline, PoseSkipped
 from onboard.capture.segmentation import Segmentation
@@ -97,7 +98,8 @@ class Runtime:
                              self.notifier, wall)
         # Captures stop short of the quota, so replies and STATUS still fit when they do.
         self.sweep = SweepControl(self.state, self.outbox, self.pipeline, self.captures, self.status,
-                                  self.notifier, reserve=self.outbox.quota_bytes // 8, new_sweep=new_sweep)
+                                  self.notifier, reserve=self.outbox.quota_bytes // 8, new_sweep=new_sweep,
+                                  clock=clock)
         self.dispatch = Dispatcher(self.state, self.outbox, self.link, self.failsafe, self.status, self.pipeline,
                                    self.captures, self.sweep, hal.arm, hal.servo_bus, segmenter, wall)
 
@@ -184,9 +186,9 @@ class Runtime:
         try:
             self.pipeline.retry("torque on", self.hal.arm.enable)
             self.state.torque = True
-        except PoseSkipped as exc:
+        except (PoseSkipped, DeviceGone) as exc:
             self.state.torque = False  # GOTO and SWEEP say to send torque-on
-            self.state.errors.append(exc.reason)
+            self.state.errors.append(exc.reason if isinstance(exc, PoseSkipped) else str(exc))
         self.watch_disk()
         camera = self.lock_camera()
         swept = None

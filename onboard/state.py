@@ -31,6 +31,7 @@ class RuntimeState:
     progress: SweepProgress | None = None
     pose: ViewAngles | None = None  # the last measured view
     paused_reason: str = ""  # why acquisition waits (the outbox is full), "" when it does not
+    device_gone: str = ""  # a device not there (unplugged): the sweep waits for it, "" when all answer
     disk: str = "ok"  # room under state_dir: ok | low | full (onboard.disk.Pressure)
     disk_free: int | None = None  # bytes free there, when known
     errors: deque[str] = field(default_factory=lambda: Recent(16))  # counts the older ones let go

@@ -19,9 +19,10 @@ from onboard.capture.pipeline import FittedView, PoseTiming, remember
 from onboard.link import bodies as wire
 from onboard.link.outbox import Outbox
 from onboard.state import RuntimeState
+from radio import packets as pk
 
-PCA_KEY = "pca"  # the scene's basis, in the outbox state with the packet that carries it
 log = logging.getLogger("btf.robot")
+PCA_KEY = "pca"  # the scene's basis, in the outbox state with the packet that carries it
 
 
 class Captures:
@@ -52,12 +53,25 @@ class Captures:
         if cap.unchanged and ref is not None:
             packets.append(wire.unchanged_body(cfg.robot_id, seq, ref, self.wall(), cap))
         else:
-            packets.append(wire.models_body(cfg.robot_id, seq, self.wall(), cfg.features.space, cap))
+            body, left_out = wire.fitting_models_body(cfg.robot_id, seq, self.wall(), cfg.features.space, cap)
+            packets.append(body)
+            if left_out:
+                self._left_out(seq, cap, left_out)
         timing = self.last_timing = dataclasses.replace(cap.timing, encode=time.perf_counter() - t0)
         steps = ", ".join(f"{k} {getattr(timing, k) * 1e3:.1f}" for k in PoseTiming.STEPS)
         log.info("capture %d compute: %s; total %.1f ms", seq, steps, timing.total * 1e3,
                  extra={"fields": {"capture": seq, **timing.milliseconds()}})
         return seq, packets, state
+
+    def _left_out(self, seq: int, cap: FittedView, labels: tuple[int, ...]) -> None:
+        """Say which regions a capture's MODELS left out to fit the link's largest message."""
+        n = len({label for label, _ in cap.results})
+        shown = ", ".join(str(x) for x in labels[:12]) + (", ..." if len(labels) > 12 else "")
+        text = (f"capture {seq}: the {len(labels)} smallest of its {n} regions left out (labels {shown}): all "
+                f"{n} regions' models exceed the link's largest message, {pk.MAX_BODY} bytes; fewer "
+                "segment.n_labels or features.bands keep every region")
+        self.state.errors.append(text)
+        log.warning("%s", text)
 
     def filed(self, cap: FittedView, seq: int) -> None:
         """`cap` was committed under `seq`."""

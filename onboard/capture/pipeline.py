@@ -32,7 +32,7 @@ from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, 
 from btf.fit.fitter import FrameFitter
 from btf.record import FittedModel
 from hal.devices import Hal
-from hal.interfaces import CameraSettings, HalError, ViewAngles, view_from_orientation
+from hal.interfaces import CameraSettings, DeviceGone, DeviceSpent, HalError, ViewAngles, view_from_orientation
 from onboard.capture import skip
 from onboard.capture.camera_lock import CameraLock, reference_level
 from onboard.config import Config
@@ -78,11 +78,12 @@ class Segmented(NamedTuple):
 
 
 class PoseSkipped(Exception):
-    """A pose could not be measured after its retries; `reason` says which step failed."""
+    """A pose could not be measured after its retries; `reason` says which step failed, `fault`
+    whether a device did (then the sweep tries the pose again after its plan)."""
 
-    def __init__(self, reason: str) -> None:
+    def __init__(self, reason: str, fault: bool = False) -> None:
         super().__init__(reason)
-        self.reason = reason
+        self.reason, self.fault = reason, fault
 
 
 @dataclass(frozen=True, slots=True)
@@ -181,15 +182,17 @@ class Pipeline:
     def retry(self, step: str, fn: Callable[[], T]) -> T:
         """`fn()`, tried `sweep.retries` more times on a device fault; PoseSkipped with the last one."""
         attempts = self.cfg.sweep.retries + 1
-        last = ""
+        last, spent = "", False
         for attempt in range(attempts):
             try:
                 return fn()
+            except DeviceGone as exc:  # not there: no retry helps now (the sweep waits for it)
+                raise DeviceGone(f"{step}: {exc}") from exc
             except (HalError, OSError, TimeoutError, ValueError) as exc:
-                last = f"{type(exc).__name__}: {exc}"
+                last, spent = f"{type(exc).__name__}: {exc}", isinstance(exc, DeviceSpent)
                 self.faults.append(f"{step}: {last}")
                 self.pump()
-        raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}")
+        raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}", fault=not spent)
 
     def move(self, view: ViewAngles) -> None:
         """Send the goals, then poll until settled; each bus call has its own retries."""
@@ -204,14 +207,15 @@ class Pipeline:
         while self.retry("settle", lambda: bus.is_moving(ids)):
             if time.monotonic() > deadline:
                 raise PoseSkipped(f"settle failed: servos {ids} still moving after "
-                                  f"{self.cfg.sweep.settle_timeout_s:.1f} s")
+                                  f"{self.cfg.sweep.settle_timeout_s:.1f} s", fault=True)
             self.pump()
             self.sleep(0.005)
         reached = self.retry("positions", lambda: bus.positions(ids))
         tol = arm.joints.tolerance_deg
         for sid, goal in goals.items():
             if abs(reached[sid] - goal) > tol:
-                raise PoseSkipped(f"move: servo {sid} stopped at {reached[sid]:.1f}°, short of {goal:.1f}°")
+                raise PoseSkipped(f"move: servo {sid} stopped at {reached[sid]:.1f}°, short of {goal:.1f}°",
+                                  fault=True)
 
     def measure_view(self) -> ViewAngles:
         v = self.retry("tracker", lambda: view_from_orientation(self.hal.tracker.orientation()))

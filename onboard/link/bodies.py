@@ -6,6 +6,7 @@ outbox database so a restart never reuses one.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from typing import Any
@@ -65,6 +66,40 @@ def models_body(robot_id: int, seq: int, now: float, space: str, cap: FittedView
                             feature_space=space, bands=cap.band_names, levels=cap.levels,
                             extras=extras, dependence=cap.dependence, camera=cap.camera)
     return int(pk.Kind.MODELS), body
+
+
+def fitting_models_body(robot_id: int, seq: int, now: float, space: str,
+                        cap: FittedView) -> tuple[tuple[int, bytes], tuple[int, ...]]:
+    """MODELS for a capture within the link's largest message (`pk.MAX_BODY`), and the regions
+    left out to fit: none unless every region's models would not fit (many labels of many 16-bit
+    bands), then the fewest, smallest by pixel count first."""
+    try:
+        return models_body(robot_id, seq, now, space, cap), ()
+    except pk.PacketTooLarge:
+        pass
+    counts: dict[int, int] = {}
+    for (label, _), r in cap.results.items():
+        counts[label] = int(r.count)
+    order = sorted(counts, key=lambda lab: (-counts[lab], lab))  # the largest regions kept first
+    best, fits, over = models_body(robot_id, seq, now, space, only_labels(cap, ())), 0, len(order)
+    while over - fits > 1:  # the first `fits` regions fit, the first `over` do not
+        mid = (fits + over) // 2
+        try:
+            best, fits = models_body(robot_id, seq, now, space, only_labels(cap, order[:mid])), mid
+        except pk.PacketTooLarge:
+            over = mid
+    return best, tuple(sorted(order[fits:]))
+
+
+def only_labels(cap: FittedView, labels) -> FittedView:
+    """`cap` with the models, dependence and brackets of `labels` only."""
+    keep = set(labels)
+    camera = cap.camera
+    if camera is not None and camera.bracketed:
+        camera = dataclasses.replace(camera, bracketed={k: v for k, v in camera.bracketed.items() if k in keep})
+    return dataclasses.replace(
+        cap, results={k: r for k, r in cap.results.items() if k[0] in keep}, camera=camera,
+        dependence=None if cap.dependence is None else {k: d for k, d in cap.dependence.items() if k in keep})
 
 
 def unchanged_body(robot_id: int, seq: int, ref_seq: int, now: float, cap: FittedView) -> tuple[int, bytes]:

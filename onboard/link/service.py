@@ -3,6 +3,8 @@ the link, at most `link.window` at a time, and leaves the outbox when the base a
 it. Link events other than acknowledgements go back to the runtime, except the base's refusal
 of a message (a NACK UNUSABLE naming it): that message is set aside in the outbox's dead
 letters, never offered again (`Outbox.set_aside`), and the refusal is one of the robot's errors.
+A message the link refuses as longer than its largest (an outbox row written before that bound)
+is set aside the same way and the next one offered: one message never stalls those after it.
 A refusal that arrives in the same read as the message's acknowledgement is applied first, so
 the dead letter keeps the body; one that arrives later finds only the id to keep.
 
@@ -19,7 +21,7 @@ from onboard.link.transport import Transport
 from onboard.state import RuntimeState
 from radio import FrameError
 from radio import packets as pk
-from radio.link import Acked, Delivered, Event, LinkStats, QueueFull
+from radio.link import Acked, Delivered, Event, LinkStats, MessageTooLarge, QueueFull
 
 
 class LinkService:
@@ -48,6 +50,9 @@ class LinkService:
             self.transport.send(body, now=now)
             return True
         except QueueFull:
+            return False
+        except MessageTooLarge as exc:
+            self.state.errors.append(f"a message of kind {kind} not sent: {exc}")
             return False
 
     def read(self, now: float) -> list[Event]:
@@ -93,6 +98,16 @@ class LinkService:
             self.on_ack()
         return True
 
+    def _too_large(self, msg_id: int, why: str) -> None:
+        """The link refused message `msg_id` as too long: into the dead letters, never offered again."""
+        try:
+            self.outbox.set_aside(msg_id, why)
+        except OutboxError as exc:
+            self.state.errors.append(f"message {msg_id} not sent ({why}); not set aside: {exc}")
+            return
+        self.state.errors.append(f"message {msg_id} not sent: {why}; set aside")
+        self.on_ack()
+
     def stats(self) -> LinkStats | None:
         """The link's counters (None for a link that keeps none)."""
         stats = getattr(self.transport, "stats", None)
@@ -108,6 +123,10 @@ class LinkService:
                     self.transport.send(body, msg_id=msg_id, now=now)
                 except QueueFull:  # the link holds enough already: offer the rest later
                     break
+                except MessageTooLarge as exc:
+                    self._last_sent = msg_id
+                    self._too_large(msg_id, str(exc))
+                    continue
                 self._in_flight.add(msg_id)
                 self._last_sent = msg_id
         self.transport.write(now)

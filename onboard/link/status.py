@@ -39,7 +39,7 @@ class Status:
         rejected = sorted(dict(getattr(self.link.stats(), "rejected", {}) or {}).items())
         count, letters = self.outbox.dead_letters(DEAD_LETTERS_SHOWN)
         return fit(dataclasses.replace(
-            self.said(), outbox=len(self.outbox), paused=s.paused_reason,
+            self.said(), outbox=len(self.outbox), paused=s.paused_reason or s.device_gone,
             rejected=pk.Kept(tuple(pk.Rejection(str(k), int(n)) for k, n in rejected)),
             failsafe=_events(self.failsafe.events),
             failsafe_s=float(s.cfg.link.failsafe_s), torque=bool(s.torque), faults=_kept(self.pipeline.faults),
@@ -55,7 +55,8 @@ class Status:
                                pose_ms=None if timing is None else round(timing.total * 1e3, 1))
 
     def robot_state(self) -> pk.RobotState:
-        if self.state.mode is Mode.FAILSAFE or self.state.paused_reason or self.state.disk != "ok":
+        s = self.state
+        if s.mode is Mode.FAILSAFE or s.paused_reason or s.device_gone or s.disk != "ok":
             return pk.RobotState.PAUSED
         return pk.RobotState.SWEEPING if self.state.mode is Mode.SWEEPING else pk.RobotState.IDLE
 
@@ -82,7 +83,7 @@ class Status:
 
 def sweep_report(p: SweepProgress, whole: bool = False, **said) -> pk.SweepReport:
     """A sweep as STATUS says it: its number and what `said` names; `whole`: its progress, plan
-    and skipped poses too."""
+    and skipped poses too, and once it is done the poses missing."""
     if not whole:
         return pk.SweepReport(p.sweep_id, **said)
     plan = p.plan
@@ -90,11 +91,13 @@ def sweep_report(p: SweepProgress, whole: bool = False, **said) -> pk.SweepRepor
     return pk.SweepReport(
         p.sweep_id, next=p.next_index, poses=plan.count, active=p.active,
         plan=pk.Plan(plan.start, plan.stop, plan.step, plan.azimuths, plan.elevations) if fits else None,
-        plan_left_out=not fits, skipped=pk.Kept(tuple(skipped_pose(k) for k in p.skipped)), **said)
+        plan_left_out=not fits, skipped=pk.Kept(tuple(skipped_pose(k) for k in p.skipped)),
+        **({"missing": pk.Kept(tuple(skipped_pose(k) for k in p.skipped))} if p.done else {}), **said)
 
 
 def skipped_pose(k) -> pk.SkippedPose:
-    return pk.SkippedPose(k.index, float(k.commanded.elevation), float(k.commanded.azimuth) % 360.0, k.reason)
+    return pk.SkippedPose(k.index, float(k.commanded.elevation), float(k.commanded.azimuth) % 360.0, k.reason,
+                          k.tries if k.tries > 1 else None)
 
 
 def fit(report: pk.StatusReport) -> pk.StatusReport:

@@ -29,7 +29,16 @@ from typing import Any
 
 from radio import FrameError
 from radio.packets.answers import AckPacket, NackPacket, Reason
-from radio.packets.base import MAX_BODY, NEWEST_VERSION, SCHEMA_VERSION, Kind, pack_body, split_fields, unpack_body
+from radio.packets.base import (
+    MAX_BODY,
+    NEWEST_VERSION,
+    SCHEMA_VERSION,
+    Kind,
+    PacketTooLarge,
+    pack_body,
+    split_fields,
+    unpack_body,
+)
 from radio.packets.command import CommandPacket
 from radio.packets.commands import CommandName
 from radio.packets.log import LogLevel, LogPacket
@@ -56,7 +65,7 @@ __all__ = [
     "CommandPacket", "AckPacket", "NackPacket", "LogPacket", "Packet", "KINDS", "encode", "decode",
     "encode_models", "encode_mask", "models_packet", "mask_packet", "downsample_labels", "StatusReport",
     "SweepReport", "Plan", "SkippedPose", "FailsafeEvent", "Rejection", "Disk", "DeadLetter", "DeadLetters",
-    "Kept", "version_of",
+    "Kept", "version_of", "PacketTooLarge",
 ]
 
 Packet = (ModelsPacket | UnchangedPacket | MaskPacket | StatusPacket | CommandPacket
@@ -88,12 +97,16 @@ def decode(body: bytes) -> Packet:
 
 
 def encode(packet: Packet) -> bytes:
-    """The packet's body; raises ValueError if a field is out of the schema's range."""
+    """The packet's body; raises ValueError if a field is out of the schema's range, and
+    PacketTooLarge (a ValueError) if the body would be longer than a link message (MAX_BODY)."""
     try:
         cls = type(packet)
         given = packet.wire_values()
         values = {f.name: f.type.fit(given[f.name]) for f in layout(cls)}
         body = pack_body(cls.KIND, newest(cls), values_to_wire(layout(cls), values), packet.extras)
+        if len(body) > MAX_BODY:
+            raise PacketTooLarge(f"{cls.KIND.name} body of {len(body)} bytes exceeds the link's largest "
+                                 f"message, {MAX_BODY} bytes")
         _decode(body, compute=False)  # the decoder's checks are the one statement of the schema
     except (FrameError, OverflowError, TypeError, AttributeError, KeyError, struct.error) as exc:
         raise ValueError(f"cannot encode {type(packet).__name__}: {exc}") from None

@@ -14,6 +14,7 @@ from typing import Any
 import msgpack
 
 from radio import FrameError
+from radio.fragment import MAX_MESSAGE
 
 # The schema version every kind has a layout at; a kind whose layout grew since is encoded at its
 # own newer version (`radio.packets.schema.newest`), and its older layouts still decode.
@@ -22,7 +23,8 @@ from radio import FrameError
 # 5: the MODELS camera section's flags are a varint and may carry the frame's source file.
 SCHEMA_VERSION = 3
 NEWEST_VERSION = 5
-MAX_BODY = 96 * 1024  # 256 labels x 16 bands x 4 codes x 4 bytes, with room to spare
+# A body is one link message: a longer one could not be sent (`radio.fragment.MAX_MESSAGE`).
+MAX_BODY = MAX_MESSAGE
 MAX_STR = 512
 MAX_ARRAY = 256
 MAX_EXTRAS = 16
@@ -54,6 +56,11 @@ MAX_BANDS = 16
 MAX_NAME = 16  # a feature space or band name
 MIN_LEVELS, MAX_LEVELS = 2, 65536  # a sensor's levels (PercentileCodec.for_levels' range)
 MAX_ANGLES = 64  # angles in a SWEEP command's list
+
+
+class PacketTooLarge(ValueError):
+    """A packet whose body would exceed MAX_BODY: the encoder refuses it (the sender decides
+    what to leave out or split), since no link could carry it."""
 
 
 class Kind(enum.IntEnum):

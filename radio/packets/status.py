@@ -79,7 +79,8 @@ class SkippedPose:
     index: int = wire(Int(0, MAX_POSES - 1), "the pose's index in the plan", tag=1)
     elevation: float = wire(Float(-90.0, 90.0), "its commanded elevation, degrees", tag=2)
     azimuth: float = wire(Float(0.0, 360.0), "its commanded azimuth, degrees in [0, 360)", tag=3)
-    reason: str = wire(LINE, "why it was skipped", tag=4)
+    reason: str = wire(LINE, "why it was skipped (its last try, when tried again)", tag=4)
+    tries: int | None = wire(Maybe(Int(1, 1000)), "times it was tried, when more than once", tag=5, default=None)
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +113,8 @@ class SweepReport:
     skipped: Kept | None = wire(Maybe(Latest(Record(SkippedPose), 16)), "poses skipped", tag=7, default=None)
     measured: int | None = wire(Maybe(Int(0, MAX_POSES)), "poses measured (when it is done)", tag=8, default=None)
     boot: str | None = wire(Maybe(Word(BOOTS)), "what the robot's start did with it", tag=9, default=None)
+    missing: Kept | None = wire(Maybe(Latest(Record(SkippedPose), 64)), "poses not measured when it ended, "
+                                "each with why (after every try)", tag=10, default=None)
 
     def problem(self) -> str:
         if self.next is not None and self.poses is not None and self.next > self.poses:

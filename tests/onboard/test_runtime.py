@@ -35,7 +35,8 @@ def test_sweep_of_each_plate_sends_every_pose_label_band_model(fake_robot, scene
 
 def test_faults_at_ten_percent_still_finish_and_report_every_skipped_pose(fake_robot):
     # A stalled servo moves on only at the settle timeout (real seconds): 2 s, not the default 10.
-    rt, tr = make(fake_robot, "black", rate=0.1, extra={"sweep": {"settle_timeout_s": 2}})
+    # Skipped poses stay skipped here (retry_skipped = 0); tests/onboard/sweep/test_retry_skipped.py tries them again.
+    rt, tr = make(fake_robot, "black", rate=0.1, extra={"sweep": {"settle_timeout_s": 2, "retry_skipped": 0}})
     sweep(rt)
     packets = decoded(tr)
     measured = [p for p in packets if isinstance(p, pk.ModelsPacket)]
@@ -186,9 +187,10 @@ def test_memory_growth_with_frame_size_is_only_the_frame_buffers(tmp_path):
         return top
 
     small, large = peak(500), peak(2000)
-    # Feature bands (3 bytes/pixel) are the only frame-sized buffer the pipeline makes.
+    # Feature bands (3 bytes/pixel) are the only frame-sized buffer the pipeline makes; what else
+    # differs between the two calls does not grow with the frame (a cache entry, a log record).
     frame_buffers = (2000 * 2000 - 500 * 500) * 3
-    assert large - small <= frame_buffers
+    assert large - small <= frame_buffers + 64 * 1024
 
 
 def test_runtime_imports_nothing_from_the_host_and_stays_under_150_mb(tmp_path):

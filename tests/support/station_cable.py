@@ -28,6 +28,7 @@ class Robot:
         self.pump = LinkPump(Link(1, 2, 1, key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), end)
         self.acked: set[int] = set()
         self.commands: list[pk.CommandPacket] = []
+        self.extras: dict | None = None  # what its answers carry (default: a PING's answer, its clock)
 
     def turn(self):
         for ev in self.pump.step():
@@ -39,7 +40,8 @@ class Robot:
                 if not isinstance(cmd, pk.CommandPacket):
                     continue  # the station's refusal of a message (a NACK): kept in `commands` for the tests
                 if [c.command_id for c in self.commands].count(cmd.command_id) == 1:  # as the robot: once
-                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, {"time": 1.7e9 + len(self.commands)})))
+                    extras = {"time": 1.7e9 + len(self.commands)} if self.extras is None else self.extras
+                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, extras)))
 
 
 def station_on_cable(tmp_path, store=None, host_key=KEY, robot_key=KEY):

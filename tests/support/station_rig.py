@@ -56,12 +56,15 @@ class Rig:
         self.procs.append(p)
         return p
 
-    def station(self, *argv: str, key: Path | None = None) -> subprocess.Popen:
+    def station(self, *argv: str, key: Path | None = None, env: dict[str, str] | None = None,
+                preexec_fn=None) -> subprocess.Popen:
+        """`btf-host station` on the cable (`env`: added to this process's environment)."""
         self.stations += 1
         err = open(self.where / f"station-{self.stations}.err", "wb")
         p = subprocess.Popen([*python("tools.cli"), "station", "--port", self.cable.paths[1], "--db", str(self.db),
                               "--key", str(key or self.key), "--status-every", "1", *argv],
-                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err)
+                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err,
+                             env=None if env is None else {**os.environ, **env}, preexec_fn=preexec_fn)
         self.procs.append(p)
         return p
 

@@ -187,5 +187,5 @@ def test_the_robot_says_a_line_per_pose_and_command_on_its_console(tmp_path):
     assert [x.split(":")[0] for x in poses] == [f"sweep 1 pose {i}/3 at {e}.0°/0.0°"
                                                  for i, e in ((1, 90), (2, 80), (3, 70))]
     assert all(re.search(r": seq \d+, measured [\d.]+°/[\d.]+°, \d+ models$", x) for x in poses), poses
-    assert "sweep 1 done: 3 measured, 0 skipped" in lines
+    assert "sweep 1 done: 3 measured, 0 missing" in lines
     assert "\x1b" not in text and "\r" not in text  # no colours, no progress bars

@@ -205,17 +205,17 @@ class RobotRun:
         self.cid = self.session.command(pk.CommandName.SWEEP,
                                         {"elevations": [float(e) for e in elevations], "azimuths": [0.0]})
         self.done_at: float | None = None
-        self.skipped: list[str] = []
+        self.skipped: list[str] = []  # why each pose the sweep could not measure (after its tries)
 
     def step(self, tick: Callable[[str], None]) -> bool:
         """Pump the link once; True once the sweep is done and its last acknowledgements are out."""
         for item in self.session.step():
             if item.kind in (ItemKind.CAPTURE, ItemKind.UNCHANGED) and item.stored:
                 tick(self.scene)
-            if item.kind is ItemKind.STATUS and item.packet.text.startswith("skipped pose"):
-                self.skipped.append(item.packet.text)
             if item.kind is ItemKind.STATUS and item.packet.text == "sweep done":
                 self.done_at = time.monotonic()
+                swept = item.packet.report.sweep
+                self.skipped = [k.reason for k in (swept.missing if swept and swept.missing else ())]
         answer = self.session.answers.get(self.cid)
         if answer is not None and answer.text.startswith("NACK"):
             raise RuntimeError(f"robot {self.scene} refused the sweep: {answer.text}")
@@ -407,7 +407,7 @@ def run_demo(out: Path, cfg: DemoConfig = DemoConfig(), progress: bool = True) -
             res.captures[scene] = len(store.captures(scene=scene))
             if res.captures[scene] < len(elevations):
                 raise RuntimeError(f"{scene} plate: {res.captures[scene]} of {len(elevations)} poses "
-                                   f"captured ({st['skipped']} skipped by the robot): "
+                                   f"captured ({st['skipped']} missing, the robot said): "
                                    f"{_tail(work / f'robot-{scene}.stderr')}")
         by_scene = {s: store.models_by_angle(scene=s) for s in PLATES}
         steps = tqdm(total=4, desc="experiments", disable=not progress, leave=False)

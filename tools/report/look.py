@@ -96,8 +96,13 @@ def camera_table(capture: Any) -> str:
     return table(["setting", "value"], rows, left=2, cls="camera")
 
 
+def azimuth_shown(azimuth: float, digits: int = 1) -> float:
+    """An azimuth as shown, in [0, 360): rounded first, so 359.96 is 0.0, never 360.0."""
+    return round(round(azimuth, digits) % 360.0, digits) + 0.0  # + 0.0: no -0.0
+
+
 def capture_title(capture: Any) -> str:
-    az = capture.measured[1]
+    az = azimuth_shown(capture.measured[1])
     where = f"{capture.elevation:.1f}°" + (f" / {az:.1f}°" if az else "")
     return f"{capture.scene or 'robot ' + capture.robot} at {where} (seq {capture.sequence})"
 

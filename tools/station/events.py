@@ -172,13 +172,15 @@ class LinkEvent(Event):
 
 @dataclass(frozen=True)
 class RejectedEvent(Event):
-    """Frames the link refused since the last such event, for `reason`, with its likely cause."""
+    """Frames the link refused since the last such event, for `reason`, with its likely cause;
+    `wrong_key`: none has passed, and the line says the key is likely wrong."""
 
     KIND: ClassVar[str] = "rejected"
     reason: str = ""
     count: int = 0
     total: int = 0
     cause: str = ""
+    wrong_key: bool = False
 
     @property
     def tone(self) -> Tone:

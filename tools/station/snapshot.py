@@ -74,7 +74,9 @@ class SweepView:
     poses: int | None = None
     active: bool | None = None
     measured: int = 0
-    skipped: list[dict] = field(default_factory=list)  # {"index", "elevation", "azimuth", "reason"}
+    skipped: list[dict] = field(default_factory=list)  # {"index", "elevation", "azimuth", "reason", "tries"}
+    missing: list[dict] | None = None  # the poses the robot could not measure, once the sweep ended
+    missing_left_out: int = 0  # more missing poses than its report lists
     layout: SweepPlan | None = None  # the poses, from the robot's STATUS or this station's SWEEP
     done: set[int] = field(default_factory=set)  # poses whose capture arrived before the robot's next report
 
@@ -109,8 +111,12 @@ class StationSnapshot:
         if item.stored and s.active:  # captures stored since the sweep began
             s.measured += 1
             if s.layout is not None and p.commanded[0] is not None:
-                i = sweep_grid.index_of(s.layout, (float(p.commanded[0]), float(p.commanded[1])),
-                                        s.done | {k["index"] for k in s.skipped}, s.next_index or 0)
+                at = (float(p.commanded[0]), float(p.commanded[1]))
+                i = sweep_grid.index_of(s.layout, at, s.done | {k["index"] for k in s.skipped}, s.next_index or 0)
+                if i is None:  # a skipped pose measured again, after the plan
+                    i = next((k["index"] for k in s.skipped if k["index"] < s.layout.count
+                              and sweep_grid.same_pose(s.layout.pose(k["index"]), at)), None)
+                    s.skipped = [k for k in s.skipped if k["index"] != i]
                 if i is not None:
                     s.done.add(i)
 
@@ -153,9 +159,9 @@ class StationSnapshot:
                 {"msg_id": k.msg_id, "kind": None if k.kind is None else k.kind.name, "reason": k.reason,
                  "time": iso_time(k.time)} for k in d.latest.items]}
         if x.sweep is not None:
-            self._sweep(x.sweep)
+            self._sweep(x.sweep, whole)
 
-    def _sweep(self, w: pk.SweepReport) -> None:
+    def _sweep(self, w: pk.SweepReport, whole: bool = False) -> None:
         self._sweep_id(w.id)
         s = self.sweep
         if w.poses is not None:
@@ -167,8 +173,15 @@ class StationSnapshot:
             s.layout = sweep_grid.plan_of(w.plan.to_record()) or s.layout
         if w.active is not None:
             s.active = w.active
+        if whole and w.skipped is not None and not w.skipped.left_out:  # every pose skipped now
+            s.skipped = []
         for k in w.skipped or ():
-            self._skip(k.index, k.elevation, k.azimuth, k.reason)
+            self._skip(k)
+        if w.missing is not None:  # the sweep ended: these are the poses it could not measure
+            s.missing, s.missing_left_out = [_pose_dict(k) for k in w.missing.items], w.missing.left_out
+            s.skipped = []
+            for k in w.missing.items:
+                self._skip(k)
         if w.measured is not None:  # the sweep is done
             s.measured, s.next_index = w.measured, s.poses
 
@@ -211,11 +224,10 @@ class StationSnapshot:
         if sweep_id != self.sweep.sweep_id:
             self.sweep = SweepView(sweep_id)
 
-    def _skip(self, index: int, elevation: float, azimuth: float, reason: str) -> None:
-        if any(k["index"] == index for k in self.sweep.skipped):
-            return
-        self.sweep.skipped = (self.sweep.skipped + [{
-            "index": index, "elevation": elevation, "azimuth": azimuth, "reason": reason}])[-SKIPPED_KEPT:]
+    def _skip(self, k: pk.SkippedPose) -> None:
+        """A pose skipped (again: its newest reason and tries replace the older)."""
+        kept = [x for x in self.sweep.skipped if x["index"] != k.index]
+        self.sweep.skipped = (kept + [_pose_dict(k)])[-SKIPPED_KEPT:]
 
     # -- the JSON form -----------------------------------------------------------------------
     def to_json(self, now: float) -> dict:
@@ -237,10 +249,17 @@ class StationSnapshot:
                       "rejected": r.rejected, "last_status": iso_time(r.last_status),
                       "last_status_s": ago(r.last_status, now), "last_status_text": r.last_status_text},
             "sweep": {"id": s.sweep_id, "plan": s.plan, "next": s.next_index, "poses": s.poses,
-                      "active": s.active, "measured": s.measured, "skipped": s.skipped,
+                      "active": s.active, "measured": s.measured, "skipped": s.skipped, "missing": s.missing,
+                      "missing_left_out": s.missing_left_out,
                       "grid": sweep_grid.grid_json(s.layout, s.next_index, s.done, s.skipped, s.active)},
             "captures": {**self.counts, "latest": list(self.latest)},
         }
+
+
+def _pose_dict(k: pk.SkippedPose) -> dict:
+    """A skipped or missing pose in the snapshot's JSON."""
+    return {"index": k.index, "elevation": k.elevation, "azimuth": k.azimuth, "reason": k.reason,
+            "tries": k.tries or 1}
 
 
 def _pose(pose: tuple[float, float] | None) -> dict | None:

@@ -10,7 +10,8 @@ One asyncio event loop runs it all. The link pump (`run`) turns a `radio.pump.Li
 port on a thread of its own, so the loop never waits on the port: `LinkPump.transfer` (write
 what is due, read what arrived) runs there; on the loop, what arrived is fed to the link and
 every delivered packet is stored (`LinkPump.feed`), and only then is the next write taken
-(`LinkPump.due`): an acknowledgement never leaves before its packet is in the database. The
+(`LinkPump.due`): an acknowledgement never leaves before its packet is on stable storage (the
+turn's packets in one transaction, its commit fsync'd: synchronous=FULL, one fsync a turn). The
 `Link`, the `Store`, the snapshot and the bus are touched on the loop only.
 
 The interface for code inside the station (the control socket, the operator's page):
@@ -36,7 +37,9 @@ The interface for code inside the station (the control socket, the operator's pa
   A command id the robot saw before is answered from its memory, never run twice, so a client
   that lost its station re-submits the same id to the next one.
 - `station.stop()` ends `run` after the current turn; `station.failure` says why it ended on
-  its own (`StationFailure`: a wrong key, a store that cannot be written, a port that failed).
+  its own (`StationFailure`: a store that cannot be written, a port that failed; never a frame
+  or a client: those are counted, said and refused). `station.wrong_key` is the one line
+  saying the key is likely wrong, while it is.
 
 Every event is a typed record, one declaration per kind (`tools.station.events`: capture,
 unchanged, mask, status, failsafe, log, other, bad, command, answer, link, rejected, station,
@@ -46,16 +49,21 @@ and the page from its declaration.
 No packet ends the station: every field of a delivered packet is checked as it is decoded, and
 one the station cannot use (undecodable, refused by the store, or one whose handling failed) is
 kept raw in the database's rejected_packets, counted, logged as a `bad` event, and refused to
-the robot with a NACK UNUSABLE naming the message, which the robot sets aside for good.
+the robot with a NACK UNUSABLE naming the message, which the robot sets aside for good. No frame
+ends it either (`tools.station.rejected_frames`): refused frames are `rejected` events with
+their likely cause, a likely wrong key in one line of its own, and the robot's frames of its
+session with the previous station, right after a start, the re-sync the first link-up says.
 """
 from __future__ import annotations
 
 import asyncio
 import secrets
+import sqlite3
 import time
 from collections import deque
+from contextlib import contextmanager
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 from radio import packets as pk
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale
@@ -64,14 +72,19 @@ from radio.pump import LinkPump
 from radio.link import QueueFull
 from tools.station import events as ev_
 from tools.station.bus import EventBus
-from tools.station.log import StationLog, likely_cause
+from tools.station.log import StationLog
 from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json, refusal_body
+from tools.station.rejected_frames import RejectedFrames
 from tools.station.snapshot import StationSnapshot
+from tools.store.database import disk_free
 
-WRONG_KEY_FRAMES = 8  # frames failing authentication, none passing: the key is wrong
-REJECTED_EVERY_S = 1.0  # rejected-frame events, per reason, at most this often
 SENT_KEPT = 1024  # commands remembered until answered (for the snapshot)
 POLLS_KEPT = 16  # the station's own STATUS requests it recognises the answers of
+
+
+def empty(value: Any) -> bool:
+    """An answer's value not worth a word: '', None, an empty list or mapping."""
+    return value is None or (isinstance(value, (str, list, tuple, dict)) and not value)
 
 
 class StationFailure(Exception):
@@ -98,8 +111,9 @@ class Station:
         self._sent: dict[int, tuple[CommandName, dict]] = {}
         self._poll: tuple[int, float] | None = None  # the STATUS this station asked for, and when
         self._polls: deque[int] = deque(maxlen=POLLS_KEPT)  # its earlier ones: answered late, still its own
-        self._rejected: dict[str, int] = {}  # counts already reported
-        self._rejected_at: dict[str, float] = {}
+        self.rejected_frames = RejectedFrames(wall())  # what the link refused, said
+        self._held: list[tuple[ev_.Event, bool]] | None = None  # events said once the turn's commit is done
+        self._told_wrong_key = False
         self._accepted = 0
         self._polled_at = -1e9
         self.refused = 0  # the robot's messages this station refused (and told it so)
@@ -136,7 +150,10 @@ class Station:
         self._stop = True
 
     def emit(self, ev: ev_.Event, logged: bool = True) -> None:
-        """Log an event and publish it to every subscriber."""
+        """Log an event and publish it to every subscriber (inside a turn's commit: once it is done)."""
+        if self._held is not None:
+            self._held.append((ev, logged))
+            return
         if logged:
             self.log.write(ev)
         self.bus.publish(ev)
@@ -180,7 +197,39 @@ class Station:
     def _turn(self, data: bytes, room: int) -> bytes:
         """Feed the link what arrived, store and route what it delivered; what to write next."""
         now, wall = self.clock(), self.wall()
-        for ev in self.pump.feed(data, now):
+        events = self.pump.feed(data, now)
+        with self._one_commit(any(isinstance(ev, Delivered) for ev in events)):
+            self._route(events, now, wall)
+        self._watch_link(wall)
+        self._ask_status(now)
+        return self.pump.due(room, now)
+
+    @contextmanager
+    def _one_commit(self, storing: bool) -> Iterator[None]:
+        """The turn's writes in one transaction: one commit, one fsync (synchronous=FULL), however
+        many packets it delivered, before `due` lets their acknowledgements out; its events are said
+        once the commit is on disk (none when it fails: StoreFailed, nothing of the turn kept)."""
+        store = self.receiver.store
+        if not storing or store is None:
+            yield
+            return
+        self._held = []
+        try:
+            with store.batch():
+                yield
+        except sqlite3.Error as exc:  # the commit itself: no room for the WAL, an I/O error
+            name = getattr(exc, "sqlite_errorname", "") or ""
+            raise StoreFailed(f"database {store.path}: cannot commit this turn's packets: {exc} "
+                              f"({disk_free(store.path)} free on its disk)",
+                              damaged=name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB"))) from None
+        finally:
+            held, self._held = self._held, None
+        for ev, logged in held:
+            self.emit(ev, logged)
+
+    def _route(self, events: list, now: float, wall: float) -> None:
+        """Each of the link's events of this turn: a delivery stored and routed, the link's state said."""
+        for ev in events:
             if isinstance(ev, Delivered):
                 self.last_delivery = now
                 self.snapshot.note_delivered(len(ev.payload), wall)
@@ -188,16 +237,14 @@ class Station:
             elif isinstance(ev, (LinkUp, LinkDown)):
                 up = isinstance(ev, LinkUp)
                 self.snapshot.note_link(up, wall)
-                self.emit(ev_.LinkEvent(wall, "up: the robot is heard" if up else
+                resync = self.rejected_frames.link_up(self.pump.stats(), wall) if up else ""
+                self.emit(ev_.LinkEvent(wall, f"up: the robot is heard{resync}" if up else
                                         f"down: nothing heard from the robot for {self.pump.link.link_timeout:g} s",
                                         up=up))
             elif isinstance(ev, PeerStale):  # the robot's counters are behind: said once, with the remedy
                 self.emit(ev_.LinkEvent(wall, ev.text, up=self.pump.up, stale=True))
                 if self.on_item is not None:
                     self.on_item(Item(ItemKind.LINK, ev.sender, None, False, ev.text))
-        self._watch_link(wall)
-        self._ask_status(now)
-        return self.pump.due(room, now)
 
     def _handle(self, ev: Delivered, wall: float) -> None:
         """Store and route one delivered message; one the station cannot use is refused (StoreFailed
@@ -280,7 +327,8 @@ class Station:
                 self._poll = None
             self.emit(ev_.StatusEvent(wall, "the robot's report", packet=answer, poll=True), logged=False)
             return
-        said = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items())
+        said = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items()
+                        if not empty(v))  # "paused=" says nothing: a field left empty is left out
         said = said if len(said) <= 160 else said[:157] + "..."
         verdict = f"ACK {said}".strip() if ok else f"NACK {p.reason.name}: {p.text}"
         named = name or (p.name if ok else None)
@@ -296,25 +344,24 @@ class Station:
             if not futs:
                 del self._waiting[cid]
 
+    @property
+    def wrong_key(self) -> str:
+        """The line saying the key is likely wrong, while frames fail authentication and none
+        passed ('' otherwise). Never a reason to stop: anyone on the radio can send such frames."""
+        return self.rejected_frames.wrong_key(self.pump.stats())
+
     def _watch_link(self, wall: float) -> None:
-        """Quality counters from the link; rejected frames with their likely cause; a key
-        that authenticates nothing ends the station."""
+        """Quality counters from the link; refused frames with their likely cause (a wrong key
+        in one line, the re-sync after a start as such): counted, said, never the end."""
         st = self.pump.stats()
-        self.snapshot.link.stats = st
+        self.snapshot.link.stats = self.rejected_frames.view(st)
         if st.frames_accepted > self._accepted:
             self._accepted, self.snapshot.link.last_heard = st.frames_accepted, wall
-        for reason, total in st.rejected.items():
-            new = total - self._rejected.get(reason, 0)
-            if new and wall - self._rejected_at.get(reason, -1e9) >= REJECTED_EVERY_S:
-                self._rejected[reason], self._rejected_at[reason] = total, wall
-                self.emit(ev_.RejectedEvent(wall, f"{new} frame{'s' * (new > 1)} refused: {likely_cause(reason)}",
-                                            reason=reason, count=new, total=total, cause=likely_cause(reason)))
-        tags = st.rejected.get("tag", 0)
-        if tags >= WRONG_KEY_FRAMES and st.frames_accepted == 0:
-            self._stop = True
-            self.failure = StationFailure(
-                f"{tags} frames failed authentication and none passed: wrong key? --key must hold the "
-                "same key as the robot's link.key_file", status=2)
+        for text, fields in self.rejected_frames.update(st, wall):
+            self.emit(ev_.RejectedEvent(wall, text, **fields))
+            if fields.get("wrong_key") and not self._told_wrong_key and self.on_item is not None:
+                self._told_wrong_key = True  # the foreground's reader is told once, the log each time
+                self.on_item(Item(ItemKind.LINK, None, None, False, text))
 
     def _ask_status(self, now: float) -> None:
         """A STATUS every `status_every` seconds while the link is up, for the snapshot."""

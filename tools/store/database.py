@@ -10,6 +10,7 @@ the file; `tools.store.rows` checks every row read back).
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 from contextlib import contextmanager
 from pathlib import Path
@@ -35,9 +36,20 @@ from tools.store.rows import (
 )
 from tools.store.schema import SCHEMA_VERSION, CorruptDatabase, StoreUnavailable, connect
 
-__all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "RejectedPacket", "SCHEMA_VERSION"]
+__all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "RejectedPacket", "SCHEMA_VERSION",
+           "disk_free"]
 
 REJECTED_KEPT = 1000  # rejected packets kept for a person; older ones are deleted
+
+
+def disk_free(path: str | Path) -> str:
+    """The room left on the disk holding `path`, for a line saying why a write failed."""
+    try:
+        st = os.statvfs(os.path.dirname(os.path.abspath(path)))
+    except OSError:
+        return "unknown bytes"
+    return f"{st.f_bavail * st.f_frsize} bytes"
+
 
 class _Undo(Exception):
     """Drops the current write (e.g. a capture that was already stored)."""

@@ -169,7 +169,11 @@ def connect(p: Path, create: bool = True) -> sqlite3.Connection:
         if magic != _SQLITE_MAGIC:
             raise CorruptDatabase(f"database {p}: not an SQLite file; left untouched")
     elif not create:
-        raise CorruptDatabase(f"database {p}: no such database")
+        if p.exists():  # a 0-byte file: what a failed copy, or a typo in a redirection, leaves
+            raise CorruptDatabase(f"database {p}: an empty file, not a btfscout database; give the one station, "
+                                  "listen, fit, ingest or demo wrote")
+        raise CorruptDatabase(f"database {p}: no such database; give the one station, listen, fit, ingest or "
+                              "demo wrote")
     if not p.parent.exists():
         raise CorruptDatabase(f"database {p}: directory {p.parent} does not exist")
     try:
@@ -205,13 +209,13 @@ def connect(p: Path, create: bool = True) -> sqlite3.Connection:
     except CorruptDatabase:
         conn.close()
         raise
-    # Only once the file is known to be ours. The host is not the durable side: the
-    # robot keeps every packet in its outbox until it is acknowledged, and a capture is
-    # acknowledged only after its commit, so a power cut that loses the last WAL
-    # commits makes the robot send them again. NORMAL skips an fsync per commit.
+    # Only once the file is known to be ours. A capture is acknowledged once its commit
+    # returns and the robot then deletes its copy, so a commit must be on stable storage:
+    # FULL fsyncs the WAL at every commit (NORMAL only at checkpoints, and a power cut
+    # would lose what was acknowledged). The station groups a turn's packets in one commit.
     try:
         conn.execute("PRAGMA journal_mode = WAL")
-        conn.execute("PRAGMA synchronous = NORMAL")
+        conn.execute("PRAGMA synchronous = FULL")
     except sqlite3.DatabaseError as exc:
         conn.close()
         raise _failure(p, exc, "open for writing") from None

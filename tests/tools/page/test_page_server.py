@@ -81,6 +81,8 @@ def test_page_options_are_checked_before_the_station_starts(rig, tmp_path):
     for argv, words in ((["--http", "localhost:http"], "expected PORT or ADDR:PORT"),
                         (["--http", "70000"], "outside 0..65535"),
                         (["--http-public"], "give --http"),
+                        (["--http-host", "station.local"], "give --http"),
+                        (["--http", "0", "--http-host", "station.local:80"], "expected a host name"),
                         (["--http", "0", "--robot-config", str(not_fake)], "not a fake robot's"),
                         (["--http", "0", "--robot-config", str(tmp_path / "none.toml")], "not found")):
         code, err = station(*argv)

@@ -1,6 +1,7 @@
 """What the page draws, without a browser: the sweep's grid from the robot's own STATUS answer,
 advanced by captures between reports; the failsafe assumed while the link is silent; the robot's
-disk and rejections; goodput; the latest capture per pose."""
+disk and rejections; goodput; the latest capture per pose; azimuths in [0, 360); what watch says
+of a robot not heard yet."""
 import dataclasses
 
 from hal.interfaces import ViewAngles
@@ -8,7 +9,9 @@ from onboard.link.status import sweep_report
 from onboard.sweep.plan import SkippedPose, SweepPlan, SweepProgress
 from radio import packets as pk
 from tests.support.packets import models_body
+from tools.cli.watch import summary
 from tools.page.data import CaptureIndex
+from tools.report.look import capture_title
 from tools.station.receiver import Item, ItemKind, Receiver
 from tools.station.snapshot import StationSnapshot
 from tools.station.sweep_grid import grid_json, plan_of_command
@@ -116,3 +119,97 @@ def test_the_page_lists_the_latest_capture_at_each_pose(tmp_path):
     assert [c["seq"] for c in index.refresh()] == [4]
     assert sorted(c["seq"] for c in index.latest.values()) == [3, 4]
     index.close()
+
+
+def test_azimuths_are_shown_in_one_convention_never_as_360(tmp_path):
+    with Store.open(tmp_path / "scene.db") as s:
+        for seq, az in ((1, 359.96), (2, -0.04), (3, 90.0)):
+            body, _, _ = models_body(seq, 65.3)
+            p = dataclasses.replace(pk.decode(body), measured=(65.3, az), commanded=(65.0, 10.0 * seq))
+            assert Receiver(s, scene="mixed").handle(pk.encode(p)).stored
+    index = CaptureIndex(str(tmp_path / "scene.db"))
+    assert sorted(c["azimuth"] for c in index.refresh()) == [0.0, 0.0, 90.0]
+    index.close()
+    with Store.open(tmp_path / "scene.db") as s:
+        titles = [capture_title(c) for c in s.captures()]
+    assert not any("360.0" in t for t in titles) and any("65.3° / 90.0°" in t for t in titles), titles
+
+
+def test_watch_says_a_robot_not_heard_yet_and_then_what_its_answer_told():
+    snap = StationSnapshot("/dev/pts/1", "scene.db", 1.7e9)
+    assert "robot not heard yet" in summary(snap.to_json(1.7e9 + 1))
+    plan = SweepPlan(90.0, 30.0, 30.0, (0.0,))
+    snap.note_status_answer(answer_report(report(plan, mode="idle")), 1.7e9 + 2)  # an answer carries no id
+    text = summary(snap.to_json(1.7e9 + 3))
+    assert "robot (id not heard yet): idle at an unknown pose, outbox 2" in text and "None" not in text
+
+
+def test_the_page_draws_the_chosen_capture_before_the_cards_and_each_drawing_once(tmp_path, monkeypatch):
+    import asyncio
+    import time
+    from concurrent.futures import ThreadPoolExecutor
+
+    import tools.page.data as page_data
+
+    drawn = []
+
+    def render(db, capture_id, fake, what, rev):
+        drawn.append((capture_id, what, rev))
+        time.sleep(0.2 if capture_id == 99 else 0.005)
+        return {"png": b"%d" % capture_id}
+
+    monkeypatch.setattr(page_data, "render", render)
+    data = page_data.PageData(str(tmp_path / "scene.db"))
+    data._pool = ThreadPoolExecutor(1)  # the drawings in a thread here: the queue is what is tested
+    data._btf_pool = ThreadPoolExecutor(1)
+
+    async def go():
+        thumbs = [asyncio.ensure_future(data.drawn(i, "thumb")) for i in range(1, 6)]
+        section = asyncio.ensure_future(data.drawn(3, "section"))
+        histograms = asyncio.ensure_future(data.drawn(3, "histograms"))
+        await asyncio.gather(*thumbs, section, histograms)
+        early = asyncio.ensure_future(data.drawn(9, "thumb"))
+        data.mask_arrived()  # before it was drawn: asked again under the new revision
+        late = asyncio.ensure_future(data.drawn(9, "thumb"))
+        again = asyncio.ensure_future(data.drawn(9, "thumb"))
+        nines = await asyncio.gather(early, late, again)
+        busy = asyncio.ensure_future(data.drawn(99, "thumb"))  # the worker busy meanwhile
+        await asyncio.sleep(0.05)
+        left = asyncio.ensure_future(data.drawn(20, "section"))
+        chosen = asyncio.ensure_future(data.drawn(21, "section"))
+        await asyncio.sleep(0.01)
+        left.cancel()  # the page went on to another capture before this one's turn
+        await asyncio.gather(busy, chosen)
+        return nines
+
+    assert asyncio.run(go()) == [{"png": b"9"}] * 3
+    assert drawn[:2] == [(3, "section", 0), (3, "histograms", 0)]
+    assert sorted(drawn[2:7]) == [(i, "thumb", 0) for i in range(1, 6)]
+    assert drawn[7:] == [(9, "thumb", 1), (99, "thumb", 1), (21, "section", 1)]  # 9 once, at the revision
+    # in force; 20, left before its turn, not at all
+    data.close()
+
+
+def test_a_pose_measured_again_after_the_plan_is_done_and_the_sweeps_missing_poses_are_listed_with_why():
+    plan = SweepPlan(80.0, 60.0, 10.0, (0.0,))  # 80, 70, 60
+    progress = SweepProgress(4, plan, 3, retry_skipped=2, skipped=[
+        SkippedPose(0, ViewAngles(80.0, 0.0), "move failed after 3 attempts", True),
+        SkippedPose(2, ViewAngles(60.0, 0.0), "settle failed", True)])
+    snap = StationSnapshot("pty", "db", 0.0)
+    snap.note_status_answer(answer_report(dataclasses.replace(report(plan), sweep=sweep_report(progress, whole=True))),
+                            10.0)
+    assert snap.to_json(10.0)["sweep"]["grid"]["cells"] == "sds" and snap.to_json(10.0)["sweep"]["missing"] is None
+    snap.note_capture(capture_item(5, 80.0, 0.0), 11.0)  # the robot tried pose 80 again: measured
+    js = snap.to_json(11.0)["sweep"]
+    assert js["grid"]["cells"] == "dds" and [k["index"] for k in js["skipped"]] == [2]
+    gone = pk.SkippedPose(2, 60.0, 0.0, "settle failed: servos [1, 2] still moving after 10.0 s", 3)
+    done = pk.StatusPacket(1, 1.7e9, pk.RobotState.IDLE, None, 0, 0, 5, "sweep done", report=pk.StatusReport(
+        sweep=pk.SweepReport(4, active=False, measured=2, skipped=pk.Kept((), 1), missing=pk.Kept((gone,)))))
+    snap.note_status(pk.decode(pk.encode(done)), 12.0)
+    js = snap.to_json(12.0)["sweep"]
+    assert js["missing"] == [{"index": 2, "elevation": 60.0, "azimuth": 0.0, "tries": 3,
+                              "reason": "settle failed: servos [1, 2] still moving after 10.0 s"}]
+    assert js["grid"]["cells"] == "dds" and js["grid"]["reasons"] == {"2,0": gone.reason}
+    lines = summary(snap.to_json(12.0)).splitlines()
+    assert "sweep 4 done: 2 measured, 1 missing" in lines
+    assert "  missing 60.0°/0.0° after 3 tries: settle failed: servos [1, 2] still moving after 10.0 s" in lines

@@ -1,10 +1,14 @@
 """The station's parts in one process, over a simulated cable: the event bus, the store before
-the acknowledgement, the wrong key, the snapshot, and a command answered once."""
+the acknowledgement, a wrong key and another key's frames (said, never the end), the snapshot,
+and a command answered once."""
 import asyncio
+import time
 
 import pytest
 
 from radio import packets as pk
+from radio.auth import MemoryCounterStore
+from radio.link import Link
 from tests.support.packets import models_body
 from tests.support.station_cable import drive, station_log, station_on_cable
 from tools.station.bus import EventBus
@@ -57,13 +61,59 @@ def test_a_store_that_fails_ends_the_station_and_nothing_is_acknowledged(tmp_pat
     assert mid not in robot.acked and robot.pump.link.queued_bytes > 0  # still the robot's to send
 
 
-def test_a_wrong_key_ends_the_station_saying_so(tmp_path):
+def test_a_wrong_key_is_said_in_one_line_and_the_station_goes_on_listening(tmp_path):
     station, robot, _ = station_on_cable(tmp_path, robot_key=bytes(32))
-    asyncio.run(drive(station, robot, lambda: False, limit_s=20.0))
-    assert station.failure is not None and station.failure.status == 2
-    assert "wrong key?" in str(station.failure)
+    asyncio.run(drive(station, robot, lambda: station.pump.stats().rejected.get("tag", 0) >= 40, limit_s=20.0))
+    assert station.failure is None and station.pump.stats().rejected["tag"] >= 40  # stopped by the test
+    assert station.wrong_key.startswith("wrong key?") and "--key must hold" in station.wrong_key
     rejected = [e for e in station_log(tmp_path) if e["kind"] == "rejected"]
-    assert rejected and rejected[0]["reason"] == "tag" and "tag mismatch: wrong key?" in rejected[0]["cause"]
+    assert rejected and all(e["reason"] == "tag" for e in rejected)
+    said = [e for e in rejected if e.get("wrong_key")]
+    assert said and said[0]["text"].startswith("wrong key?") and "still listening" in said[0]["text"]
+
+
+class Forger:
+    """A transmitter with another key on the robot's side of the cable: it only writes."""
+
+    def __init__(self, end):
+        self.link, self.end = Link(1, 2, 1, bytes(32), MemoryCounterStore(), heartbeat=0.01), end
+
+    def turn(self):
+        self.end.write(self.link.poll(time.monotonic()))
+
+
+def test_the_station_survives_frames_of_another_key_before_and_after_hearing_its_robot(tmp_path):
+    station, robot, store = station_on_cable(tmp_path)
+    forger = Forger(robot.pump.port)
+    tags = lambda: station.pump.stats().rejected.get("tag", 0)  # noqa: E731
+
+    async def go():
+        task = asyncio.ensure_future(station.run())
+
+        async def until(done, *ends):
+            end = time.monotonic() + 20.0
+            while not done() and not task.done() and time.monotonic() < end:
+                for e in ends:
+                    e.turn()
+                await asyncio.sleep(0.002)
+
+        await until(lambda: station.wrong_key, forger)  # before the robot is heard
+        first = robot.pump.send(models_body(7)[0], msg_id=41)
+        await until(lambda: first in robot.acked, robot, forger)
+        before = tags()
+        said = lambda: any("another transmitter" in e["text"] for e in station_log(tmp_path))  # noqa: E731
+        await until(lambda: tags() >= before + 40 and said(), robot, forger)  # after
+        second = robot.pump.send(models_body(8)[0], msg_id=42)
+        await until(lambda: second in robot.acked, robot, forger)
+        station.stop()
+        await task
+        return first, second, before
+
+    first, second, before = asyncio.run(go())
+    assert station.failure is None and {first, second} <= robot.acked
+    assert [c.sequence for c in store.captures()] == [7, 8] and tags() >= before + 40 >= 48
+    texts = [e["text"] for e in station_log(tmp_path) if e["kind"] == "rejected"]
+    assert any(t.startswith("wrong key?") for t in texts) and any("another transmitter" in t for t in texts)
 
 
 def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path):
@@ -95,4 +145,18 @@ def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path)
     assert snap["link"]["up"] and snap["link"]["frames_accepted"] > 0 and snap["link"]["last_heard"]
     assert snap["robot"]["state"] == "sweeping" and snap["robot"]["pose"] == {"elevation": 60.0, "azimuth": 0.0}
     assert snap["sweep"]["id"] == 2 and snap["sweep"]["skipped"] == [
-        {"index": 4, "elevation": 50.0, "azimuth": 0.0, "reason": "settle failed"}]
+        {"index": 4, "elevation": 50.0, "azimuth": 0.0, "reason": "settle failed", "tries": 1}]
+
+
+def test_an_answer_is_logged_without_the_fields_the_robot_left_empty(tmp_path):
+    station, robot, _ = station_on_cable(tmp_path)
+    robot.extras = {"set": "skip.min_pixels", "camera": ""}
+
+    async def go():
+        _, fut = station.submit(pk.CommandName.SET, {"key": "skip.min_pixels", "value": 50}, command_id=78)
+        await drive(station, robot, fut.done)
+        return await fut
+
+    assert asyncio.run(go())["extras"]["camera"] == ""  # the answer itself as the robot sent it
+    said = [e["text"] for e in station_log(tmp_path) if e["kind"] == "answer"]
+    assert said == ["SET (command 78): ACK set=skip.min_pixels"], said
