@@ -21,7 +21,7 @@ import dataclasses
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, NamedTuple, TypeVar
+from typing import Any, Callable, ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 
@@ -54,7 +54,7 @@ class PoseTiming:
     dependence: float = 0.0
     encode: float = 0.0
 
-    STEPS = ("features", "segmentation", "fit", "dependence", "encode")
+    STEPS: ClassVar[tuple[str, ...]] = ("features", "segmentation", "fit", "dependence", "encode")
 
     @property
     def total(self) -> float:
