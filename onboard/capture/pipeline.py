@@ -21,7 +21,7 @@ import dataclasses
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, TypeVar
+from typing import Any, Callable, ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 
@@ -41,6 +41,40 @@ from radio.packets.schema import Recent
 T = TypeVar("T")
 MAX_POSES_REMEMBERED = 512  # previous models kept per pose for the UNCHANGED rule
 PUMP_S = 0.01  # how often the link is serviced while a step runs in the worker
+
+
+@dataclass(frozen=True, slots=True)
+class PoseTiming:
+    """One pose's compute by step, seconds: features, segmentation, fit (the skip rules, the
+    fit, the camera record and any brackets), dependence, encode (its packet bodies)."""
+
+    features: float = 0.0
+    segmentation: float = 0.0
+    fit: float = 0.0
+    dependence: float = 0.0
+    encode: float = 0.0
+
+    STEPS: ClassVar[tuple[str, ...]] = ("features", "segmentation", "fit", "dependence", "encode")
+
+    @property
+    def total(self) -> float:
+        return self.features + self.segmentation + self.fit + self.dependence + self.encode
+
+    def milliseconds(self) -> dict[str, float]:
+        """Each step and the total in ms, to 0.1 ms (the robot's log line)."""
+        return {**{f"{k}_ms": round(getattr(self, k) * 1e3, 1) for k in self.STEPS},
+                "total_ms": round(self.total * 1e3, 1)}
+
+
+class Segmented(NamedTuple):
+    """A frame's labels as the segmentation step gives them (a plain (labels, changed) pair
+    also does): `small` the MASK packet's map of them and `counts` each label's pixels, when
+    the step already counted them (else the pipeline does)."""
+
+    labels: np.ndarray
+    changed: bool
+    small: np.ndarray | None = None
+    counts: np.ndarray | None = None
 
 
 class PoseSkipped(Exception):
@@ -69,6 +103,8 @@ class FittedView:
     pca: PcaBasis | None = None  # the scene's basis, on the first capture made with it
     dependence: dict[int, Dependence] | None = None  # grain and band correlation, when configured
     camera: CaptureSettings | None = None  # what it was taken with (None: a frame from elsewhere)
+    small: np.ndarray | None = field(default=None, repr=False)  # `labels` as MASK pools them, when known
+    timing: PoseTiming = PoseTiming()  # its compute by step (encode: filled where it is encoded)
 
 
 def feature_spec(cfg: Config) -> FeatureSpec:
@@ -83,7 +119,7 @@ class Pipeline:
         self,
         cfg: Config | Callable[[], Config],
         hal: Hal,
-        segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple[np.ndarray, bool]],
+        segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple],
         pump: Callable[[], None] | None = None,
         sleep: Callable[[float], None] = time.sleep,
         resend_mask: Callable[[], None] = lambda: None,
@@ -258,6 +294,8 @@ class Pipeline:
     def _process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles,
                  settings: CameraSettings | None) -> FittedView:
         cfg = self.cfg  # a SET while this runs applies from the next frame
+        clock = time.perf_counter
+        t0 = clock()
         try:
             if self.spec.space is FeatureSpace.PCA and self.pca is None:
                 self.pca = PcaBasis.fit(frame)  # once per scene; sent with the scene
@@ -265,9 +303,12 @@ class Pipeline:
             feats = compute(frame, self.spec, self.pca)
         except ValueError as exc:  # e.g. a band the camera does not have: skip with the reason
             raise PoseSkipped(f"features: {exc}") from None
-        labels, changed = self.segmenter(feats, frame, measured)
+        t1 = clock()
+        seg = Segmented(*self.segmenter(feats, frame, measured))
+        labels, changed = seg.labels, seg.changed
+        t2 = clock()
         n_labels = cfg.segment.n_labels
-        counts = skip.label_counts(labels, n_labels)
+        counts = skip.label_counts(labels, n_labels) if seg.counts is None else seg.counts[:n_labels]
         keep = skip.kept_labels(counts, cfg.skip.min_pixels)
         data = feats.data
         stride = skip.subsample_stride(counts, keep, cfg.skip.percentile_precision, data.shape[1])
@@ -284,11 +325,13 @@ class Pipeline:
             remember(self._previous, key, results)
         pca = self.pca if self.pca_pending else None
         self.pca_pending = False
+        t3 = clock()
         dep = None
         if cfg.features.dependence and results and not same:  # a bounded second pass
             dep = dependence.measure(data, labels, {k: r.model for k, r in primary.items()}, feats.levels)
+        timing = PoseTiming(t1 - t0, t2 - t1, t3 - t2, clock() - t3)
         return FittedView(commanded, measured, feats.band_names, feats.levels, results, dropped,
-                          labels, changed, same, stride, pca, dep, camera)
+                          labels, changed, same, stride, pca, dep, camera, seg.small, timing)
 
     def bracket(self, results: dict[tuple[int, int], FittedModel], camera: CaptureSettings, labels: np.ndarray,
                 stride: int, levels: int) -> tuple[dict[tuple[int, int], FittedModel], CaptureSettings]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import errno
+import json
 import logging
 import os
 import signal
@@ -35,6 +36,7 @@ from radio.auth import CounterFileLost, FileCounterStore, write_fresh
 from radio.channel_port import parse_url
 from radio.keys import KeyFileError, load_key
 from radio.link import Link
+from radio.packets.base import iso_time
 from radio.ports import open_url
 from radio.pump import LinkPump
 
@@ -50,6 +52,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--new-sweep", action="store_true",
                    help="start a new sweep of the config's plan even if its last sweep finished "
                         "(by default an interrupted sweep resumes and a finished one is not repeated)")
+    p.add_argument("--log-json", action="store_true",
+                   help="log one JSON object per line (time, message and the line's fields, e.g. each "
+                        "pose's compute by step) instead of plain text")
     p.add_argument("--new-key", action="store_true",
                    help="link.key_file holds a key never used before (just made by 'btf-host keygen'): "
                         "start its link counters afresh; only needed with [link] clock = \"none\"")
@@ -174,15 +179,26 @@ def _build(cfg, key: bytes, args: argparse.Namespace, hal, port, segment: Segmen
     return rt
 
 
-def console_log() -> None:
+class JsonLines(logging.Formatter):
+    """A log record as one JSON object: its UTC time, level, message and the fields it carries
+    (`extra={"fields": {...}}`, e.g. a pose's compute by step)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        line = {"time": iso_time(record.created), "level": record.levelname.lower(), "message": record.getMessage()}
+        line.update(getattr(record, "fields", {}))
+        return json.dumps(line, separators=(",", ":"))
+
+
+def console_log(as_json: bool = False) -> None:
     """One short line per pose, command and link change on stderr: plain text for journald,
-    which stamps each line; a terminal gets the time in front."""
+    which stamps each line; a terminal gets the time in front; `as_json`: JSON lines."""
     log = logging.getLogger("btf.robot")
     for old in list(log.handlers):
         log.removeHandler(old)
     handler = logging.StreamHandler(sys.stderr)
     tty = hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
-    handler.setFormatter(logging.Formatter("%(asctime)s %(message)s" if tty else "%(message)s", "%H:%M:%S"))
+    handler.setFormatter(JsonLines() if as_json else
+                         logging.Formatter("%(asctime)s %(message)s" if tty else "%(message)s", "%H:%M:%S"))
     log.addHandler(handler)
     log.setLevel(logging.INFO)
     log.propagate = False
@@ -190,7 +206,7 @@ def console_log() -> None:
 
 def run(args: argparse.Namespace) -> int:
     cfg, key = _setup(args)
-    console_log()
+    console_log(getattr(args, "log_json", False))
 
     cfg = _calibrated_exposure(cfg)
     try:

@@ -107,8 +107,9 @@ def unchanged_body(robot_id: int, seq: int, ref_seq: int, now: float, cap: Fitte
     return int(pk.Kind.UNCHANGED), pk.encode(packet)
 
 
-def mask_body(robot_id: int, seq: int, labels: np.ndarray) -> tuple[int, bytes]:
-    return int(pk.Kind.MASK), pk.encode_mask(labels, robot_id=robot_id, seq=seq)
+def mask_body(robot_id: int, seq: int, labels: np.ndarray, pooled: np.ndarray | None = None) -> tuple[int, bytes]:
+    """MASK for a label map; `pooled`: the map the segmentation already pooled from it."""
+    return int(pk.Kind.MASK), pk.encode_mask(labels, robot_id=robot_id, seq=seq, pooled=pooled)
 
 
 def status_body(robot_id: int, now: float, state: pk.RobotState, pose: ViewAngles | None,

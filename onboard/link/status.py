@@ -1,9 +1,9 @@
 """What the robot says about itself: the STATUS packet (boot, skipped poses, sweep done, the
 failsafe, the disk) and the answer to the STATUS command, both typed (`radio.packets.StatusReport`),
-and the systemd status line. Every STATUS says the mode and the disk besides what it is about;
-the answer says everything: the sweep with its plan and skipped poses, the failsafe and its
-`failsafe_s` (so the station draws the grid and knows when the arm is held), the link's
-rejections, faults, errors and the messages the base refused. Bounded lists say how many older
+and the systemd status line. Every STATUS says the mode, the disk and the last pose's compute
+time besides what it is about; the answer says everything: the sweep with its plan and skipped
+poses, the failsafe and its `failsafe_s` (so the station draws the grid and knows when the arm is
+held), the link's rejections, faults, errors and the messages the base refused. Bounded lists say how many older
 items they left out. A STATUS the outbox cannot take (a full disk) goes straight to the link."""
 from __future__ import annotations
 
@@ -49,9 +49,10 @@ class Status:
                 max(0, count - len(letters))))))
 
     def said(self) -> pk.StatusReport:
-        """What every STATUS says: the mode and the disk."""
-        s = self.state
-        return pk.StatusReport(mode=s.mode.value, disk=pk.Disk(s.disk, s.disk_free))
+        """What every STATUS says: the mode, the disk and the last pose's compute time."""
+        s, timing = self.state, self.captures.last_timing
+        return pk.StatusReport(mode=s.mode.value, disk=pk.Disk(s.disk, s.disk_free),
+                               pose_ms=None if timing is None else round(timing.total * 1e3, 1))
 
     def robot_state(self) -> pk.RobotState:
         s = self.state
@@ -65,7 +66,8 @@ class Status:
         fields, with the mode and the disk."""
         said = self.said()
         if report is not None:
-            said = dataclasses.replace(report, mode=report.mode or said.mode, disk=report.disk or said.disk)
+            said = dataclasses.replace(report, mode=report.mode or said.mode, disk=report.disk or said.disk,
+                                       pose_ms=said.pose_ms if report.pose_ms is None else report.pose_ms)
         return wire.status_body(self.state.cfg.robot_id, self.wall(), state or self.robot_state(),
                                 self.state.pose, len(self.outbox), self.outbox.bytes_used,
                                 self.captures.last_seq, text, fit(said))

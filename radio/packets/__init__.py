@@ -10,10 +10,10 @@ raises `radio.FrameError` with the reason. `encode` fits what a sender may cut (
 oldest items of a bounded list, counted) and checks its own output the same way, so a packet
 that encodes always decodes.
 
-A kind is encoded at its newest schema version (3, or 4 for STATUS, ACK and NACK, whose layouts
-grew); its older layouts still decode.
+A kind is encoded at its newest schema version (3; 4 for STATUS, ACK and NACK, 5 for MODELS,
+whose layouts grew); its older layouts still decode.
 
-MODELS (schema 3, layout in `radio.packets.models`) carry each model as four percentiles in
+MODELS (schema 5, layout in `radio.packets.models`) carry each model as four percentiles in
 fixed point: for 8-bit sensors 16-bit codes with a step of 2**-8 gray level, so each is within
 2**-9 < 0.01 gray level of the fitted value, and the host recomputes the robot's models bit for
 bit. An ordinary model costs 8 bytes; a label one bitmap bit and a varint of its pixel count and

@@ -19,9 +19,10 @@ from radio.fragment import MAX_MESSAGE
 # The schema version every kind has a layout at; a kind whose layout grew since is encoded at its
 # own newer version (`radio.packets.schema.newest`), and its older layouts still decode.
 # 2: MODELS packs angles, labels, codes and records into one blob; 3: the read records;
-# 4: STATUS and the ACK of STATUS carry the typed report, a NACK may refuse a robot's message.
+# 4: STATUS and the ACK of STATUS carry the typed report, a NACK may refuse a robot's message;
+# 5: the MODELS camera section's flags are a varint and may carry the frame's source file.
 SCHEMA_VERSION = 3
-NEWEST_VERSION = 4
+NEWEST_VERSION = 5
 # A body is one link message: a longer one could not be sent (`radio.fragment.MAX_MESSAGE`).
 MAX_BODY = MAX_MESSAGE
 MAX_STR = 512

@@ -87,6 +87,12 @@ def downsample_labels(labels: np.ndarray, max_side: int = MAX_SIDE) -> np.ndarra
     This is the map a MASK packet carries, and the one the robot compares to decide whether
     a new MASK is due. Cells are rows and columns between the rounded points of an even split.
     """
+    return pool_labels(labels, max_side)[0]
+
+
+def pool_labels(labels: np.ndarray, max_side: int = MAX_SIDE) -> tuple[np.ndarray, np.ndarray]:
+    """(downsample_labels' map, the pixels of each label 0..255): both from one count of each
+    cell's labels, so a caller that needs both reads the map once."""
     labels = np.asarray(labels)
     if labels.ndim != 2 or labels.size == 0:
         raise ValueError(f"label map must be a non-empty 2-D array, got shape {labels.shape}")
@@ -97,16 +103,21 @@ def downsample_labels(labels: np.ndarray, max_side: int = MAX_SIDE) -> np.ndarra
     H, W = labels.shape
     scale = max(H, W) / max_side
     if scale <= 1.0:
-        return labels.astype(np.uint8)
+        return labels.astype(np.uint8), np.bincount(labels.reshape(-1), minlength=256)
     h, w = max(1, min(max_side, round(H / scale))), max(1, min(max_side, round(W / scale)))
     rows, cols = cell_edges(H, h), cell_edges(W, w)
     col_cell = np.repeat(np.arange(w, dtype=np.intp), np.diff(cols)) << 8
     out = np.empty((h, w), dtype=np.uint8)
+    total = np.zeros(w * 256, dtype=np.int64)
+    index = np.empty((int(np.diff(rows).max()), W), dtype=np.intp)
     for i in range(h):  # one row of cells at a time: memory is a few frame rows, not the frame
         band = labels[rows[i]:rows[i + 1]]
-        counts = np.bincount((col_cell[None, :] | band).ravel(), minlength=w * 256)
+        at = index[:len(band)]
+        np.bitwise_or(col_cell, band, out=at)
+        counts = np.bincount(at.reshape(-1), minlength=w * 256)
         out[i] = counts.reshape(w, 256).argmax(axis=1)  # first maximum: the lower label on ties
-    return out
+        total += counts
+    return out, total.reshape(w, 256).sum(axis=0)
 
 
 def cell_edges(full: int, cells: int) -> np.ndarray:
@@ -121,10 +132,11 @@ def cell_of(full: int, cells: int) -> np.ndarray:
 
 def mask_packet(
     labels: np.ndarray, *, robot_id: int, seq: int, max_side: int = MAX_SIDE,
-    extras: Mapping[str, Any] | None = None,
+    extras: Mapping[str, Any] | None = None, pooled: np.ndarray | None = None,
 ) -> MaskPacket:
-    """Downsample a frame's label map and run-length encode it."""
-    small = downsample_labels(labels, max_side)
+    """Downsample a frame's label map and run-length encode it; `pooled`: the map
+    downsample_labels(labels, max_side) already made (not made again)."""
+    small = downsample_labels(labels, max_side) if pooled is None else np.asarray(pooled, dtype=np.uint8)
     flat = small.reshape(-1)
     starts = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])
     runs = np.diff(np.r_[starts, flat.size])

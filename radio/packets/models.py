@@ -23,8 +23,9 @@ The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
   codes    per label, per band, four codes (>H up to 256 levels, else >I)
   dependence  when flagged: per label, its grain and band correlation in int8
            (`radio.packets.dependence`, 11 bytes per RGB label); never flagged empty
-  camera   when flagged: the capture's camera settings, reference level and brackets
-           (`radio.packets.camera`, 10 bytes for a locked capture without either)
+  camera   when flagged: the capture's camera settings, reference level, brackets and (schema
+           5) the frame's source file (`radio.packets.camera`, 10 bytes for a locked capture
+           without any of these)
   records  (`radio.packets.records`) absent when every model is plain; else 2 bits per model (model i at bits 2(i%4) of
            byte i//4): 0 plain, 1 a read byte, 2 never, 3 a flagged record; then, for each
            non-plain model in order, for 1 the read byte (bits 0-3 z index, bits 4-5 the
@@ -66,7 +67,7 @@ from radio.packets.base import (
     angles_to_wire,
     want_int,
 )
-from radio.packets.camera import decode_camera, encode_camera
+from radio.packets.camera import VARINT_FLAGS, decode_camera, encode_camera
 from radio.packets.dependence import decode_dependence, encode_dependence, quantized, section_size
 from radio.packets.records import Tail, censor_code, read_tails, tail_bytes, tail_of
 from radio.packets.schema import Angles, Bin, Declared, Field, Int, ListOf, Text, wire
@@ -119,6 +120,7 @@ class ModelsPacket(Declared):
     """One capture's models: the header fields, then one blob (`radio/packets/models.py` gives its layout)."""
 
     KIND: ClassVar[Kind] = Kind.MODELS
+    BYTES_SINCE: ClassVar[int] = VARINT_FLAGS  # the blob's camera section grew a source
     WIRE: ClassVar[tuple[Field, ...]] = (
         Field("robot_id", ROBOT, "the robot", label="robot id"),
         Field("seq", SEQ, "the capture's number", label="capture seq"),
@@ -182,7 +184,7 @@ class ModelsPacket(Declared):
         if self.dependence:
             out += encode_dependence(self.dependence, ids, len(self.bands))
         if self.camera is not None:
-            out += encode_camera(self.camera, len(self.bands), codec, ids)
+            out += encode_camera(self.camera, len(self.bands), codec, ids, self.BYTES_SINCE)
         entries = [tail_bytes(t, lab.z_index) for lab in self.labels
                    for t in (lab.tails + (None,) * len(self.bands))[:len(self.bands)]]
         if any(c for c, _ in entries):
@@ -238,7 +240,7 @@ class ModelsPacket(Declared):
             pos = end
         camera = None
         if has_camera:
-            camera, pos = decode_camera(blob, pos, n_bands, codec, ids)
+            camera, pos = decode_camera(blob, pos, n_bands, codec, ids, version)
         tails = read_tails(blob, pos, [z for _, _, z in heads], n_bands)
         records = tuple(
             LabelModels(label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]), tails[i])

@@ -387,8 +387,9 @@ def layout(cls: type, version: int | None = None) -> tuple[Field, ...]:
 
 
 def newest(cls: type) -> int:
-    """The schema version a kind is encoded at: the newest of its fields'."""
-    return max((f.since for f in layout(cls)), default=SCHEMA_VERSION)
+    """The schema version a kind is encoded at: the newest of its fields' and of the bytes inside
+    one (`BYTES_SINCE`: a kind whose packed field grew, e.g. the MODELS blob)."""
+    return max([f.since for f in layout(cls)] + [getattr(cls, "BYTES_SINCE", SCHEMA_VERSION)])
 
 
 def width(cls: type, version: int) -> int:

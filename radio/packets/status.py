@@ -159,6 +159,8 @@ class StatusReport:
     camera: str | None = wire(Maybe(LINE), "what the camera holds (at boot)", tag=12, default=None)
     dead_letters: DeadLetters | None = wire(Maybe(Record(DeadLetters)), "messages the base refused", tag=13,
                                             default=None)
+    pose_ms: float | None = wire(Maybe(Float(0.0, 3.6e6)), "the last pose's compute, features to encoded "
+                                 "packets, milliseconds", tag=14, default=None)
 
 
 @dataclass(frozen=True, slots=True)

@@ -47,13 +47,15 @@ def test_old_answers_and_refusals_decode():
 
 def test_each_kind_is_encoded_at_its_newest_version_and_refused_at_one_it_never_had():
     assert {k: pk.version_of(k) for k in pk.Kind} == {
-        k: 4 if k in (pk.Kind.STATUS, pk.Kind.ACK, pk.Kind.NACK) else 3 for k in pk.Kind}
+        k: 4 if k in (pk.Kind.STATUS, pk.Kind.ACK, pk.Kind.NACK) else 5 if k is pk.Kind.MODELS else 3 for k in pk.Kind}
     body = pk.encode(pk.LogPacket(1, 2.0, pk.LogLevel.INFO, "x"))
     assert body[1] == 3
     with pytest.raises(FrameError, match="unsupported schema version 4 for LOG"):
         pk.decode(bytes([body[0], 4]) + body[2:])
-    with pytest.raises(FrameError, match="unsupported schema version 5"):
+    with pytest.raises(FrameError, match="unsupported schema version 5 for STATUS"):
         pk.decode(raw(5, int(pk.Kind.STATUS)))
+    with pytest.raises(FrameError, match="unsupported schema version 6"):
+        pk.decode(raw(6, int(pk.Kind.MODELS)))
 
 
 def test_the_cross_field_rules_hold_both_ways():

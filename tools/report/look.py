@@ -126,6 +126,9 @@ def capture_source(capture: Any) -> str:
     asked = "" if cmd[0] is None else f" (commanded {cmd[0]:.1f}° / {cmd[1] or 0.0:.1f}°)"
     state = f", incarnation {capture.incarnation}" if capture.incarnation else ""
     file = f"; file {capture.source}" if capture.source else ""
+    replayed = getattr(capture.camera, "source", None)
+    if replayed:  # a replaying camera read the frame from this file
+        file += f"; frame from file {replayed}"
     return (f"robot {capture.robot}, sequence {capture.sequence}{state}; pose elevation {el:.2f}°, "
             f"azimuth {az:.2f}°{asked}{lit}{file}")
 

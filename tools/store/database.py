@@ -211,10 +211,10 @@ class Store:
     def _add_camera(self, cid: int, s: CaptureSettings) -> None:
         red, blue = s.white_balance_gains or (None, None)
         self._conn.execute(
-            f"INSERT INTO capture_camera (capture, {', '.join(CAMERA_COLUMNS)}) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            f"INSERT INTO capture_camera (capture, {', '.join(CAMERA_COLUMNS)}) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (cid, s.exposure_us, s.gain, s.white_balance_kelvin, red, blue, s.sensor_temperature_c, int(s.unlocked),
              None if s.reference is None else json.dumps(list(s.reference)), float(s.reference_clipped),
-             json.dumps(list(s.brackets)), json.dumps({str(k): v for k, v in sorted(s.bracketed.items())})))
+             json.dumps(list(s.brackets)), json.dumps({str(k): v for k, v in sorted(s.bracketed.items())}), s.source))
 
     def next_sequence(self, robot_id: str) -> int:
         row = self._conn.execute("SELECT MAX(sequence) FROM captures WHERE robot = ?", (robot_id,)).fetchone()
@@ -289,7 +289,7 @@ class Store:
         camera = ", ".join(f"k.{c}" for c in CAMERA_COLUMNS)
         rows = self._conn.execute(
             "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
-            " space, bands, scene, light_elevation, light_azimuth, source, levels, incarnation, " + camera
+            " space, bands, scene, light_elevation, light_azimuth, captures.source, levels, incarnation, " + camera
             + " FROM captures LEFT JOIN capture_camera k ON k.capture = captures.id"
             + where + " ORDER BY elevation, id", args
         ).fetchall()

@@ -76,7 +76,7 @@ def capture_from_row(r: tuple) -> StoredCapture:
 
 
 CAMERA_COLUMNS = ("exposure_us", "gain", "wb_kelvin", "wb_red", "wb_blue", "sensor_c", "unlocked", "reference",
-                  "reference_clipped", "brackets", "bracketed")
+                  "reference_clipped", "brackets", "bracketed", "source")
 
 
 def camera_from_row(r: tuple) -> CaptureSettings | None:
@@ -102,7 +102,8 @@ def camera_from_row(r: tuple) -> CaptureSettings | None:
             number(r[8], "camera reference_clipped"),
             tuple(number(v, "camera bracket exposure") for v in brackets),
             {integer(int(k) if str(k).isdigit() else k, "bracketed label", 0, MAX_LABELS - 1):
-             integer(v, "bracket index", 1, MAX_BRACKETS) for k, v in bracketed.items()})
+             integer(v, "bracket index", 1, MAX_BRACKETS) for k, v in bracketed.items()},
+            None if r[11] is None else text(r[11], "camera source"))
     except ValueError as exc:
         raise ValueError(f"camera settings: {exc}") from None
 

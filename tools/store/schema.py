@@ -9,7 +9,7 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-SCHEMA_VERSION = 9
+SCHEMA_VERSION = 10
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -42,6 +42,8 @@ CREATE TABLE IF NOT EXISTS capture_camera (
     brackets TEXT NOT NULL DEFAULT '[]', bracketed TEXT NOT NULL DEFAULT '{}'
 );
 """
+# The file a replaying camera read the frame from (btf.capture_settings.CaptureSettings.source).
+_CAMERA_SOURCE = "ALTER TABLE capture_camera ADD COLUMN source TEXT;"
 # A capture is one robot state's (incarnation's) numbered view: a robot whose state was wiped
 # numbers its captures from 1 again under a new incarnation ('' for robots older than them).
 _CAPTURES = """
@@ -102,7 +104,7 @@ CREATE TABLE masks (
     data BLOB NOT NULL,
     UNIQUE (robot, key)
 );
-""" + _DEPENDENCE + _PCA + _CAMERA + _REJECTED
+""" + _DEPENDENCE + _PCA + _CAMERA + _CAMERA_SOURCE + _REJECTED
 _TABLES = {"captures", "models", "masks"}
 # Upgrades from the keyed version to the next; each keeps every existing row.
 _MIGRATIONS: dict[int, str] = {
@@ -132,6 +134,8 @@ _MIGRATIONS: dict[int, str] = {
        "CREATE INDEX captures_by_source ON captures (robot, source);",
     # the packets the station could not use, kept raw
     8: _REJECTED,
+    # the file a replayed frame came from
+    9: _CAMERA_SOURCE,
 }
 
 

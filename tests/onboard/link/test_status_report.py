@@ -23,7 +23,8 @@ def fullest() -> pk.StatusReport:
         sweep=pk.SweepReport(4, next=2, poses=14, active=True, plan=plan,
                              skipped=pk.Kept((pk.SkippedPose(1, 80.0, 0.0, "servo timeout"),))),
         camera="exposure 5000 us, gain 1.0, locked",
-        dead_letters=pk.DeadLetters(1, pk.Kept((pk.DeadLetter(41, pk.Kind.STATUS, "sweep must be an int", 1.7e9),))))
+        dead_letters=pk.DeadLetters(1, pk.Kept((pk.DeadLetter(41, pk.Kind.STATUS, "sweep must be an int", 1.7e9),))),
+        pose_ms=42.5)
 
 
 def answer(report, packet=pk.AckPacket):
@@ -41,10 +42,10 @@ def test_the_fullest_report_travels_whole():
 def test_a_field_added_to_the_report_travels_past_the_sixteen_an_extras_map_held():
     @dataclasses.dataclass(frozen=True, slots=True)
     class Grown(pk.StatusReport):
-        humidity: float | None = wire(Maybe(Float(0.0, 100.0)), "air humidity, %", tag=14, default=None)
-        lamp: str | None = wire(Maybe(Word(("on", "off"))), "the lamp", tag=15, default=None)
-        notes: pk.Kept | None = wire(Maybe(Latest(Text(40), 4)), "notes", tag=16, default=None)
-        battery_v: float | None = wire(Maybe(Float(0.0, 60.0)), "battery, volts", tag=17, default=None)
+        humidity: float | None = wire(Maybe(Float(0.0, 100.0)), "air humidity, %", tag=15, default=None)
+        lamp: str | None = wire(Maybe(Word(("on", "off"))), "the lamp", tag=16, default=None)
+        notes: pk.Kept | None = wire(Maybe(Latest(Text(40), 4)), "notes", tag=17, default=None)
+        battery_v: float | None = wire(Maybe(Float(0.0, 60.0)), "battery, volts", tag=18, default=None)
 
     @dataclasses.dataclass(frozen=True, slots=True)
     class GrownAck(pk.AckPacket):
@@ -52,7 +53,7 @@ def test_a_field_added_to_the_report_travels_past_the_sixteen_an_extras_map_held
 
     grown = Grown(**{f.name: getattr(fullest(), f.name) for f in layout(pk.StatusReport)},
                   humidity=41.5, lamp="on", notes=pk.Kept(("a", "b")), battery_v=12.6)
-    assert len(layout(Grown)) == 17 > MAX_EXTRAS
+    assert len(layout(Grown)) == 18 > MAX_EXTRAS
     kinds = dict(pk.KINDS)
     pk.KINDS[pk.Kind.ACK] = GrownAck  # a writer and reader that know the new declaration
     try:
@@ -62,7 +63,7 @@ def test_a_field_added_to_the_report_travels_past_the_sixteen_an_extras_map_held
         pk.KINDS.clear()
         pk.KINDS.update(kinds)
     assert back == grown and all(getattr(back, f.name) is not None for f in layout(Grown))
-    with pytest.raises(FrameError, match="no field tagged 14"):  # a reader that does not refuses it, whole
+    with pytest.raises(FrameError, match="no field tagged 15"):  # a reader that does not refuses it, whole
         pk.decode(body)
 
 

@@ -93,8 +93,8 @@ def test_a_locked_capture_costs_ten_bytes_and_brackets_name_their_labels():
     (bytes([0x82, 100, 0]), "bracket exposures|exposures \\(1"),
 ])
 def test_a_bad_camera_section_is_refused_naming_the_field(blob, message):
-    with pytest.raises(FrameError, match=message):
-        decode_camera(blob, 0, 3, CODEC, [3])
+    with pytest.raises(FrameError, match=message):  # the one-byte flags robots sent before schema 5
+        decode_camera(blob, 0, 3, CODEC, [3], version=4)
 
 
 # -- config and the lock ---------------------------------------------------------------------

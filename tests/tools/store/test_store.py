@@ -189,7 +189,7 @@ def test_a_database_from_before_rejected_packets_gains_the_table(tmp_path):
     with Store.open(db) as s:
         s.add_capture("1", 1, 1.0, (90.0, 0.0), (90.0, 0.0), "rgb", ("R", "G", "B"), {})
     con = sqlite3.connect(db)
-    con.executescript("DROP TABLE rejected_packets; PRAGMA user_version = 8;")
+    con.executescript("DROP TABLE rejected_packets; ALTER TABLE capture_camera DROP COLUMN source; PRAGMA user_version = 8;")
     con.close()
     with Store.open(db) as s:
         assert len(s.captures()) == 1 and s.rejected() == []
