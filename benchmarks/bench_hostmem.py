@@ -57,12 +57,12 @@ def run(ctx: Context) -> list[Section]:
     lines = [
         "Peak resident set of `btf-host` on synthetic clutter (6 regions, RGB PNG). "
         "**peak / pixel** is the whole process (interpreter and libraries included) over the "
-        "image's pixels, the issue's measure (bar: under 64); **held / pixel** is what the command "
+        "image's pixels, the measure its bar is set on (under 64); **held / pixel** is what the command "
         "held beyond the process after the same command on a 64x64 scene. The input PNG alone "
         "is 3 bytes a pixel, the mask 1.", "",
         "| command | image | peak RSS | peak / pixel | held / pixel | bar: < 64 at 20000x20000 | time |",
         "|---|---|---:|---:|---:|---|---:|", *rows, "",
-        "Before tiling (issue 18, 20000x20000 unless said): compare about 37 bytes per pixel "
+        "Before tiling (20000x20000 unless said): compare about 37 bytes per pixel "
         "(3.8 GB at 10000x10000, MemoryError at 20000x20000), mask isodata 8.2 GB, pdfs 5.7 GB, "
         "synth 4.5 GB. k-means stays global (cv2.kmeans on float32 pixels: 12 bytes a pixel and "
         "its own labels and distances); Felzenszwalb and SLIC segment tiles of at most 1024 and 2048 "

@@ -1,4 +1,6 @@
-"""Dataset ingest: throughput (images per second) and scaling from 1 to 2 workers.
+"""Dataset ingest: throughput (images per second) and scaling from 1 to 2 workers; and the
+station's store: captures a second with every acknowledged capture on stable storage
+(`benchmarks.store_commits`).
 
 A UTIA-layout dataset of rendered views (rendering is not timed) is ingested into a fresh
 database by each executor: in-process, a process pool of 1 and of 2, and a Dask
@@ -12,6 +14,8 @@ import tempfile
 import time
 from pathlib import Path
 
+from benchmarks.common import Context, Section
+from benchmarks.store_commits import run as run_store
 from tools.data.datasets import Angles, write_rendered
 from tools.data.ingest import Job, fit_job, ingest
 
@@ -41,7 +45,11 @@ def _best(root: Path, work: Path, repeat: int, **kw) -> tuple[float, list]:
     return best, content
 
 
-def run(ctx=None) -> list[str]:
+def run(ctx: Context | None = None) -> list[Section]:
+    return [Section("ingest", run_ingest(ctx)), run_store(ctx or Context())]
+
+
+def run_ingest(ctx: Context | None) -> list[str]:
     quick = bool(getattr(ctx, "quick", False))
     n, size, repeat = (6, (60, 80), 1) if quick else (48, (240, 320), 3)
     with tempfile.TemporaryDirectory(prefix="btf-ingest-") as tmp:
@@ -76,11 +84,12 @@ def run(ctx=None) -> list[str]:
     rest = (t_serial - t_fit) / n * 1e3
     lines += ["", f"Fitting alone, in this process: {n / t_fit:.1f} images/s; the rest of the in-process "
               + (f"time ({rest:.1f} ms per image)" if rest > 0.5 else "time (below the timing noise)")
-              + " is the single writer, batched: one SQLite commit per 64 images, WAL, synchronous=NORMAL.",
+              + " is the single writer, batched: one SQLite commit per 64 images, WAL, synchronous=FULL.",
               "", f"Dask cluster start-up (not in the times above): {start:.1f} s. "
               "Scaling 1 -> 2 workers on a shared 2-core machine is bounded by the other load on it."]
     return lines
 
 
 if __name__ == "__main__":
-    print("\n".join(run()))
+    for section in run():
+        print("\n".join(section.markdown()))

@@ -6,8 +6,13 @@ histogram L1 between the region and as many pixels sampled from the model (mean 
 and the exact L1 between the histogram and the model's level probabilities (no sampling
 noise). Peers: R SuppDists `JohnsonFit(x, moment="quant")` (benchmarks.rpeer; skipped with a
 note when Rscript is missing: `make bench-peers` installs it), scipy's johnsonsu MLE, and the
-Gaussian, uniform, Weibull and lognormal MLE fits of `btf-host pdfs`. A failure (an exception,
-NaN, out-of-range parameters) counts, and scores 2 (the worst L1) where a total needs it.
+Gaussian, uniform, Weibull and lognormal MLE fits of `btf-host pdfs`, and the AS 99 method of
+moments (benchmarks.as99_moment_fit). A failure (an exception, NaN, out-of-range parameters)
+counts, and scores 2 (the worst L1) where a total needs it.
+
+The trade-off plot: each method's fitting time against its error over all cases, and the robot's
+dependence pass (`btf.fit.dependence.measure`) on the colour photographs at several anchor counts,
+its time against its error to the pass with every pixel an anchor.
 """
 from __future__ import annotations
 
@@ -15,19 +20,22 @@ import time
 import warnings
 
 import numpy as np
+from matplotlib.ticker import FuncFormatter, NullFormatter
 from scipy import stats
 
-from benchmarks import photo_cases, rpeer
-from benchmarks.common import Context, Section, figure, save, verdict
-from btf.fit.fitter import fit_histogram, fit_values, plain_fit
+from benchmarks import as99_moment_fit, photo_cases, rpeer
+from benchmarks.common import Context, Section, best_time, figure, save, verdict
+from btf.fit import dependence
+from btf.fit.fitter import FrameFitter, fit_histogram, fit_values, plain_fit
 from btf.johnson import Family, Johnson
 from tools.analysis.pdfs import binned, peer_probabilities
 
 LEVELS = 256
 SEEDS = (0, 1, 2)
 MLE_SAMPLE = 5000  # johnsonsu MLE sees at most this many dequantized values (bounded time)
-PEERS = ("ours", "plain", "R", "R (integer values)", "johnsonsu MLE", "gaussian", "uniform", "weibull",
-         "lognormal")
+PEERS = ("ours", "plain", "R", "R (integer values)", "johnsonsu MLE", "moments (AS 99)", "gaussian", "uniform",
+         "weibull", "lognormal")
+ANCHORS = (256, 1024, 4096, 16384, 65536)  # the dependence pass's max_anchors (65536: the robot's default)
 
 
 def table2(counts: np.ndarray, probs: np.ndarray) -> float:
@@ -86,6 +94,11 @@ def evaluate(cases: list[photo_cases.Case], with_r: bool) -> tuple[dict, dict]:
         except Exception:  # a peer's failure is a result, whatever scipy raised
             probs["johnsonsu MLE"], t = None, 0.0
         seconds["johnsonsu MLE"] += t
+        try:
+            probs["moments (AS 99)"], t = _timed(lambda: as99_moment_fit.fit_counts(case.counts).level_probabilities(LEVELS))
+        except (ValueError, ArithmeticError):  # no curve for these moments: a failure, as the method reports it
+            probs["moments (AS 99)"], t = None, 0.0
+        seconds["moments (AS 99)"] += t
         others, t = _timed(lambda: peer_probabilities(values.astype(np.int64), LEVELS, rng))
         for name in ("gaussian", "uniform", "weibull", "lognormal"):
             probs[name] = others.get(name)
@@ -169,6 +182,67 @@ def plot(cases, errors, ctx: Context, with_r: bool) -> str:
     return save(fig, ctx, "photos.png")
 
 
+def dependence_tradeoff(ctx: Context) -> dict[int, tuple[float, float]]:
+    """Per anchor count: (seconds per photograph, mean absolute error of its correlations against
+    every pixel an anchor), over the colour photographs with their k-means masks."""
+    out: dict[int, list] = {a: [] for a in ANCHORS}
+    for name in photo_cases.RGB[:ctx.pick(len(photo_cases.RGB), 1)]:
+        img = photo_cases.load(name)
+        labels = photo_cases.kmeans_mask(img).astype(np.uint8)
+        fitter = FrameFitter(photo_cases.K, 3)
+        fitter.add(img, labels)
+        models = {k: r.model for k, r in fitter.fit().items()}
+        truth = dependence.measure(img, labels, models, max_anchors=labels.size)
+        for a in ANCHORS:
+            got = dependence.measure(img, labels, models, max_anchors=a)
+            err = np.mean([abs(u - v) for lab in truth for f in ("corr", "dx", "dy")
+                           for u, v in zip(getattr(truth[lab], f), getattr(got[lab], f))])
+            out[a].append((best_time(lambda: dependence.measure(img, labels, models, max_anchors=a),
+                                     ctx.pick(3, 1)), float(err)))
+    return {a: (float(np.mean([t for t, _ in v])), float(np.mean([e for _, e in v]))) for a, v in out.items()}
+
+
+def tradeoff_plot(cases, errors, seconds, dep: dict[int, tuple[float, float]], ctx: Context,
+                  with_r: bool) -> list[str]:
+    """Time against error: each fitting method over all cases, and the dependence pass per anchor count."""
+    fig, axes = figure(2, 1, size=(5.6, 4.4))
+    ax = axes[0][0]
+    everything = list(range(len(cases)))
+    names = [n for n in ("ours", "plain", "R", "johnsonsu MLE", "moments (AS 99)", "gaussian")
+             if with_r or n != "R"]
+    for name in names:
+        t, e = seconds[name] / len(cases), _total(errors[name], 1, everything)
+        ax.scatter([t * 1e3], [e], s=40)
+        ax.annotate(name, (t * 1e3, e), textcoords="offset points", xytext=(5, 4), fontsize=8)
+    ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.set_xlabel("fitting time per (region, band), ms")
+    ax.set_ylabel(f"Table 2 error, sum over {len(cases)} cases")
+    ax.set_title("Fitting real photographs: time against error" + ("" if with_r else " (R not installed)"),
+                 fontsize=9)
+    ax = axes[0][1]
+    ts = [dep[a][0] * 1e3 for a in ANCHORS]
+    es = [dep[a][1] for a in ANCHORS]
+    ax.plot(ts, es, "o-")
+    for a, t, e in zip(ANCHORS, ts, es):
+        last = a == ANCHORS[-1]  # the rightmost label ends at its point, inside the axes
+        ax.annotate(f"{a} anchors" + (" (default)" if a == dependence.MAX_ANCHORS else ""), (t, e),
+                    textcoords="offset points", xytext=(-4, 6) if last else (5, 4), fontsize=8,
+                    ha="right" if last else "left")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.xaxis.set_minor_formatter(NullFormatter())  # log-axis minor labels would overlap
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.set_xlabel("dependence pass per photograph, ms")
+    ax.set_ylabel("mean |error| of its correlations (log)")
+    ax.set_title("Dependence: anchors against error (every pixel an anchor: 0)", fontsize=9)
+    rows = [f"| {n} | {seconds[n] / len(cases) * 1e3:.2f} ms | {_total(errors[n], 1, everything):.3f} |"
+            for n in names]
+    rows += [f"| dependence, {a} anchors | {dep[a][0] * 1e3:.1f} ms per photograph | {dep[a][1]:.4f} (correlation) |"
+             for a in ANCHORS]
+    return ["| method | time | error |", "|---|---:|---:|", *rows, "", save(fig, ctx, "tradeoff.png")]
+
+
 def recovery(ctx: Context) -> list[str]:
     """The recovery grid of tests/test_fit.py at wider spans: share of cells whose worst
     quantile error over u in 1%..99% stays within one gray level, ours and the plain read."""
@@ -207,6 +281,13 @@ def run(ctx: Context) -> list[Section]:
             "masks (3 classes), the whole frame of the texture photographs, and the true depth layers of the "
             "Middlebury motorcycle. Lower is better; `plain` is the plain percentile fit (the count's z, "
             "unshifted, no rule) that every rule of ours is held to.", ""]
+    trade = tradeoff_plot(cases, errors, seconds, dependence_tradeoff(ctx), ctx, with_r)
     return [Section("Accuracy on real photographs", head + summary(cases, errors, seconds, with_r)
                     + [plot(cases, errors, ctx, with_r), ""] + per_case(cases, errors, with_r)),
+            Section("Time against error on real photographs", [
+                "Each fitting method's time per (region, band) and its Table 2 error summed over the cases "
+                "above (a failure scores 2); the dependence pass as it stands (`btf.fit.dependence`, "
+                "`max_anchors`) on the colour photographs with their k-means masks, its time per photograph "
+                "and the mean absolute error of its band and spatial correlations against the pass with "
+                "every pixel an anchor.", "", *trade]),
             Section("Recovery at wide spans", recovery(ctx))]

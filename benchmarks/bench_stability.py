@@ -197,12 +197,12 @@ def _censoring(points, sizes, res) -> list[str]:
             f"than 0.1 gray in {better} cells and raises it in {worse}, of which {worse_fb} took the fallback."]
     q_ok = all(f[0] <= QUANTILE_BAR for s, f in verdicts if s.fraction <= 0.10)
     l1_ok = all(f[2] <= L1_BAR for _, f in verdicts)
-    out += ["", f"Issue 10's bars on the noise-free counts, off the band: quantile error within {QUANTILE_BAR:g} "
+    out += ["", f"The censoring bars on the noise-free counts, off the band: quantile error within {QUANTILE_BAR:g} "
             f"gray levels up to 10% censored: {'met' if q_ok else 'NOT met'}; model-to-truth histogram L1 "
             f"at most {L1_BAR} up to 40% censored: {'met' if l1_ok else 'NOT met'} (the bar is set on "
             "samples against data; here the fit's level probabilities meet the true ones, without "
-            "sampling noise). The issue states these bars for clipped normal, SU, SB and lognormal "
-            "curves, where tests/test_censored.py checks them; this grid adds J-shaped curves beside "
+            "sampling noise). The bars are stated for clipped normal, SU, SB and lognormal "
+            "curves, where tests/btf/test_censored.py checks them; this grid adds J-shaped curves beside "
             "the band, whose pole at the lower bound a crushed limit swallows (the table below).", ""]
     return out
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 from btf.johnson import Family, Johnson
 
 MAX_BRACKETS = 4  # shorter exposures one capture may take
+MAX_SOURCE = 64  # bytes of UTF-8 a capture's source file name takes on the wire
 LINEAR_SPACES = ("rgb", "gray")  # feature spaces whose levels scale with exposure
 
 
@@ -26,7 +27,8 @@ class CaptureSettings:
     `reference`: the reference region's mean level per band, and `reference_clipped` the share
     of its pixels at a sensor limit (its level then understates the light). `brackets`: the
     shorter exposures taken (µs); `bracketed` maps a label fitted from one of them to its
-    1-based index in `brackets` (the others come from `exposure_us`).
+    1-based index in `brackets` (the others come from `exposure_us`). `source`: the file the
+    frame was read from (a replaying camera; `bounded_source` keeps a long path's end).
     """
 
     exposure_us: float | None = None
@@ -39,6 +41,7 @@ class CaptureSettings:
     reference_clipped: float = 0.0
     brackets: tuple[float, ...] = ()
     bracketed: Mapping[int, int] = field(default_factory=dict)
+    source: str | None = None
 
     def __post_init__(self) -> None:
         for name in ("exposure_us", "gain", "white_balance_kelvin", "sensor_temperature_c"):
@@ -60,11 +63,28 @@ class CaptureSettings:
         for label, index in self.bracketed.items():
             if not 1 <= index <= len(self.brackets):
                 raise ValueError(f"capture settings: label {label} names bracket {index} of {len(self.brackets)}")
+        if self.source is not None and (not self.source or not self.source.isprintable()
+                                        or len(self.source.encode("utf-8")) > MAX_SOURCE):
+            raise ValueError(f"capture settings: source must be printable, 1..{MAX_SOURCE} bytes of UTF-8, "
+                             f"got {self.source!r}")
 
     def exposure_of(self, label: int) -> float | None:
         """The exposure (µs) the models of `label` were fitted at."""
         index = self.bracketed.get(label)
         return self.exposure_us if index is None else self.brackets[index - 1]
+
+
+def bounded_source(path: str) -> str | None:
+    """A frame's source file as a capture records it: the path itself when it fits MAX_SOURCE
+    bytes, else "…" and as much of its end as fits (the file's name first); None for none."""
+    text = "".join(c if c.isprintable() else "?" for c in str(path))
+    if not text:
+        return None
+    if len(text.encode("utf-8")) <= MAX_SOURCE:
+        return text
+    room = MAX_SOURCE - len("…".encode())
+    tail = text.encode("utf-8")[-room:].decode("utf-8", errors="ignore")
+    return "…" + tail
 
 
 def scaled(model: Johnson, factor: float) -> Johnson:

@@ -102,9 +102,9 @@ class Johnson:
     lam: float
 
     def __post_init__(self) -> None:
-        values = (self.gamma, self.delta, self.xi, self.lam)
-        if not all(math.isfinite(v) for v in values):
-            raise ValueError(f"Johnson parameters must be finite, got {values}")
+        if not (math.isfinite(self.gamma) and math.isfinite(self.delta) and math.isfinite(self.xi)
+                and math.isfinite(self.lam)):
+            raise ValueError(f"Johnson parameters must be finite, got {(self.gamma, self.delta, self.xi, self.lam)}")
         if self.family is not Family.CONST:
             if self.delta <= 0.0:
                 raise ValueError(f"delta must be positive, got {self.delta}")

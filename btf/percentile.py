@@ -42,8 +42,8 @@ def model_from_percentiles(percentiles, z: float, count: int, *, shift: float = 
     """
     if len(percentiles) != 4:
         raise ValueError(f"need four percentiles, got {len(percentiles)}")
-    a, b, c, e = (float(v) for v in percentiles)
-    if not all(math.isfinite(v) for v in (a, b, c, e)):
+    a, b, c, e = map(float, percentiles)
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c) and math.isfinite(e)):
         raise ValueError(f"percentiles must be finite, got {percentiles}")
     if not (a <= b <= c <= e):
         raise ValueError(f"percentiles must be non-decreasing, got {percentiles}")
@@ -151,7 +151,7 @@ def _sl(m: float, n: float, p: float, mid: float, z: float) -> Johnson | None:
 
 
 def _checked(family: Family, gamma: float, delta: float, xi: float, lam: float) -> Johnson | None:
-    values = (gamma, delta, xi, lam)
-    if not all(math.isfinite(v) for v in values) or delta <= 0.0 or lam == 0.0:
+    if not (math.isfinite(gamma) and math.isfinite(delta) and math.isfinite(xi) and math.isfinite(lam)
+            and delta > 0.0 and lam != 0.0):
         return None
     return Johnson(family, gamma, delta, xi, lam)

@@ -117,7 +117,7 @@ def load_arm_fit(state_dir: str | Path) -> ArmFit | None:
                                             for k in ("offset_deg", "sign", "residual_deg", "poses")})
                          for name in ("yaw", "tilt")})
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise HalError(f"arm calibration {path}: {exc}; run `btf-robot calibrate arm` again or remove the file") from None
+        raise HalError(f"arm calibration {path}: {exc}; run 'btf-robot calibrate arm' again or remove the file") from None
 
 
 def _wrap(deg: float) -> float:

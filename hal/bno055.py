@@ -2,6 +2,9 @@
 
 Register addresses from the Bosch BNO055 datasheet (page 0). Euler angles are
 little-endian int16 in 1/16 degree; conversion to degrees happens here and nowhere else.
+A chip that does not answer at all (EIO after every try, or no device: ENXIO, ENODEV) is
+`DeviceGone`: unplugged, or without power. Back on the bus it has started afresh (CONFIG
+mode, the default axes, Euler registers at zero), so the next read sets it up again first.
 """
 from __future__ import annotations
 
@@ -15,7 +18,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from hal.interfaces import Calibration, HalError, Orientation
+from hal.interfaces import Calibration, DeviceGone, HalError, Orientation
 
 CHIP_ID = 0xA0
 DEFAULT_ADDRESS = 0x28
@@ -46,6 +49,7 @@ TO_CONFIG_S = 0.019
 FROM_CONFIG_S = 0.007
 EULER_RADIANS = 0x04  # UNIT_SEL bit 2: Euler in 1/900 rad instead of 1/16 degree
 RETRYABLE = frozenset({errno.EREMOTEIO, errno.EIO, errno.EBUSY})  # 121 NACK, 5, 16
+GONE = frozenset({errno.EIO, errno.ENXIO, errno.ENODEV})  # every try: no chip on the bus
 
 
 # Datasheet section 3.4: the eight placements of the chip, as (AXIS_MAP_CONFIG, AXIS_MAP_SIGN).
@@ -131,15 +135,28 @@ class BNO055Tracker:
         self.retries = retries
         self._sleep = sleep
         self.retried = 0  # transient bus errors absorbed so far
-        chip = self._io(bus.read_byte_data, address, Reg.CHIP_ID)
+        self._wanted = remap
+        self._lost = False  # the chip stopped answering: set it up again before the next read
+        self._setup()
+
+    def _setup(self) -> None:
+        """Put the chip in fusion mode with degrees and the remap asked for (at start, and when
+        it is back on the bus after it was gone)."""
+        chip = self._io(self._bus.read_byte_data, self.address, Reg.CHIP_ID)
         if chip != CHIP_ID:
             raise HalError(f"{self._where()}: chip id 0x{chip:02X}, expected 0x{CHIP_ID:02X} (BNO055); "
                            "wrong device or address")
         self._set_mode(Mode.CONFIG)
-        self._io(bus.write_byte_data, address, Reg.PAGE_ID, 0)
+        self._io(self._bus.write_byte_data, self.address, Reg.PAGE_ID, 0)
         self._use_degrees()
-        self.remap = self._axis_remap(remap)
+        self.remap = self._axis_remap(self._wanted)
         self._set_mode(Mode.NDOF)
+        self._lost = False
+
+    def _back(self) -> None:
+        """Set a chip that was gone up again before it is read (it lost its settings)."""
+        if self._lost:
+            self._setup()
 
     @classmethod
     def open(cls, bus_number: int = 1, address: int = DEFAULT_ADDRESS, **kwargs: Any) -> BNO055Tracker:
@@ -163,6 +180,11 @@ class BNO055Tracker:
             try:
                 return op(*args)
             except OSError as exc:
+                gone = exc.errno in GONE and (attempt == self.retries or exc.errno not in RETRYABLE)
+                if gone:
+                    self._lost = True
+                    raise DeviceGone(f"{self._where()}: no answer ({errno.errorcode.get(exc.errno, exc.errno)}, "
+                                     f"{attempt + 1} tries): unplugged or without power?") from exc
                 if exc.errno not in RETRYABLE:
                     raise HalError(f"{self._where()}: {exc}") from exc
                 if attempt == self.retries:
@@ -203,6 +225,7 @@ class BNO055Tracker:
             raise HalError(f"{self._where()}: asked for mode {mode.name}, chip reports 0x{got:02X}")
 
     def orientation(self) -> Orientation:
+        self._back()
         raw = self._io(self._bus.read_i2c_block_data, self.address, Reg.EULER_H_LSB, 6)
         if len(raw) != 6:
             raise HalError(f"{self._where()}: short Euler read ({len(raw)} of 6 bytes)")
@@ -210,6 +233,7 @@ class BNO055Tracker:
         return Orientation(heading=heading, roll=roll, pitch=pitch)
 
     def calibration(self) -> Calibration:
+        self._back()
         v = self._io(self._bus.read_byte_data, self.address, Reg.CALIB_STAT)
         return Calibration(system=(v >> 6) & 3, gyro=(v >> 4) & 3, accel=(v >> 2) & 3, mag=v & 3)
 

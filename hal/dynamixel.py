@@ -5,10 +5,14 @@ when the SDK reports COMM_SUCCESS, no packet error and the expected payload leng
 timeout or corrupt reply is retried a bounded number of times, then raises an error naming
 the servo and the port. A status with the alert bit (0x80) makes the driver read the
 hardware error status, reboot the servo, restore torque and goal, and redo the request.
+A port that fails under a request (its USB adapter unplugged: EIO, then the device node gone)
+raises `DeviceGone`; the next request opens it again and, once it opens, restores torque and
+goals as after a reboot, then goes on.
 """
 from __future__ import annotations
 
 import math
+import os
 import termios
 import threading
 import time
@@ -16,7 +20,7 @@ import time
 import dynamixel_sdk as sdk
 
 from hal.dynamixel_table import ALERT, CENTER_TICKS, SIZE, TICKS_PER_TURN, Reg
-from hal.interfaces import DeviceTimeout, HalError, LimitError, ServoRecovery
+from hal.interfaces import DeviceGone, DeviceTimeout, HalError, LimitError, ServoRecovery
 
 
 def deg_to_ticks(deg: float) -> int:
@@ -94,6 +98,8 @@ class DynamixelServoBus:
         self._lock = threading.RLock()
         self._goals: dict[int, int] = {}
         self._torque: dict[int, bool] = {}
+        self._lost = False  # the port failed under a request: open it again before the next
+        self._closed = False
         self._port = _Port(port, latency_ms)
         self._ph = sdk.PacketHandler(2.0)
         try:
@@ -127,13 +133,13 @@ class DynamixelServoBus:
         if not ticks:
             return
         with self._lock:
-            self._goals.update(ticks)
             size = SIZE[Reg.GOAL_POSITION]
             group = sdk.GroupSyncWrite(self._port, self._ph, Reg.GOAL_POSITION, size)
             for sid, t in ticks.items():
                 group.addParam(sid, list(t.to_bytes(size, "little")))
             # Broadcast: no status comes back, so only a transmit failure is visible.
             self._call(min(ticks), "sync write goal", lambda: (group.txPacket(), 0), alerts=False)
+            self._goals.update(ticks)  # sent: what a reboot or a reopened port restores
 
     def positions(self, servo_ids: list[int]) -> dict[int, float]:
         raw = self._sync_read(servo_ids, Reg.PRESENT_POSITION)
@@ -164,6 +170,7 @@ class DynamixelServoBus:
 
     def close(self) -> None:
         with self._lock:
+            self._closed = True
             if self._port.is_open:
                 self._port.closePort()
 
@@ -241,6 +248,8 @@ class DynamixelServoBus:
             raise HalError(f"servo {sid} on {self.port_name}: alert persists after {self.max_recoveries} reboots")
 
     def _retry(self, sid: int, what: str, attempt):
+        if self._lost and not self._closed:
+            self._reopen(sid, what)
         failure = _Failed("not attempted")
         try:
             for _ in range(self.retries):
@@ -253,14 +262,49 @@ class DynamixelServoBus:
                     self._port.clearPort()
         except (OSError, termios.error) as exc:  # the port itself failed: unplugged or closed
             self._port.is_using = False  # the SDK leaves its busy flag set when a write raises
-            raise HalError(f"servo {sid} on {self.port_name}: {what}: port failed ({exc})") from exc
+            if self._closed:
+                raise HalError(f"servo {sid} on {self.port_name}: {what}: port failed ({exc})") from exc
+            self._lost = True
+            try:
+                self._port.closePort()
+            except (OSError, termios.error):
+                pass
+            raise DeviceGone(f"servo {sid} on {self.port_name}: {what}: port failed ({_why(exc)}); unplugged?") from exc
         error = DeviceTimeout if failure.timeout else HalError
         raise error(f"servo {sid} on {self.port_name}: {what} failed {self.retries} times (last: {failure})")
+
+    def _reopen(self, sid: int, what: str) -> None:
+        """Open the port that failed; once it is back, torque and goals as they were. DeviceGone
+        while it is not there."""
+        try:
+            opened = self._port.openPort()
+        except Exception as exc:  # pyserial: SerialException (an OSError) naming the missing node
+            opened, why = False, _why(exc)
+        else:
+            why = "it would not open"
+        if not opened:
+            raise DeviceGone(f"servo {sid} on {self.port_name}: {what}: port not there ({why}); unplugged?")
+        self._lost = False
+        for servo, on in self._torque.items():
+            if on:
+                if self.profile_velocity:
+                    self._write(servo, Reg.PROFILE_VELOCITY, self.profile_velocity, alerts=False)
+                self._write(servo, Reg.TORQUE_ENABLE, 1, alerts=False)
+        for servo, goal in self._goals.items():
+            self._write(servo, Reg.GOAL_POSITION, goal, alerts=False)
 
     def _recover(self, sid: int) -> None:
         code = self.hardware_error(sid)
         self.recoveries.append(ServoRecovery(sid, code))
         self.reboot(sid)
+
+
+def _why(exc: Exception) -> str:
+    """An OS error as a person reads it: "Input/output error" rather than (5, '...') or a path twice."""
+    number = getattr(exc, "errno", None)
+    if not isinstance(number, int) and exc.args and isinstance(exc.args[0], int):  # termios.error
+        number = exc.args[0]
+    return os.strerror(number) if isinstance(number, int) else str(exc)
 
 
 def _unpack(data: list[int], size: int) -> int:

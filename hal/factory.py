@@ -28,6 +28,7 @@ from hal.orientation import MOUNTS
 from hal.scene import SCENES, render
 
 ENV_VAR = "BTF_HAL"
+REPLAY = "replay:"  # hal.camera = "replay:DIR_OR_GLOB": frames from image files (hal.replay)
 # Views the emulated camera's image sequence is rendered at (it replays them in order).
 SEQUENCE_VIEWS = (ViewAngles(90.0), ViewAngles(60.0), ViewAngles(30.0))
 
@@ -135,7 +136,8 @@ def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, s
     body, scene, size, fault_rate, fault_seed, servo_port, servo_baud, tracker_bus,
     camera, seed, arm, servo_latency_ms, tracker_remap, reference (the fake scenes hold the
     grey reference card), and for fake and emulated bodies the deliberate faults in
-    `FAKE_WORLD`. With `state_dir`, the arm calibration stored there is applied."""
+    `FAKE_WORLD` and `camera = "replay:DIR_OR_GLOB"` with `replay_loop` (`hal.replay`).
+    With `state_dir`, the arm calibration stored there is applied."""
     options = _options(config)
     body = choose_body(options, os.environ if env is None else env)
     size = tuple(int(v) for v in options.get("size", (120, 160)))
@@ -154,14 +156,40 @@ def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, s
     if body is Body.REAL and any(options.get(k) is not None for k in FAKE_WORLD):
         raise HalConfigError(f"{', '.join(k for k in FAKE_WORLD if options.get(k) is not None)}: "
                              "only fake and emulated bodies take deliberate faults")
+    if body is Body.REAL and str(options.get("camera") or "").startswith(REPLAY):
+        raise HalConfigError("hal.camera replay: plays files under the fake and emulated bodies only "
+                             "(a real arm would file recorded frames under its live poses)")
+    replay = _replay(options, size)
     if body is not Body.REAL:
         if options.get("scene", "black") not in SCENES:
             raise HalConfigError(f"unknown scene {options['scene']!r}; choose from {', '.join(SCENES)}")
     builder = {Body.FAKE: _fake, Body.EMULATED: _emulated, Body.REAL: _real}[body]
     try:
-        return builder(options, calibration, size, world)
+        return builder(options, calibration, size, world, replay)
     except (TypeError, ValueError) as exc:  # a device constructor refused an option
         raise HalConfigError(f"{body.value} HAL: {exc}") from None
+
+
+def _replay(options: Mapping[str, Any], size: tuple[int, int]) -> Camera | None:
+    """The camera `camera = "replay:DIR_OR_GLOB"` asks for, its files checked; None for another camera."""
+    text = str(options.get("camera") or "")
+    if not text.startswith(REPLAY):
+        return None
+    from hal.replay import ReplayCamera, replay_files  # OpenCV reads the files: loaded only for them
+
+    loop = options.get("replay_loop", False)
+    if not isinstance(loop, bool):
+        raise HalConfigError(f"hal.replay_loop must be true or false, got {loop!r}")
+    try:
+        camera = ReplayCamera(replay_files(text[len(REPLAY):].strip()), loop=loop)
+    except (HalError, ValueError) as exc:
+        raise HalConfigError(f"hal.camera {text!r}: {exc}") from None
+    if camera.size != size:
+        h, w = camera.size
+        raise HalConfigError(f"hal.camera {text!r}: the files are {w}x{h} (first: {camera.files[0].name}), "
+                             f"hal.size is {list(size)}; set hal.size = [{h}, {w}] (frames are played at "
+                             "their own size)")
+    return camera
 
 
 def _faults(options: Mapping[str, Any], kinds: frozenset[str] = frozenset()) -> Faults:
@@ -171,7 +199,8 @@ def _faults(options: Mapping[str, Any], kinds: frozenset[str] = frozenset()) -> 
         raise HalConfigError(f"hal fault_rate: {exc}") from None
 
 
-def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int], world: ArmCalibration) -> Hal:
+def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int], world: ArmCalibration,
+          replay: Camera | None) -> Hal:
     seed = int(options.get("seed", 0))
     start = cal.tilt.servo_deg(0.0)  # parked looking straight down
     bus = FakeServoBus(tuple(cal.servo_ids), faults=_faults(options), start_deg={cal.tilt.servo_id: start,
@@ -187,6 +216,8 @@ def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
         raise HalConfigError(f"fake_tracker_bias_deg must be degrees, got {options['fake_tracker_bias_deg']!r}") from None
     tracker = FakeTracker(true_view, faults=_faults(options), seed=seed, bias_deg=bias,
                           mount=_tracker_mount(options), remap=tracker_remap(options))
+    if replay is not None:  # frames from files: no scene, so no ground truth
+        return Hal(Body.FAKE, bus, arm, tracker, replay, size)
     camera = FakeCamera(str(options.get("scene", "black")), true_view, seed=seed, size=size,
                         faults=_faults(options), reference=bool(options.get("reference", False)),
                         honours_lock=bool(options.get("camera_honours_lock", True)))
@@ -194,9 +225,8 @@ def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
 
 
 def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int],
-              world: ArmCalibration) -> Hal:
-    from hal.dynamixel import DynamixelServoBus  # dynamixel-sdk and OpenCV: only for the bodies that use them
-    from hal.emulators.camera import SequenceCamera, V4L2Controls
+              world: ArmCalibration, replay: Camera | None) -> Hal:
+    from hal.dynamixel import DynamixelServoBus  # dynamixel-sdk: only for the bodies that use it
 
     mount = _tracker_mount(options)
     emulator = DxlEmulator(tuple(cal.servo_ids), faults=_faults(options, frozenset({"drop", "corrupt"})))
@@ -215,17 +245,24 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
         tracker = BNO055Tracker(EmulatedSMBus(orientation_source=orientation, seed=int(options.get("fault_seed", 0)),
                                               nack_rate=float(options.get("fault_rate", 0.0)), mount=mount),
                                 remap=tracker_remap(options))
-        frames = Path(tempfile.mkdtemp(prefix="btf-frames-"))
-        cleanup.append(lambda: shutil.rmtree(frames, ignore_errors=True))
-        _write_sequence(frames, str(options.get("scene", "black")), size, int(options.get("seed", 0)),
-                        bool(options.get("reference", False)))
-        camera = SequenceCamera(str(frames),
-                                controls=V4L2Controls(honours_lock=bool(options.get("camera_honours_lock", True))))
+        camera = replay or _sequence_camera(options, size, cleanup)
     except BaseException:
         for closer in reversed(cleanup):
             closer()
         raise
     return Hal(Body.EMULATED, bus, arm, tracker, camera, size, tuple(cleanup))
+
+
+def _sequence_camera(options: Mapping[str, Any], size: tuple[int, int], cleanup: list[Callable[[], None]]) -> Camera:
+    """OpenCV replaying the scene's renders through emulated V4L2 controls; its folder goes at close."""
+    from hal.emulators.camera import SequenceCamera, V4L2Controls  # OpenCV: only for the emulated body
+
+    frames = Path(tempfile.mkdtemp(prefix="btf-frames-"))
+    cleanup.append(lambda: shutil.rmtree(frames, ignore_errors=True))
+    _write_sequence(frames, str(options.get("scene", "black")), size, int(options.get("seed", 0)),
+                    bool(options.get("reference", False)))
+    honours_lock = bool(options.get("camera_honours_lock", True))
+    return SequenceCamera(str(frames), controls=V4L2Controls(honours_lock=honours_lock))
 
 
 def _write_sequence(directory: Path, scene: str, size: tuple[int, int], seed: int, reference: bool) -> None:
@@ -236,7 +273,8 @@ def _write_sequence(directory: Path, scene: str, size: tuple[int, int], seed: in
                                for view in SEQUENCE_VIEWS))
 
 
-def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int], world: ArmCalibration) -> Hal:
+def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int], world: ArmCalibration,
+          replay: Camera | None = None) -> Hal:  # `replay` is None: build_hal refuses files on the real body
     from hal.dynamixel import DynamixelServoBus  # dynamixel-sdk: only for the bodies that use it
 
     port = str(options.get("servo_port", ""))

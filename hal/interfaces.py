@@ -25,6 +25,16 @@ class LimitError(HalError):
     """A requested move lies outside a joint's limits; nothing was moved."""
 
 
+class DeviceGone(HalError):
+    """The device is not there (unplugged, its port vanished, powered off): every call fails
+    until it returns. No retry can help now; the robot pauses and asks again until it answers."""
+
+
+class DeviceSpent(HalError):
+    """A device with nothing more to give (a replay that played its last file): trying again,
+    now or later, cannot help."""
+
+
 @dataclass(frozen=True, slots=True)
 class ViewAngles:
     """Where the camera looks from, over the sample: elevation 90° is straight down."""
@@ -126,7 +136,8 @@ class CameraSettings:
     """What the camera reports it captures with, read back from the device (None: not reported).
 
     `lock_held` is False when a manual control asked for was not granted, or the device
-    still reports the automatic mode for it; `problems` says which, one line each.
+    still reports the automatic mode for it; `problems` says which, one line each. `source`
+    names the file the last frame was read from, for a camera that plays files.
     """
 
     exposure_us: float | None
@@ -139,6 +150,7 @@ class CameraSettings:
     auto_white_balance: bool = False
     lock_held: bool = True
     problems: tuple[str, ...] = field(default=())
+    source: str | None = None
 
     @property
     def locked(self) -> bool:

@@ -1,8 +1,9 @@
 """The robot's TOML configuration, read once at start into frozen dataclasses.
 
-Every problem (missing file, bad TOML, unknown key, wrong type, missing key file)
-raises `ConfigError` with one line naming the key and the file; the runtime stops
-with exit status 2. Relative paths are resolved against the config file's directory.
+Every problem (missing file, bad TOML, unknown key, wrong type, a number outside what the
+robot can use (`BOUNDS`), missing key file) raises `ConfigError` with one line naming the key
+and the file; the runtime stops with exit status 2 before it creates anything. Relative paths
+are resolved against the config file's directory.
 """
 from __future__ import annotations
 
@@ -17,8 +18,10 @@ from typing import Any, Mapping
 
 from btf.capture_settings import LINEAR_SPACES, MAX_BRACKETS
 from hal.controls import AUTO, FALLBACK_LOCK, hold, parse_controls
+from hal.bno055 import AxisRemap
 from hal.interfaces import CameraControls, CameraSettings
 from onboard.sweep.plan import SweepPlan
+from radio.packets.base import INT64, MAX_FRAME_PIXELS, MAX_FRAME_SIDE, UINT32
 
 # A camera control: a number, "auto" (the camera's automatic) or "hold" (locked at what the
 # camera stands at when the robot starts). TOML gives it as a number or a string.
@@ -39,10 +42,14 @@ class HalConfig:
     servo_port: str = ""
     servo_baud: int = 1_000_000
     tracker_bus: int = 1
-    camera: str = ""  # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0
+    # real camera: device index or path, or "picamera2"; unset: picamera2 if installed, else 0.
+    # Fake and emulated bodies: "replay:DIR_OR_GLOB" plays PNG/JPEG files as the frames (hal.replay),
+    # at their own size (hal.size must match them); a relative path is against the config file
+    camera: str = ""
     seed: int = 0
     tracker_remap: str = ""  # BNO055 axis remap, P0..P7 or "0x24/0x03"; `btf-robot calibrate tracker` names it
     reference: bool = False  # fake and emulated scenes: lay the grey reference card (label 7) in the plate
+    replay_loop: bool = False  # replay camera: start over after the last file; false: the poses after it are skipped
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,6 +80,7 @@ class SweepConfig:
     settle_timeout_s: float = 10.0
     retries: int = 2  # extra attempts per device step before the pose is skipped
     pose_tolerance_deg: float = 1.0  # measured pose already in this sweep: not measured again
+    retry_skipped: int = 2  # after the plan: more tries of each pose a device fault skipped
 
 
 @dataclass(frozen=True, slots=True)
@@ -156,15 +164,8 @@ class Config:
     source: Path | None = None
 
 
-_SECTIONS: dict[str, type] = {
-    "hal": HalConfig,
-    "link": LinkConfig,
-    "sweep": SweepConfig,
-    "features": FeatureConfig,
-    "segment": SegmentConfig,
-    "skip": SkipConfig,
-    "camera": CameraConfig,
-}
+_SECTIONS: dict[str, type] = {"hal": HalConfig, "link": LinkConfig, "sweep": SweepConfig, "features": FeatureConfig,
+                               "segment": SegmentConfig, "skip": SkipConfig, "camera": CameraConfig}
 
 
 def _kind(annotation: Any) -> Any:
@@ -186,13 +187,39 @@ def field_types(cls: type) -> dict[str, Any]:
 
 _TYPES: dict[type, dict[str, Any]] = {cls: field_types(cls) for cls in _SECTIONS.values()}
 _TOP = {k: v for k, v in field_types(Config).items() if k not in _SECTIONS and k != "source"}
-CHOICES = {
-    "hal.body": ("", "fake", "emulated", "real"),
-    "hal.scene": ("black", "white", "mixed", "field"),
-    "features.space": ("rgb", "hsv", "gray", "pca", "raw"),
-    "segment.method": ("isodata", "mask", "scene"),
-    "link.clock": ("rtc", "none"),
+
+
+def keys() -> dict[str, Any]:
+    """Every key a config file may hold, dotted ("robot_id", "hal.size"), with how it is read: a
+    type, or (item type, length or None) for a list."""
+    return {**_TOP, **{f"{name}.{k}": kind for name, cls in _SECTIONS.items() for k, kind in _TYPES[cls].items()}}
+
+
+CHOICES = {"hal.body": ("", "fake", "emulated", "real"), "hal.scene": ("black", "white", "mixed", "field"),
+           "features.space": ("rgb", "hsv", "gray", "pca", "raw"), "segment.method": ("isodata", "mask", "scene"),
+           "link.clock": ("rtc", "none")}
+# The numbers a key may hold, both ends included (each item of a list key): what the robot, its
+# packets and its devices can use. A value outside is refused as the file is read.
+DAY = 86400.0
+BOUNDS: dict[str, tuple[float, float]] = {
+    "robot_id": (0, 0xFFFF), "outbox_quota_bytes": (4096, INT64), "disk_min_free_bytes": (0, INT64),
+    "disk_reserve_bytes": (0, INT64),
+    "hal.size": (8, MAX_FRAME_SIDE), "hal.fault_rate": (0.0, 1.0), "hal.fault_seed": (0, UINT32),
+    "hal.seed": (0, UINT32), "hal.servo_baud": (1, UINT32), "hal.tracker_bus": (0, 0xFFFF),
+    "link.baud": (1, UINT32), "link.node_id": (0, 255), "link.peer_id": (0, 255), "link.link_id": (0, 255),
+    "link.mtu": (40, 4096), "link.heartbeat_s": (0.01, DAY), "link.failsafe_s": (0.02, DAY),
+    "link.window": (1, 1024),
+    "sweep.start": (0.0, 90.0), "sweep.stop": (0.0, 90.0), "sweep.step": (0.01, 180.0),
+    "sweep.azimuths": (-3600.0, 3600.0), "sweep.settle_timeout_s": (0.001, DAY), "sweep.retries": (0, 100),
+    "sweep.pose_tolerance_deg": (0.0, 90.0), "sweep.retry_skipped": (0, 10),
+    "features.bins_16bit": (2, 65536),
+    "segment.n_labels": (1, 256), "segment.k": (1, 128), "segment.min_samples": (1, MAX_FRAME_PIXELS),
+    "segment.split_std": (1e-6, 1e9), "segment.merge_distance": (0.0, 1e9), "segment.max_merges": (0, 256),
+    "segment.iterations": (1, 1000), "segment.subsample": (1, MAX_FRAME_PIXELS), "segment.refit_drift": (0.0, 1e9),
+    "skip.min_pixels": (1, MAX_FRAME_PIXELS), "skip.unchanged_tolerance": (0.0, 65535.0),
+    "camera.reference_label": (-1, 255), "camera.bracket_max": (1, MAX_BRACKETS),
 }
+MAX_FILE = 1 << 20  # a robot's config is a few kilobytes; a file past this is not one
 
 
 def _convert(name: str, value: Any, kind: Any, base: Path) -> Any:
@@ -205,28 +232,47 @@ def _convert(name: str, value: Any, kind: Any, base: Path) -> Any:
         return tuple(_convert(f"{name}[{i}]", v, item, base) for i, v in enumerate(value))
     if kind is bool:
         if not isinstance(value, bool):
-            raise ConfigError(f"{name} must be true or false, got {value!r}")
+            raise ConfigError(f"{name} must be true or false, got {_shown(value)}")
         return value
     if kind is int:
         if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{name} must be an integer, got {value!r}")
-        return value
+            raise ConfigError(f"{name} must be an integer, got {_shown(value)}")
+        return _within(name, value)
     if kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{name} must be a number, got {value!r}")
+            raise ConfigError(f"{name} must be a number, got {_shown(value)}")
         if not math.isfinite(value):
             raise ConfigError(f"{name} must be finite, got {value!r}")
-        return float(value)
+        return _within(name, float(value))
     if kind is CameraValue and isinstance(value, (int, float)) and not isinstance(value, bool):
         if not math.isfinite(value):
             raise ConfigError(f"{name} must be finite, got {value!r}")
         return CameraValue(str(value))
     if not isinstance(value, str):
-        raise ConfigError(f"{name} must be a string, got {value!r}")
+        raise ConfigError(f"{name} must be a string, got {_shown(value)}")
     if kind is Path:
+        if "\0" in value:
+            raise ConfigError(f"{name} must be a path, without NUL characters")
         path = Path(value).expanduser()
         return path if path.is_absolute() else base / path
     return value
+
+
+def _within(name: str, value: float) -> Any:
+    """`value`, when it lies in the key's BOUNDS (a list's items by the list's key)."""
+    lo, hi = BOUNDS.get(name.partition("[")[0], (-math.inf, math.inf))
+    if not lo <= value <= hi:
+        raise ConfigError(f"{name} must lie in {lo:g}..{hi:g}, got {value:g}" if isinstance(value, float) else
+                          f"{name} must lie in {lo}..{hi}, got {value}")
+    return value
+
+
+def _shown(value: Any, key: bool = False) -> str:
+    """A value (`key`: a key, unquoted) as one short printable line; a table or a list by its size."""
+    if isinstance(value, (dict, list)):
+        return f"a table of {len(value)} keys" if isinstance(value, dict) else f"a list of {len(value)} items"
+    text = value if key and value.isprintable() else repr(value)
+    return text if len(text) <= 60 else f"{text[:57]}..."
 
 
 def _section(cls: type, table: Any, prefix: str, base: Path) -> Any:
@@ -237,7 +283,7 @@ def _section(cls: type, table: Any, prefix: str, base: Path) -> Any:
     for key, raw in table.items():
         name = f"{prefix}.{key}"
         if key not in types:
-            raise ConfigError(f"unknown key {name} (known: {', '.join(types)})")
+            raise ConfigError(f"unknown key {_shown(name, True)} (known: {', '.join(types)})")
         value = _convert(name, raw, types[key], base)
         if name in CHOICES and value not in CHOICES[name]:
             raise ConfigError(f"{name} must be one of {', '.join(CHOICES[name])}, got {value!r}")
@@ -252,6 +298,14 @@ def _section(cls: type, table: Any, prefix: str, base: Path) -> Any:
     return obj
 
 
+def _replay_against(hal: HalConfig, base: Path) -> HalConfig:
+    """A replay camera's relative folder or glob, resolved against the config file's directory."""
+    kind, colon, where = hal.camera.partition(":")
+    if kind != "replay" or not colon or not where.strip() or Path(where.strip()).expanduser().is_absolute():
+        return hal
+    return replace(hal, camera=f"replay:{os.path.normpath(base / where.strip())}")
+
+
 def from_mapping(data: Mapping[str, Any], base: Path = Path(".")) -> Config:
     """Build and check a `Config` from parsed TOML; raises ConfigError on any problem."""
     top: dict[str, Any] = {}
@@ -262,10 +316,11 @@ def from_mapping(data: Mapping[str, Any], base: Path = Path(".")) -> Config:
             top[key] = _convert(key, raw, _TOP[key], base)
         else:
             known = ", ".join([*_TOP, *(f"[{s}]" for s in _SECTIONS)])
-            raise ConfigError(f"unknown key {key} (known: {known})")
+            raise ConfigError(f"unknown key {_shown(key, True)} (known: {known})")
     for key, cls in _SECTIONS.items():
         if key not in top:  # absent sections still resolve their default paths against base
             top[key] = _section(cls, {}, key, base)
+    top["hal"] = _replay_against(top["hal"], base)
     top.setdefault("state_dir", base / "state")
     cfg = Config(**top)
     check(cfg)
@@ -273,52 +328,43 @@ def from_mapping(data: Mapping[str, Any], base: Path = Path(".")) -> Config:
 
 
 def check(cfg: Config) -> None:
+    """Every key within its BOUNDS and the keys that depend on each other agreeing; ConfigError
+    naming the first that does not (a config built in code passes here what a file passes)."""
+    for dotted in BOUNDS:
+        section, _, key = dotted.rpartition(".")
+        value = getattr(getattr(cfg, section) if section else cfg, key)
+        for i, v in enumerate(value) if isinstance(value, tuple) else ((None, value),):
+            _within(dotted if i is None else f"{dotted}[{i}]", v)
     s = cfg.sweep
-    if s.step <= 0:
-        raise ConfigError(f"sweep.step must be positive, got {s.step}")
-    for name, value in (("sweep.start", s.start), ("sweep.stop", s.stop)):
-        if not 0.0 <= value <= 90.0:
-            raise ConfigError(f"{name} must lie in [0, 90] degrees, got {value}")
     if not s.azimuths:
         raise ConfigError("sweep.azimuths must name at least one azimuth")
-    if s.retries < 0 or s.settle_timeout_s <= 0 or s.pose_tolerance_deg < 0:
-        raise ConfigError("sweep.retries, sweep.settle_timeout_s and sweep.pose_tolerance_deg must be >= 0")
     try:
         SweepPlan(s.start, s.stop, s.step, s.azimuths)
     except ValueError as exc:
         raise ConfigError(f"[sweep]: {exc}") from None
-    h = cfg.hal
-    if min(h.size) < 8:
-        raise ConfigError(f"hal.size must be at least 8x8, got {h.size}")
-    if not 0.0 <= h.fault_rate <= 1.0:
-        raise ConfigError(f"hal.fault_rate must lie in [0, 1], got {h.fault_rate}")
     ln = cfg.link
-    if ln.heartbeat_s <= 0 or ln.failsafe_s <= ln.heartbeat_s:
-        raise ConfigError("link.failsafe_s must exceed link.heartbeat_s, both positive")
-    if ln.window < 1 or ln.mtu < 32:
-        raise ConfigError("link.window must be >= 1 and link.mtu >= 32")
-    sk = cfg.skip
-    if sk.min_pixels < 1 or not 0.0 <= sk.percentile_precision < 0.5 or sk.unchanged_tolerance < 0:
-        raise ConfigError("skip.min_pixels >= 1, skip.percentile_precision in [0, 0.5), "
-                          "skip.unchanged_tolerance >= 0")
+    if ln.failsafe_s <= ln.heartbeat_s:
+        raise ConfigError(f"link.failsafe_s ({ln.failsafe_s:g}) must exceed link.heartbeat_s ({ln.heartbeat_s:g})")
+    if ln.node_id == ln.peer_id:
+        raise ConfigError(f"link.node_id and link.peer_id must differ, both are {ln.node_id}")
+    if not 0.0 <= cfg.skip.percentile_precision < 0.5:
+        raise ConfigError(f"skip.percentile_precision must lie in [0, 0.5), got {cfg.skip.percentile_precision:g}")
+    if cfg.hal.tracker_remap:
+        try:
+            AxisRemap.parse(cfg.hal.tracker_remap)
+        except ValueError as exc:
+            raise ConfigError(f"hal.tracker_remap: {exc}") from None
     sg = cfg.segment
-    if not 1 <= sg.n_labels <= 256:
-        raise ConfigError(f"segment.n_labels must lie in [1, 256], got {sg.n_labels}")
     if sg.method == "mask":
         if sg.mask is None:
             raise ConfigError("segment.method = 'mask' needs segment.mask (a PNG or .npy label file)")
         if not sg.mask.is_file():
             raise ConfigError(f"segment.mask: no such file {sg.mask}")
-    if not 2 <= cfg.features.bins_16bit <= 65536:
-        raise ConfigError(f"features.bins_16bit must lie in [2, 65536], got {cfg.features.bins_16bit}")
-    if sg.refit_drift < 0:
-        raise ConfigError(f"segment.refit_drift must be >= 0, got {sg.refit_drift}")
     if sg.method == "scene" and (cfg.hal.body or os.environ.get("BTF_HAL", "")) != "fake":
         raise ConfigError("segment.method = 'scene' needs hal.body = 'fake' (ground truth)")
-    if cfg.outbox_quota_bytes < 4096:
-        raise ConfigError("outbox_quota_bytes must be at least 4096")
-    if cfg.disk_min_free_bytes < 0 or cfg.disk_reserve_bytes < 0:
-        raise ConfigError("disk_min_free_bytes and disk_reserve_bytes must not be negative")
+    if sg.method == "scene" and cfg.hal.camera.startswith("replay:"):
+        raise ConfigError("segment.method = 'scene' needs the fake scene camera; a replay camera has no "
+                          "ground truth (use isodata or mask)")
     check_camera(cfg)
 
 
@@ -330,9 +376,8 @@ def check_camera(cfg: Config) -> None:
         raise ConfigError(f"[camera]: {exc}") from None
     if not 0.0 <= c.bracket_limit < 1.0:
         raise ConfigError(f"camera.bracket_limit must lie in [0, 1), got {c.bracket_limit}")
-    if not 1 <= c.bracket_max <= MAX_BRACKETS or not 0.0 < c.bracket_min_ratio < 1.0:
-        raise ConfigError(f"camera.bracket_max must lie in [1, {MAX_BRACKETS}] and camera.bracket_min_ratio "
-                          "in (0, 1)")
+    if not 0.0 < c.bracket_min_ratio < 1.0:
+        raise ConfigError(f"camera.bracket_min_ratio must lie in (0, 1), got {c.bracket_min_ratio:g}")
     if c.bracket_limit and cfg.features.space not in LINEAR_SPACES:
         raise ConfigError(f"camera.bracket_limit needs features.space {' or '.join(LINEAR_SPACES)} (levels that "
                           f"scale with exposure), got {cfg.features.space}")
@@ -341,7 +386,7 @@ def check_camera(cfg: Config) -> None:
     if c.reference_label >= 0 and cfg.segment.method == "isodata":
         raise ConfigError("camera.reference_label needs segment.method = 'mask' or 'scene' (a label that means "
                           "the card; ISODATA's classes do not)")
-    if not -1 <= c.reference_label < cfg.segment.n_labels:
+    if c.reference_label >= cfg.segment.n_labels:
         raise ConfigError(f"camera.reference_label must be -1 (none) or a label below segment.n_labels, "
                           f"got {c.reference_label}")
 
@@ -352,7 +397,7 @@ def with_value(cfg: Config, dotted: str, value: Any) -> Config:
     section, _, key = dotted.partition(".")
     cls = _SECTIONS.get(section)
     if cls is None or key not in _TYPES[cls]:
-        raise ConfigError(f"unknown key {dotted}")
+        raise ConfigError(f"unknown key {_shown(dotted, True)}")
     new = _convert(dotted, value, _TYPES[cls][key], cfg.state_dir)
     if dotted in CHOICES and new not in CHOICES[dotted]:
         raise ConfigError(f"{dotted} must be one of {', '.join(CHOICES[dotted])}, got {new!r}")
@@ -371,7 +416,11 @@ def load(path: str | Path) -> Config:
     """Read and check the config file; every problem is one ConfigError line."""
     p = Path(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        with p.open("rb") as f:
+            raw = f.read(MAX_FILE + 1)
+        if len(raw) > MAX_FILE:
+            raise ConfigError(f"config file {p} is longer than {MAX_FILE} bytes: not a robot config")
+        text = raw.decode("utf-8")
     except FileNotFoundError:
         raise ConfigError(f"config file not found: {p}") from None
     except (OSError, UnicodeDecodeError) as exc:
@@ -379,7 +428,9 @@ def load(path: str | Path) -> Config:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{p}: bad TOML: {exc}") from None
+        raise ConfigError(f"{p}: bad TOML: {' '.join(str(exc).split())}") from None
+    except RecursionError:  # tomllib parses nested arrays and tables by recursion
+        raise ConfigError(f"{p}: bad TOML: arrays or tables nested too deeply") from None
     try:
         return replace(from_mapping(data, p.resolve().parent), source=p)
     except ConfigError as exc:

@@ -17,7 +17,7 @@ from typing import Any, Callable
 
 from hal.arm import Arm
 from hal.controls import describe
-from hal.interfaces import ServoBus, ViewAngles
+from hal.interfaces import DeviceGone, ServoBus, ViewAngles
 from onboard import config as config_mod
 from onboard.capture.filing import Captures
 from onboard.capture.pipeline import Pipeline, PoseSkipped
@@ -27,7 +27,7 @@ from onboard.failsafe import Failsafe
 from onboard.link import bodies as wire
 from onboard.link.outbox import Outbox, OutboxFull, Reply
 from onboard.link.service import LinkService
-from onboard.link.status import Status, flat
+from onboard.link.status import Status
 from onboard.state import Interrupted, RuntimeState
 from onboard.sweep.control import SweepControl
 from onboard.sweep.plan import SweepPlan
@@ -64,7 +64,7 @@ class Effect:
     undo: Callable[[], None] = lambda: None
 
 
-Result = dict | Refusal
+Result = dict | pk.StatusReport | Refusal
 
 
 # What the operator can do about each refusal, said in the NACK itself.
@@ -79,8 +79,8 @@ TORQUE_IS_OFF = "torque is off (torque-off released the servos): send torque-on,
 
 def refusal(exc: Exception) -> Refusal:
     """The NACK for a handler that raised, with what the operator can do about it."""
-    if isinstance(exc, PoseSkipped):
-        reason, text = pk.Reason.HARDWARE, exc.reason
+    if isinstance(exc, (PoseSkipped, DeviceGone)):
+        reason, text = pk.Reason.HARDWARE, exc.reason if isinstance(exc, PoseSkipped) else str(exc)
     elif isinstance(exc, Interrupted):
         return Refusal(pk.Reason.BUSY, f"interrupted by {exc}")
     elif isinstance(exc, OutboxFull):
@@ -197,7 +197,7 @@ class Dispatcher:
         return {"time": self.wall()}
 
     def status(self, args: dict, effect: Effect) -> Result:
-        return flat(self.status_report.report())
+        return self.status_report.report()
 
     def goto(self, args: dict, effect: Effect) -> Result:
         view = ViewAngles(float(args["elevation"]), float(args.get("azimuth", 0.0)))

@@ -7,19 +7,20 @@ from __future__ import annotations
 from typing import Callable
 
 from hal.arm import Arm
-from onboard.link.bodies import iso_time
 from onboard.state import Mode, RuntimeState
+from radio import packets as pk
+from radio.packets.schema import Recent
 
 EVENTS_KEPT = 8
 
 
 class Failsafe:
     def __init__(self, state: RuntimeState, arm: Arm, wall: Callable[[], float],
-                 send_status: Callable[[str, dict], None]) -> None:
+                 send_status: Callable[[str, pk.StatusReport], None]) -> None:
         self.state, self.arm, self.wall, self.send_status = state, arm, wall, send_status
         self.link_up = False
         self.ever_up = False
-        self.events: list[dict] = []  # {"since", "until"} wall times, the last EVENTS_KEPT
+        self.events: Recent = Recent(EVENTS_KEPT)  # {"since", "until"} wall times
         self._resume_mode = Mode.IDLE
 
     @property
@@ -38,9 +39,8 @@ class Failsafe:
                 event = self.events[-1]
                 event["until"] = self.wall()
                 self.state.mode = self._resume_mode
-                self.send_status("failsafe: link lost, arm held", {
-                    "failsafe_since": iso_time(event["since"]), "failsafe_until": iso_time(event["until"]),
-                    "failsafe_s": round(event["until"] - event["since"], 1)})
+                self.send_status("failsafe: link lost, arm held", pk.StatusReport(
+                    failsafe=pk.Kept((pk.FailsafeEvent(event["since"], event["until"]),))))
         elif self.ever_up and not self.active:
             self._trip()
 
@@ -49,7 +49,6 @@ class Failsafe:
         self.state.mode = Mode.FAILSAFE
         self.state.interrupt_work("failsafe")
         self.events.append({"since": self.wall(), "until": None})
-        del self.events[:-EVENTS_KEPT]
         try:
             self.arm.stop_and_hold()
         except Exception as exc:  # the arm must not end the loop; say why in STATUS

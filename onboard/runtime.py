@@ -17,6 +17,7 @@ from typing import Callable
 
 from hal.controls import describe
 from hal.devices import Hal
+from hal.interfaces import DeviceGone
 from onboard.capture.filing import PCA_KEY, Captures, read_pca
 from onboard.capture.pipeline import Pipeline, PoseSkipped
 from onboard.capture.segmentation import Segmentation
@@ -26,12 +27,13 @@ from onboard.dispatch import Dispatcher
 from onboard.failsafe import Failsafe
 from onboard.link.outbox import NO_ROOM, Outbox, OutboxError, free_bytes, open_outbox
 from onboard.link.service import LinkService
-from onboard.link.status import Status
+from onboard.link.status import Status, sweep_report
 from onboard.link.transport import Transport
 from onboard.state import Mode, RuntimeState
 from onboard.sweep.control import SweepControl
 from onboard.sweep.plan import SweepProgress
 from onboard.watchdog import Notifier
+from radio import packets as pk
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale
 
 __all__ = ["Mode", "Runtime", "open_state"]
@@ -91,12 +93,13 @@ class Runtime:
         self.pipeline.pca = read_pca(self.outbox.state(PCA_KEY), cfg.state_dir / "pca.json")
         self.link = LinkService(transport, self.outbox, self.state, on_ack=self._room_freed)
         self.captures = Captures(self.state, self.outbox, wall)
-        self.failsafe = Failsafe(self.state, hal.arm, wall, lambda text, extras: self.status.send(text, extras))
+        self.failsafe = Failsafe(self.state, hal.arm, wall, lambda text, report: self.status.send(text, report))
         self.status = Status(self.state, self.outbox, self.captures, self.pipeline, self.failsafe, self.link,
                              self.notifier, wall)
         # Captures stop short of the quota, so replies and STATUS still fit when they do.
         self.sweep = SweepControl(self.state, self.outbox, self.pipeline, self.captures, self.status,
-                                  self.notifier, reserve=self.outbox.quota_bytes // 8, new_sweep=new_sweep)
+                                  self.notifier, reserve=self.outbox.quota_bytes // 8, new_sweep=new_sweep,
+                                  clock=clock)
         self.dispatch = Dispatcher(self.state, self.outbox, self.link, self.failsafe, self.status, self.pipeline,
                                    self.captures, self.sweep, hal.arm, hal.servo_bus, segmenter, wall)
 
@@ -146,7 +149,7 @@ class Runtime:
             text = (f"disk {pressure.value}: {s.disk_free} bytes free under {self.cfg.state_dir}; "
                     f"acquisition paused until {need} are free")
         self.note(text)
-        self.status.send(text, {"disk": s.disk, "disk_free": s.disk_free})
+        self.status.send(text)  # every STATUS says the disk
 
     def service(self) -> None:
         """Read link events, answer commands, feed the link from the outbox."""
@@ -183,18 +186,18 @@ class Runtime:
         try:
             self.pipeline.retry("torque on", self.hal.arm.enable)
             self.state.torque = True
-        except PoseSkipped as exc:
+        except (PoseSkipped, DeviceGone) as exc:
             self.state.torque = False  # GOTO and SWEEP say to send torque-on
-            self.state.errors.append(exc.reason)
+            self.state.errors.append(exc.reason if isinstance(exc, PoseSkipped) else str(exc))
         self.watch_disk()
         camera = self.lock_camera()
-        extras = {"mode": self.mode.value, "camera": camera}
+        swept = None
         if self.cfg.sweep.autostart or self.sweep.new_sweep:
             boot = self.sweep.autostart()
-            extras.update(mode=self.mode.value, sweep=self.progress.sweep_id, sweep_state=boot.value)
+            swept = sweep_report(self.progress, boot=boot.value)
         self.notifier.ready(f"btf-robot running: {self.mode.value}")
-        self.status.send("boot", extras)
-        sweep = "" if "sweep" not in extras else f", sweep {extras['sweep']} {extras['sweep_state']}"
+        self.status.send("boot", pk.StatusReport(camera=camera, sweep=swept))
+        sweep = "" if swept is None else f", sweep {swept.id} {swept.boot}"
         log.info("boot: robot %d on the %s HAL, mode %s%s%s", self.cfg.robot_id, self.hal.body.value,
                  self.mode.value, sweep, "" if self.state.torque else "; torque is off (power-on failed)")
 

@@ -11,6 +11,7 @@ from typing import Iterator
 from hal.interfaces import ViewAngles
 from onboard.config import Config
 from onboard.sweep.plan import SweepProgress
+from radio.packets.schema import Recent
 
 
 class Mode(enum.StrEnum):
@@ -30,9 +31,10 @@ class RuntimeState:
     progress: SweepProgress | None = None
     pose: ViewAngles | None = None  # the last measured view
     paused_reason: str = ""  # why acquisition waits (the outbox is full), "" when it does not
+    device_gone: str = ""  # a device not there (unplugged): the sweep waits for it, "" when all answer
     disk: str = "ok"  # room under state_dir: ok | low | full (onboard.disk.Pressure)
     disk_free: int | None = None  # bytes free there, when known
-    errors: deque[str] = field(default_factory=lambda: deque(maxlen=16))
+    errors: deque[str] = field(default_factory=lambda: Recent(16))  # counts the older ones let go
     torque: bool = True  # the servos hold; False after TORQUE_OFF or a power-on that failed at boot
     # Commands are answered while the arm works (the pipeline services the link), so an
     # interrupting command or the failsafe must end that work, not be undone by it.

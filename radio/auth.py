@@ -117,8 +117,8 @@ class FileCounterStore:
                        f"the wall clock reads {time.strftime('%Y-%m-%d', time.gmtime(now))}, never set")
                 raise CounterFileLost(
                     f"counters file {self.path} {problem} and {why}: a counter of this key may be "
-                    "used again; rotate the key (`btf-host keygen --out KEY --force` on the host, copy "
-                    "KEY here) and start once with `btf-robot run --new-key`")
+                    "used again; rotate the key ('btf-host keygen --out KEY --force' on the host, copy "
+                    "KEY here) and start once with 'btf-robot run --new-key'")
             self._lost_floor = max(0, clock_counter(now - SKEW_S))
             self.note = (f"counters file {self.path} {problem} (a first start, or a lost file): counters "
                          f"start from the wall clock, frames older than {SKEW_S:.0f} s are refused")
@@ -246,5 +246,5 @@ class StaleRun:
         return PeerStale(self.peer, self.run, (
             f"every frame from node {self.peer} is refused as stale ({self.run} in a row): its "
             "counters are behind what this end accepted before (it lost its counters file, or its "
-            "clock is behind); set its clock, or rotate the key (`btf-host keygen --force`, copy it "
-            "to the robot, start it once with `btf-robot run --new-key`)"))
+            "clock is behind); set its clock, or rotate the key ('btf-host keygen --force', copy it "
+            "to the robot, start it once with 'btf-robot run --new-key')"))

@@ -7,7 +7,7 @@ concurrent messages and on buffered bytes.
 """
 from __future__ import annotations
 
-from collections import OrderedDict, deque
+from collections import Counter, OrderedDict, deque
 from dataclasses import dataclass, field
 
 from radio.frame import Reason, reject
@@ -18,6 +18,13 @@ LAST = 0x02
 AUTO = 0x04  # message id from the sender's automatic namespace
 AUTO_BASE = 1 << 56  # public ids at or above this are automatic ones
 MAX_FRAGMENTS = 4096
+# The link's largest message, and so the largest packet body (radio.packets.MAX_BODY is this):
+# a sender refuses a longer one (`MessageTooLarge`), a receiver drops it and reads on.
+MAX_MESSAGE = 64 * 1024
+
+
+class MessageTooLarge(ValueError):
+    """A message longer than the link carries; the sender refuses it (nothing is queued)."""
 
 
 def id_fields(msg_id: int) -> tuple[int, int]:
@@ -111,36 +118,52 @@ def parse_segments(data: bytes) -> list[tuple[int, int | None, bytes]]:
 
 
 class StreamAssembler:
-    """Joins in-order reliable segments; one partial message of at most `max_message` bytes."""
+    """Joins in-order reliable segments; one partial message of at most `max_message` bytes.
 
-    def __init__(self, max_message: int) -> None:
+    A message that grows past the bound is dropped and the rest of its segments skipped, while
+    the other messages sharing its frames are still delivered; what was dropped is counted in
+    `refused` (by reason) for the link to take with `take_refused`."""
+
+    def __init__(self, max_message: int = MAX_MESSAGE) -> None:
         self.max_message = max_message
         self._id: int | None = None
         self._parts: list[bytes] = []
         self._size = 0
+        self._skipping = False  # the rest of a dropped message's segments
+        self.refused: Counter[str] = Counter()
 
     def reset(self) -> None:
-        self._id, self._parts, self._size = None, [], 0
+        self._id, self._parts, self._size, self._skipping = None, [], 0, False
 
     @property
     def buffered(self) -> int:
         return self._size
 
+    def take_refused(self) -> Counter[str]:
+        out, self.refused = self.refused, Counter()
+        return out
+
     def add(self, data: bytes) -> list[tuple[int, bytes]]:
-        """Messages completed by this frame payload; FrameError if the stream is malformed
-        (the partial message is then dropped; the sender's ARQ cannot repair a forgery-free
-        malformation, so this only happens with a buggy peer)."""
+        """Messages completed by this frame payload. FrameError for a payload that does not
+        parse (then nothing of it is used); a segment that cannot belong to a message (too long,
+        or a continuation without its start) is counted in `refused` and the others go on."""
         done: list[tuple[int, bytes]] = []
         for flags, msg_id, chunk in parse_segments(data):
             if flags & FIRST:
                 self.reset()
                 self._id = msg_id
+            elif self._skipping:
+                self._skipping = not flags & LAST
+                continue
             elif self._id is None:
-                raise reject(Reason.PAYLOAD, "continuation segment without a first segment")
+                self.refused[Reason.PAYLOAD.value] += 1  # its start was lost with a malformed frame
+                continue
             self._size += len(chunk)
             if self._size > self.max_message:
                 self.reset()
-                raise reject(Reason.OVERSIZE, f"message longer than {self.max_message} bytes")
+                self._skipping = not flags & LAST
+                self.refused[Reason.OVERSIZE.value] += 1
+                continue
             self._parts.append(chunk)
             if flags & LAST:
                 done.append((self._id, b"".join(self._parts)))  # type: ignore[arg-type]
@@ -178,8 +201,8 @@ class _Partial:
 class Reassembler:
     """Datagram reassembly with a timeout and bounds on messages and bytes held."""
 
-    def __init__(self, timeout: float = 5.0, max_messages: int = 8, max_bytes: int = 64 * 1024,
-                 max_message: int = 64 * 1024) -> None:
+    def __init__(self, timeout: float = 5.0, max_messages: int = 8, max_bytes: int = MAX_MESSAGE,
+                 max_message: int = MAX_MESSAGE) -> None:
         self.timeout = timeout
         self.max_messages = max_messages
         self.max_bytes = max_bytes

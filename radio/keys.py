@@ -16,7 +16,7 @@ class KeyFileError(ValueError):
 def load_key(path: str | os.PathLike[str]) -> bytes:
     """The 32-byte key in `path`; KeyFileError if missing, malformed or readable by others."""
     p = Path(path)
-    hint = f"make one with `btf-host keygen --out {p}`"
+    hint = f"make one with 'btf-host keygen --out {p}'"
     try:
         st = p.stat()
     except FileNotFoundError:
@@ -27,7 +27,7 @@ def load_key(path: str | os.PathLike[str]) -> bytes:
         raise KeyFileError(f"key file {p} is not a regular file")
     if st.st_mode & 0o077:
         raise KeyFileError(f"key file {p} has mode {stat.S_IMODE(st.st_mode):04o}: others may "
-                           f"read it; run `chmod 600 {p}`")
+                           f"read it; run 'chmod 600 {p}'")
     try:
         text = p.read_text(encoding="ascii").strip()
     except (OSError, UnicodeDecodeError):

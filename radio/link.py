@@ -20,7 +20,15 @@ from collections import Counter, OrderedDict, deque
 from radio import FrameError
 from radio.auth import CounterStore, ReplayWindow, StaleRun
 from radio.events import Acked, Delivered, Event, LinkDown, LinkStats, LinkUp, PeerStale, QueueFull
-from radio.fragment import AUTO_BASE, Reassembler, StreamAssembler, StreamPacker, split_datagram
+from radio.fragment import (
+    AUTO_BASE,
+    MAX_MESSAGE,
+    MessageTooLarge,
+    Reassembler,
+    StreamAssembler,
+    StreamPacker,
+    split_datagram,
+)
 from radio.frame import (
     DEFAULT_MTU,
     Deframer,
@@ -35,8 +43,8 @@ from radio.frame import (
 )
 from radio.retransmit import DUPTHRESH, GRACE_TIMEOUTS, TAIL_COPIES, TAIL_FRAMES, InFlight, RetransmitTimer
 
-__all__ = ["Link", "Acked", "Delivered", "Event", "LinkDown", "LinkStats", "LinkUp", "PeerStale",
-           "QueueFull"]
+__all__ = ["Link", "Acked", "Delivered", "Event", "LinkDown", "LinkStats", "LinkUp", "MessageTooLarge",
+           "PeerStale", "QueueFull", "MAX_MESSAGE"]
 
 
 ACK_REPEATS = 2  # copies of the ACK that ends a burst of data
@@ -69,7 +77,7 @@ class Link:
                  counter_store: CounterStore, *, mtu: int = DEFAULT_MTU, window: int = 64,
                  rto: float = 0.3, min_rto: float = 0.05, max_rto: float = 1.0,
                  heartbeat: float = 1.0, link_timeout: float = 3.0, dedup: int = 4096,
-                 max_message: int = 64 * 1024, max_queue_bytes: int = 1 << 20,
+                 max_message: int = MAX_MESSAGE, max_queue_bytes: int = 1 << 20,
                  reassembly_timeout: float = 5.0, incarnation: bytes = b"") -> None:
         _check_args(node_id, peer_id, link_id, key, window, mtu, incarnation)
         self.incarnation = bytes(incarnation)
@@ -126,10 +134,11 @@ class Link:
     # ------------------------------------------------------------------ public
     def send(self, payload: bytes, now: float, reliable: bool = True,
              msg_id: int | None = None) -> int:
-        """Queue a message; returns its id (the caller's, or a fresh automatic one)."""
+        """Queue a message; returns its id (the caller's, or a fresh automatic one). A message
+        longer than `max_message` is refused (MessageTooLarge): the peer would drop it."""
         payload = bytes(payload)
         if len(payload) > self.max_message:
-            raise ValueError(f"message of {len(payload)} bytes exceeds max_message {self.max_message}")
+            raise MessageTooLarge(f"message of {len(payload)} bytes exceeds the link's largest, {self.max_message}")
         if msg_id is None:
             msg_id = AUTO_BASE + self._store.next_tx(self.node_id, self.link_id)
         elif not 0 <= msg_id < AUTO_BASE:
@@ -425,6 +434,8 @@ class Link:
             except FrameError as exc:
                 self._rejected[reason_of(exc).value] += 1
                 continue
+            finally:
+                self._rejected.update(self._asm.take_refused())
             for mid, msg in done:
                 self._deliver(mid, msg)
 

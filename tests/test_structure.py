@@ -184,3 +184,13 @@ def test_tools_take_from_onboard_only_the_cli_runner_the_configuration_and_the_s
             if got:
                 used[name] = sorted(got)
     assert not used, f"tools modules that reach into the robot's runtime: {used}"
+
+
+def test_test_modules_share_helpers_through_tests_support_only():
+    borrowed = {}
+    for path in sorted((ROOT / "tests").rglob("test_*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("tests."):
+                if node.module != "tests.support" and not node.module.startswith("tests.support."):
+                    borrowed.setdefault(str(path.relative_to(ROOT)), []).append(node.module)
+    assert not borrowed, f"test modules importing other test modules (move the helper to tests/support): {borrowed}"

@@ -115,8 +115,8 @@ class FrameFitter:
         self._bases = (np.arange(n_labels, dtype=np.intp)[:, None] * n_bands
                        + np.arange(n_bands, dtype=np.intp)[None, :]) * bins
         self.empty_labels: tuple[int, ...] = ()
-        # 8-bit frames with few labels and bands: a pixel's label base fits in 16 bits.
-        self._fits16 = n_labels * n_bands * bins <= 65536 and bins == 256
+        # 8-bit frames: a pixel's label base fits in 16 bits.
+        self._fits16 = n_labels * bins <= 65536 and bins == 256
 
     def reset(self) -> None:
         self.counts[...] = 0
@@ -147,30 +147,30 @@ class FrameFitter:
             flat += np.bincount(idx.reshape(-1), minlength=flat.size)
 
     def _add_8bit(self, frame: np.ndarray, labels: np.ndarray, step: int) -> None:
-        """8-bit frames whose (label, band, level) indices fit 16 bits: per chunk and band, the
-        index label * bands * 256 + band * 256 + value in two buffers reused across chunks, one
-        bincount each (no gather, no broadcast over the short band axis, no per-chunk copies)."""
-        flat = self.counts.reshape(-1)
+        """8-bit frames whose (label, level) indices fit 16 bits: per chunk and band, the index
+        label * 256 + value in two buffers reused across chunks, one bincount each into that
+        band's labels x levels (no gather, no broadcast over the short band axis, no per-chunk
+        copies); the labels checked once, not per chunk."""
+        self._check_labels(labels)
         height, width = labels.shape
         cap = min(step, height) * width
         base = np.empty(cap, dtype=np.uint16)
         idx = np.empty(cap, dtype=np.intp)  # bincount's own type: it copies nothing
-        stride, level_step = np.uint16(self.n_bands * self.bins), np.uint16(self.bins)
+        size = self.n_labels * self.bins
         for r0 in range(0, height, step):
             lab, vals = labels[r0:r0 + step], frame[r0:r0 + step]
-            self._check_labels(lab)
             n = lab.size
             b = base[:n].reshape(lab.shape)
             i = idx[:n].reshape(lab.shape)
-            np.multiply(lab, stride, out=b, casting="unsafe")
+            np.multiply(lab, np.uint16(self.bins), out=b, casting="unsafe")
             for band in range(self.n_bands):
-                if band:
-                    b += level_step
                 np.add(vals[..., band], b, out=i, casting="unsafe")
-                flat += np.bincount(idx[:n], minlength=flat.size)
+                self.counts[:, band, :] += np.bincount(idx[:n], minlength=size).reshape(self.n_labels, self.bins)
 
     def _check_labels(self, lab: np.ndarray) -> None:
-        lmin, lmax = int(lab.min()), int(lab.max())
+        if lab.dtype == np.uint8 and self.n_labels >= 256:
+            return  # every value is a label
+        lmin, lmax = (0 if lab.dtype.kind == "u" else int(lab.min())), int(lab.max())
         if lmin < 0 or lmax >= self.n_labels:
             bad = lmin if lmin < 0 else lmax
             raise ValueError(f"label {bad} outside [0, {self.n_labels - 1}]")
@@ -182,8 +182,9 @@ class FrameFitter:
         self.empty_labels = tuple(sorted(set(range(self.n_labels)) - set(keep)))
         if not keep:
             return {}
+        label_z = {lab: z_for_count(int(totals[lab])) for lab in keep}
         counts = [int(totals[lab]) for lab in keep for _ in range(self.n_bands)]
-        zs = [z_for_count(c) for c in counts]
+        zs = [label_z[lab] for lab in keep for _ in range(self.n_bands)]
         rows = self.counts[keep].reshape(-1, self.bins)
         fits = fit_rows(rows, counts, zs, self.centre0, self.bin_width, self.codec, censor)
         keys = [(lab, band) for lab in keep for band in range(self.n_bands)]

@@ -160,16 +160,19 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
         first, last, low_n, high_n, pile_lo, pile_hi = _ends_rows(counts, censor)
     out: list[FittedModel | None] = [None] * rows
     plans: dict[int, tuple[Placement, float, float]] = {}
+    b1, b2 = beta1.tolist(), beta2.tolist()
     for i in range(rows):
         count, z = totals[i], zs[i]
         if first[i] == last[i]:
             # One occupied bin: a constant region, sent as four equal percentiles.
             pct = codec.snap([lo + bin_width * int(first[i])] * 4)
-            out[i] = FittedModel(Johnson.constant(pct[0]), count, z, pct, float(beta1[i]), float(beta2[i]))
+            out[i] = FittedModel(Johnson.constant(pct[0]), count, z, pct, b1[i], b2[i])
             continue
-        low = quantize(float(low_n[i]) / count) if censor else 0.0
-        high = quantize(float(high_n[i]) / count) if censor else 0.0
-        where = _placement(z, low, high, count, pile_lo[i], pile_hi[i]) if censor else Placement(z)
+        if not censor or not (low_n[i] or high_n[i] or pile_lo[i] or pile_hi[i]):
+            plans[i] = (Placement(z), 0.0, 0.0)  # nothing censored or piled: the plain placement
+            continue
+        low, high = quantize(float(low_n[i]) / count), quantize(float(high_n[i]) / count)
+        where = _placement(z, low, high, count, pile_lo[i], pile_hi[i])
         if where == Placement(z) and max(low, high) < MIN_REPORTED:
             low = high = 0.0
         plans[i] = (where, low, high)
@@ -177,18 +180,18 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
         live = list(plans)
         reads = _read_all(counts, cum, live, plans, zs, totals, lo, bin_width, codec)
         chosen = _choose(counts[live], reads, plans, live, totals, lo, bin_width)
+        at = (np.arange(len(live)), chosen)
+        z_of, code_of, pct_of = reads.z[at].tolist(), reads.code[at].tolist(), reads.pct[at].tolist()
+        exact_of, fallback_of, banded = reads.exact[at].tolist(), reads.fallback[at].tolist(), reads.ok[:, 1].tolist()
         for j, i in enumerate(live):
-            k = int(chosen[j])
-            z, code = float(reads.z[j, k]), int(reads.code[j, k])
-            exact, fallback = bool(reads.exact[j, k]), bool(reads.fallback[j, k])
+            z, shift, exact, fallback = z_of[j], code_of[j] / SHIFT_SCALE, exact_of[j], fallback_of[j]
             _, low, high = plans[i]
-            p = tuple(float(v) for v in reads.pct[j, k])
-            model = model_from_percentiles(p, z, totals[i], shift=code / SHIFT_SCALE,
+            p = tuple(pct_of[j])
+            model = model_from_percentiles(p, z, totals[i], shift=shift,
                                            normal_probs=fallback_probs(low, high) if fallback else None,
                                            exact_family=exact)
             # the exact family travels only where the SL band would have chosen another
-            out[i] = FittedModel(model, totals[i], z, p, float(beta1[i]), float(beta2[i]), code / SHIFT_SCALE,
-                               low, high, fallback, exact and bool(reads.ok[j, 1]))
+            out[i] = FittedModel(model, totals[i], z, p, b1[i], b2[i], shift, low, high, fallback, exact and banded[j])
     return out  # type: ignore[return-value]
 
 
@@ -239,33 +242,48 @@ def _read_all(counts: np.ndarray, cum: np.ndarray, live: list[int], plans: dict,
         if (low or high) and not where.fallback:
             z[j, TEMPLATE + 1] = where.z
             ok[j, TEMPLATE + 1] = True
-    c, cm = counts[live], cum[live]
+    # A fallback reads the middle of the uncensored mass (its pa and pe) where a side is uncensored,
+    # the censor limit where it is censored (btf.fit.censor)
+    fallbacks = [(j, k, *plans[live[j]][1:]) for j, k in zip(*np.nonzero(ok & fallback))]
+    for j, k, low, high in fallbacks:
+        pa, pe = fallback_probs(low, high)
+        probs[j, k] = (pa, pa, pe, pe)
+    every = n == counts.shape[0]
+    c, cm = (counts, cum) if every else (counts[live], cum[live])
     targets = probs.reshape(n, -1) * cm[:, -1:]
-    at = np.empty(targets.shape, dtype=np.intp)
-    for j in range(n):
-        at[j] = np.searchsorted(cm[j], targets[j], side="left")
-    np.minimum(at, counts.shape[1] - 1, out=at)
+    at = _bins_below(c, cm, targets)
     r = np.arange(n)[:, None]
     here = c[r, at].astype(np.float64)
     below = cm[r, at] - here
     frac = np.minimum(np.maximum((targets - below) / np.maximum(here, 1.0), 0.0), 1.0)
-    pct = codec.snap_array(lo + bin_width * (at - 0.5 + frac)).reshape(n, WIDTH, 4)
-    for j, k in zip(*np.nonzero(ok & fallback)):
-        i = live[j]
-        pct[j, k] = _fallback_points(counts[i], cum[i], *plans[i][1:], lo, bin_width, codec)
+    points = (lo + bin_width * (at - 0.5 + frac)).reshape(n, WIDTH, 4)
+    for j, k, low, high in fallbacks:
+        if low > 0.0:
+            points[j, k, :2] = lo + bin_width * 0.5
+        if high > 0.0:
+            points[j, k, 2:] = lo + bin_width * (counts.shape[1] - 1.5)
+    pct = codec.snap_array(points)
     # the banded plain read only where the band decides its family (elsewhere it is column 0)
     ok[:, 1] = in_band(pct[:, 0], sl_bands(total.astype(np.float64)))
     return _Reads(z, code, exact, fallback, ok, pct)
 
 
-def _fallback_points(counts: np.ndarray, cum: np.ndarray, low: float, high: float, lo: float,
-                     bin_width: float, codec: PercentileCodec) -> tuple[float, float, float, float]:
-    """The fallback's four points a, a, e, e: the censor limits, or where a side is uncensored
-    the middle of the uncensored mass (btf.fit.censor)."""
-    mid = _percentiles_one(counts, cum, fallback_probs(low, high), lo, bin_width)
-    a = lo + bin_width * 0.5 if low > 0.0 else mid[0]
-    e = lo + bin_width * (counts.size - 1.5) if high > 0.0 else mid[1]
-    return codec.snap([a, a, e, e])
+def _bins_below(counts: np.ndarray, cum: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """Per row, the bins whose cumulative count is below each target (searchsorted, side
+    "left"), at most the last bin. Integer counts: one search over all rows, each row lifted
+    by its own multiple of the largest total + 1; for a whole-number cum, cum < t holds exactly
+    when cum < ceil(t), so every value searched is a whole number below 2**53 and exact."""
+    rows, bins = cum.shape
+    lift = float(cum[:, -1].max()) + 1.0
+    if counts.dtype.kind in "iu" and lift * rows < 2.0**53:
+        base = np.arange(rows, dtype=np.float64)[:, None] * lift
+        at = np.searchsorted((cum + base).ravel(), (np.ceil(targets) + base).ravel(), side="left")
+        at = at.reshape(targets.shape) - np.arange(0, rows * bins, bins)[:, None]
+    else:
+        at = np.empty(targets.shape, dtype=np.intp)
+        for j in range(rows):
+            at[j] = np.searchsorted(cum[j], targets[j], side="left")
+    return np.minimum(at, bins - 1, out=at)
 
 
 def _choose(counts: np.ndarray, reads: _Reads, plans: dict, live: list[int], totals: list[int],

@@ -15,6 +15,12 @@ CHUNK_PIXELS = 1 << 16
 MAX_LABELS = 255  # labels travel as uint8
 
 
+def _dot(x: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """x @ m of float32 pixels by a few centres: einsum's own loop, several times faster than
+    a BLAS call on such thin matrices (and no BLAS threads contending for the cores)."""
+    return np.einsum("ij,jk->ik", x, m)
+
+
 @dataclass(frozen=True)
 class IsodataParams:
     k: int = 4  # desired number of clusters
@@ -185,7 +191,7 @@ def fit_centres(samples: np.ndarray, p: IsodataParams) -> np.ndarray:
 
 
 def _distance_matrix(centres: np.ndarray) -> np.ndarray:
-    """[-2c, |c|^2] so that [x, 1] @ m is |x - c|^2 - |x|^2: one matmul, no broadcast add."""
+    """[-2c, |c|^2] so that [x, 1] @ m is |x - c|^2 - |x|^2: one product, no broadcast add."""
     c = centres
     return np.vstack([-2.0 * c.T, (c * c).sum(axis=1)[None, :]]).astype(np.float32)
 
@@ -196,7 +202,7 @@ def _nearest_f32(x: np.ndarray, m: np.ndarray, out: np.ndarray) -> None:
         chunk = x[a:a + CHUNK_PIXELS]
         xb = np.ones((len(chunk), b + 1), dtype=np.float32)
         xb[:, :b] = chunk
-        out[a:a + CHUNK_PIXELS] = np.argmin(xb @ m, axis=1)
+        out[a:a + CHUNK_PIXELS] = np.argmin(_dot(xb, m), axis=1)
 
 
 _CELL = np.arange(32) * 8 + 3.5
@@ -204,9 +210,6 @@ _GRID = np.stack(np.meshgrid(_CELL, _CELL, _CELL, indexing="ij"), -1).reshape(-1
 _GRID_SQ = (_GRID * _GRID).sum(axis=1)
 _CELL_RADIUS = np.sqrt(3) * 3.5
 _SUB = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), -1).reshape(-1, 3)
-_V = np.arange(256, dtype=np.uint32)
-# Per-channel parts of one packed index: coarse cell (bits 16..30) | offset in the cell (bits 0..8).
-_PACK = tuple(((((_V >> 3) << s) << 16) | ((_V & 7) << t)).astype(np.uint32) for s, t in ((10, 6), (5, 3), (0, 0)))
 
 
 def _colour_lut(c: np.ndarray) -> np.ndarray:
@@ -231,9 +234,10 @@ class Labeller:
     """Nearest-centre labelling with tables built once for a set of centres.
 
     Centres are a property of the scene, so the tables are built once and every frame
-    of the scene only looks labels up. 8-bit data with 3 bands uses two levels: a
-    32^3 table of colour cells, and an exact 8^3 sub-table only for the cells that
-    straddle a decision boundary (a few MB at most). 8-bit data with 1 or 2 bands
+    of the scene only looks labels up. 8-bit data with 3 bands gets a label for each of
+    the 2^24 colours (16 MB), built from a 32^3 table of colour cells and an exact 8^3
+    sub-table only for the cells that straddle a decision boundary; a frame is then one
+    lookup per pixel, its three bytes read as one word. 8-bit data with 1 or 2 bands
     tabulates every value. Other data goes through a float32 distance matmul.
     `names[i]` is the label written for centre i (default i), e.g. a palette id.
     """
@@ -248,8 +252,7 @@ class Labeller:
             raise ValueError(f"isodata: {len(self.names)} names for {len(c)} centres")
         self._m = _distance_matrix(c)
         self._table: np.ndarray | None = None  # 1-2 bands: label per value
-        self._base: np.ndarray | None = None  # 3 bands: sub-table offset per coarse cell
-        self._fine: np.ndarray | None = None
+        self._colours: np.ndarray | None = None  # 3 bands: label per colour r + 256 g + 65536 b
 
     @property
     def bands(self) -> int:
@@ -276,15 +279,37 @@ class Labeller:
         # Blocks 0..n-1 are constant (one per centre), then one exact block per unsure cell.
         fine = np.empty((n + len(unsure)) * 512, dtype=np.uint8)
         fine[:n * 512] = np.repeat(self.names, 512)
-        base = coarse.astype(np.uint32) * 512
-        base[unsure] = (n + np.arange(len(unsure), dtype=np.uint32)) * 512
+        block = coarse.astype(np.intp)
+        block[unsure] = n + np.arange(len(unsure))
         cells = np.stack([unsure >> 10, (unsure >> 5) & 31, unsure & 31], 1) * 8
         step = max(1, CHUNK_PIXELS // 512)
         for a in range(0, len(unsure), step):
             colours = (cells[a:a + step, None, :] + _SUB[None]).reshape(-1, 3)
             lo = (n + a) * 512
             self._general(colours, fine[lo:lo + len(colours)])
-        self._base, self._fine = base, fine
+        # Every colour's label, laid out as a little-endian word of its bytes r, g, b reads:
+        # (b cell, b offset, g cell, g offset, r cell, r offset); one blue cell at a time.
+        blocks, cell_block = fine.reshape(-1, 8, 8, 8), block.reshape(32, 32, 32)
+        table = np.empty((32, 8, 32, 8, 32, 8), dtype=np.uint8)
+        for b in range(32):
+            table[b] = blocks[cell_block[:, :, b]].transpose(4, 1, 3, 0, 2)
+        self._colours = table.reshape(-1)
+
+    def _assign_colours(self, x: np.ndarray, out: np.ndarray) -> None:
+        """Labels of (n, 3) uint8 pixels: each pixel's bytes r, g, b and the next one's r read
+        as one little-endian word, masked to 24 bits, looked up (the last pixel on its own)."""
+        if not x.flags.c_contiguous:
+            x = np.ascontiguousarray(x)
+        n = len(x)
+        words = np.ndarray((n - 1,), dtype="<u4", buffer=x.reshape(-1), strides=(3,))
+        key = np.empty(min(CHUNK_PIXELS, n), dtype=np.uint32)
+        for a in range(0, n - 1, CHUNK_PIXELS):
+            w = words[a:a + CHUNK_PIXELS]
+            k = key[:len(w)]
+            np.bitwise_and(w, 0xFFFFFF, out=k)
+            np.take(self._colours, k, out=out[a:a + len(w)])
+        r, g, b = (int(v) for v in x[-1])
+        out[-1] = self._colours[r | g << 8 | b << 16]
 
     def assign(self, data: np.ndarray) -> np.ndarray:
         """Label (uint8) of the nearest centre for every pixel of (..., bands) data, in bounded chunks."""
@@ -304,17 +329,9 @@ class Labeller:
                     key = (key << 8) | chunk[:, 1]
                 np.take(self._table, key, out=out[a:a + CHUNK_PIXELS])
         else:
-            if self._fine is None:
+            if self._colours is None:
                 self._build_colour()
-            pr, pg, pb = _PACK
-            for a in range(0, len(x), CHUNK_PIXELS):
-                chunk = x[a:a + CHUNK_PIXELS]
-                key = np.take(pr, chunk[:, 0])
-                key += np.take(pg, chunk[:, 1])
-                key += np.take(pb, chunk[:, 2])
-                idx = np.take(self._base, key >> 16)
-                idx += key & 0xFFFF
-                np.take(self._fine, idx, out=out[a:a + CHUNK_PIXELS])
+            self._assign_colours(x, out)
         return out.reshape(np.shape(data)[:-1])
 
 
@@ -355,6 +372,22 @@ def spread(sample: np.ndarray, centres: np.ndarray) -> float:
     c = np.asarray(centres, dtype=np.float64)
     d2 = (x * x).sum(axis=1)[:, None] + (c * c).sum(axis=1)[None, :] - 2.0 * (x @ c.T)
     return float(np.sqrt(np.maximum(d2.min(axis=1), 0.0)).mean())
+
+
+def light_gain(sample: np.ndarray, centres: np.ndarray, rounds: int = 2) -> float:
+    """The one gain g over all bands for which g * centres fit the sample best (least squares,
+    each row against its nearest scaled centre, `rounds` times): how much brighter the view is
+    than the one the centres were fitted on. Clipped to [1/4, 4]."""
+    x = np.asarray(sample, dtype=np.float64)
+    c = np.asarray(centres, dtype=np.float64)
+    g = 1.0
+    for _ in range(rounds):
+        near = c[_nearest(x, g * c)]
+        energy = float((near * near).sum())
+        if energy <= 0.0:
+            return 1.0
+        g = min(max(float((x * near).sum()) / energy, 0.25), 4.0)
+    return g
 
 
 def _label_counts(labels: np.ndarray, n: int) -> np.ndarray:

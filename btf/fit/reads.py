@@ -191,43 +191,49 @@ def phi(z: np.ndarray) -> np.ndarray:
     return np.where(z < 0.0, poly, np.float32(1.0) - poly)
 
 
-def z_at(fam, gamma, delta, xi, lam, x: np.ndarray) -> np.ndarray:
-    """z of each read's model (rows) at the points x (N x E), clipped to +-37, in float32 (the
-    transforms of u = (x - xi) / lam, taken in float64)."""
-    out = np.empty(x.shape, dtype=np.float32)
+def z_at(fam, gamma, delta, xi, lam, x: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """z of each read's model (`fam` sorted, so that each family is one block of reads) at its
+    `counts` points, laid end to end in x, clipped to +-37, in float32 (u = (x - xi) / lam taken
+    in float64)."""
+    u = np.subtract(x, np.repeat(xi, counts))
+    u /= np.repeat(lam, counts)
+    u32 = u.astype(np.float32)
+    del u
+    out = np.repeat(delta.astype(np.float32), counts)  # each point's delta, then its transform times it
+    ends = np.cumsum(counts).tolist()
+    bounds = (np.flatnonzero(fam[1:] != fam[:-1]) + 1).tolist()
     with np.errstate(all="ignore"):
-        u = ((x - xi[:, None]) / lam[:, None]).astype(np.float32)
-        g32, d32 = gamma.astype(np.float32)[:, None], delta.astype(np.float32)[:, None]
-        for family in set(fam.tolist()):
-            rows = np.flatnonzero(fam == family)
-            uf, g, d = u[rows], g32[rows], d32[rows]
+        for a, b in zip([0, *bounds], [*bounds, fam.size]):
+            family, lo, hi = int(fam[a]), (ends[a - 1] if a else 0), ends[b - 1]
+            uf, zf = u32[lo:hi], out[lo:hi]
             if family == SN:
-                zf = g + d * uf
+                zf *= uf
             elif family == SU:
-                zf = g + d * np.arcsinh(uf)
+                zf *= np.arcsinh(uf)
             elif family == SB:
-                zf = g + d * np.log(uf / (np.float32(1.0) - uf))
+                zf *= np.log(uf / (np.float32(1.0) - uf))
                 zf[uf <= 0.0] = -np.inf
                 zf[uf >= 1.0] = np.inf
             elif family == SL:
-                sign = np.sign(lam[rows, None]).astype(np.float32)
-                zf = g + sign * d * np.log(uf)
+                sign = np.repeat(np.sign(lam[a:b]).astype(np.float32), counts[a:b])
+                zf *= np.log(uf)
+                zf *= sign
                 zf[uf <= 0.0] = -np.inf
                 zf *= np.where(uf <= 0.0, sign, np.float32(1.0))
             else:  # CONST: a step at xi
-                zf = np.where(x[rows] >= xi[rows, None], np.float32(np.inf), np.float32(-np.inf))
-            out[rows] = zf
+                zf[:] = np.where(x[lo:hi] >= np.repeat(xi[a:b], counts[a:b]), np.float32(np.inf), np.float32(-np.inf))
+        out += np.repeat(gamma.astype(np.float32), counts)
     np.clip(out, -_Z_CLIP, _Z_CLIP, out=out)
     out[np.isnan(out)] = 0.0
     return out
 
 
-def rank_grid(counts: np.ndarray, lo: float, bin_width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def rank_grid(counts: np.ndarray, lo: float, bin_width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """What reads are ranked on, per row of (rows, bins) counts: (edges, observed probabilities,
-    span), each row's occupied bins f0..f1 left-aligned and padded: edges[r, j] is the lower
-    edge of bin f0 + j (-inf for bin 0, +inf above the last bin: the end bins hold the tails,
-    as a clipping sensor's end levels do), span[r] = f1 - f0 + 1. Deeper than MAX_RANK_BINS
-    bins, groups of bins are merged first (bounded time)."""
+    first, span). Row r occupies bins first[r] .. first[r] + span[r] - 1; edges[k] is the lower
+    edge of bin k (-inf for bin 0, +inf above the last bin: the end bins hold the tails, as a
+    clipping sensor's end levels do) and probs[r, k] its share of the row's pixels. Deeper than
+    MAX_RANK_BINS bins, groups of bins are merged first (bounded time)."""
     rows, bins = counts.shape
     group = -(-bins // MAX_RANK_BINS)
     if group > 1:
@@ -235,25 +241,36 @@ def rank_grid(counts: np.ndarray, lo: float, bin_width: float) -> tuple[np.ndarr
         counts = np.pad(counts, ((0, 0), (0, pad))).reshape(rows, -1, group).sum(axis=2)
         bins = counts.shape[1]
     width = bin_width * group
-    all_edges = np.concatenate(([-np.inf], (lo - 0.5 * bin_width) + width * np.arange(1, bins), [np.inf]))
+    edges = np.concatenate(([-np.inf], (lo - 0.5 * bin_width) + width * np.arange(1, bins), [np.inf]))
     nz = counts > 0
     f0 = np.argmax(nz, axis=1)
     f1 = bins - 1 - np.argmax(nz[:, ::-1], axis=1)
-    span = f1 - f0 + 1
-    k = np.minimum(f0[:, None] + np.arange(int(span.max()) + 1)[None, :], (f1 + 1)[:, None])
-    h = np.zeros((rows, k.shape[1] - 1))
-    inside = k[:, :-1] <= f1[:, None]
-    h[inside] = (counts / counts.sum(axis=1, keepdims=True))[np.nonzero(inside)[0], k[:, :-1][inside]]
-    return all_edges[k], h, span
+    return edges, counts / counts.sum(axis=1, keepdims=True), f0, f1 - f0 + 1
 
 
 def l1(fam, gamma, delta, xi, lam, row: np.ndarray, grid) -> np.ndarray:
     """Histogram L1 of each read's model against its row of the rank grid: the occupied span
-    bin by bin plus the model's mass outside it. Each read's sum runs in its own fixed order,
-    so a row gets the same figures alone or in a batch."""
-    edges, h, span = grid
-    cdf = phi(z_at(fam, gamma, delta, xi, lam, edges[row]))
-    dev = np.abs(np.diff(cdf, axis=1) - h[row])  # past a read's span: 0 (equal edges, empty bins)
-    reads = np.arange(row.size)
-    end = span[row]
-    return np.cumsum(dev, axis=1)[reads, end - 1] + cdf[:, 0] + (1.0 - cdf[reads, end])
+    bin by bin plus the model's mass outside it. All reads in one pass over their spans laid
+    end to end (grouped by family); each read's terms are then summed by one reduction over its
+    own stretch, so a row gets the same figures alone or in a batch."""
+    edges, probs, first, span = grid
+    order = np.argsort(fam, kind="stable")
+    cols = row[order]
+    n_edges = span[cols] + 1
+    ends = np.cumsum(n_edges)
+    starts = ends - n_edges
+    bins = np.arange(int(ends[-1]))
+    bins += np.repeat(first[cols] - starts, n_edges)  # each read's edges: the lower edges of bins first..
+    cdf = phi(z_at(fam[order], gamma[order], delta[order], xi[order], lam[order], edges[bins], n_edges))
+    # bin j of a read lies between its edges j and j + 1; the term after its last edge is no bin
+    n_bins = probs.shape[1]
+    np.minimum(bins, n_bins - 1, out=bins)
+    bins += np.repeat(cols * n_bins, n_edges)
+    dev = cdf[1:] - cdf[:-1] - probs.ravel()[bins[:-1]]
+    del bins
+    np.abs(dev, out=dev)
+    dev[ends[:-1] - 1] = 0.0
+    errors = np.add.reduceat(dev, starts) + cdf[starts] + (1.0 - cdf[ends - 1])
+    out = np.empty_like(errors)
+    out[order] = errors
+    return out

@@ -7,7 +7,9 @@ the Euler unit (UNIT_SEL: 1/16 degree or 1/900 radian; read as degrees, radians 
 1.8% small, silently), the axis remap registers, a chip mounted other than upright on the
 camera (`mount`, a rotation from hal.orientation.MOUNTS), and NACKs (OSError 121) injected
 at a seeded rate or on demand. The orientation source gives the camera's orientation; the
-chip reports it through its mounting and remap, so a wrong remap reads wrong.
+chip reports it through its mounting and remap, so a wrong remap reads wrong. `unplug()` takes
+the chip off the bus (every transaction fails with EIO) until `replug()`, which by default
+brings it back as from power-on: CONFIG mode, the default axes and units, Euler registers zero.
 """
 from __future__ import annotations
 
@@ -49,21 +51,41 @@ class EmulatedSMBus:
         self.nack_rate = nack_rate
         self.noise_deg = noise_deg
         self.address = address
+        self.chip_id, self.calibration = chip_id, calibration  # what it reports from power-on
         self.regs = bytearray(0x80)
-        self.regs[Reg.CHIP_ID] = chip_id
-        self.regs[Reg.CALIB_STAT] = calibration
-        self.regs[Reg.AXIS_MAP_CONFIG], self.regs[Reg.AXIS_MAP_SIGN] = AxisRemap().config, AxisRemap().sign
+        self._power_on()
         self.mount = None if mount is None else np.asarray(mount, float)
         self.nack_next = 0  # force this many NACKs before anything else
         self.history: list[Access] = []
         self.closed = False
+        self.unplugged = False
         self._rng = random.Random(seed)
+
+    def _power_on(self) -> None:
+        """The registers as the chip starts: CONFIG mode, its own axes, Euler at zero."""
+        self.regs[:] = bytes(len(self.regs))
+        self.regs[Reg.CHIP_ID] = self.chip_id
+        self.regs[Reg.CALIB_STAT] = self.calibration
+        self.regs[Reg.AXIS_MAP_CONFIG], self.regs[Reg.AXIS_MAP_SIGN] = AxisRemap().config, AxisRemap().sign
+
+    def unplug(self) -> None:
+        """Off the bus: every transaction fails with EIO until `replug`."""
+        self.unplugged = True
+
+    def replug(self, power_cycled: bool = True) -> None:
+        """Back on the bus; `power_cycled`: it lost power meanwhile and starts as at power-on."""
+        self.unplugged = False
+        if power_cycled:
+            self._power_on()
 
     @property
     def mode(self) -> int:
         return self.regs[Reg.OPR_MODE] & 0x0F
 
     def _nack(self, op: str, address: int, register: int, value: int | None) -> None:
+        if self.unplugged:  # no chip: the adapter reports the transfer failed
+            self.history.append(Access(op, address, register, value, False))
+            raise OSError(errno.EIO, "Input/output error")
         nack = address != self.address  # nobody answers at another address
         if self.nack_next > 0:
             self.nack_next -= 1

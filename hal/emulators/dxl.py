@@ -1,14 +1,19 @@
 """A Dynamixel Protocol 2.0 servo chain on a pseudo-terminal, for the real driver to talk to.
 
-The emulator owns the master side of a pty; `port` is the slave path that pyserial (and so
-dynamixel-sdk) opens. It answers PING, READ, WRITE, SYNC_READ, SYNC_WRITE and REBOOT with
-status packets, moves present positions toward goals at the profile velocity, and on
-request drops replies, corrupts bytes or raises the alert bit with a hardware error code.
+The emulator owns the master side of a pty; `port` is a stable link to its slave (as udev's
+/dev/serial/by-id names an adapter) that pyserial, and so dynamixel-sdk, opens. It answers
+PING, READ, WRITE, SYNC_READ, SYNC_WRITE and REBOOT with status packets, moves present
+positions toward goals at the profile velocity, and on request drops replies, corrupts
+bytes or raises the alert bit with a hardware error code. `unplug()` pulls the adapter: the
+pty closes (an open port reads and writes EIO) and `port` vanishes; `replug()` brings a new
+pty under the same name, the servos as they were (they keep their power).
 """
 from __future__ import annotations
 
 import os
 import select
+import shutil
+import tempfile
 import threading
 import time
 import tty
@@ -177,10 +182,13 @@ class DxlEmulator:
         self._corrupt = 0
         self._last = clock()
         self._lock = threading.Lock()
+        self._io = threading.Lock()  # held while the pty is used, so `unplug` never closes it under a read
         self._stop = threading.Event()
-        self._master, self._slave = os.openpty()
-        tty.setraw(self._slave)  # bytes pass unchanged: no echo, no CR/LF mapping
-        self.port = os.ttyname(self._slave)
+        self._dir = tempfile.mkdtemp(prefix="btf-dxl-")
+        self.port = os.path.join(self._dir, "ttyDXL")
+        self._master: int | None = None
+        self._slave: int | None = None
+        self._plug()
         self._thread = threading.Thread(target=self._serve, name="dxl-emulator", daemon=True)
         self._thread.start()
 
@@ -205,6 +213,33 @@ class DxlEmulator:
             servo.table[Reg.HARDWARE_ERROR_STATUS] = code
             servo.table[Reg.TORQUE_ENABLE] = 0
 
+    def unplug(self) -> None:
+        """The adapter is pulled: the pty closes and `port` no longer names anything."""
+        with self._io:
+            if self._master is None:
+                return
+            os.unlink(self.port)
+            for fd in (self._master, self._slave):
+                os.close(fd)
+            self._master = self._slave = None
+            self.history.append(Call("unplug", (), "ok"))
+
+    def replug(self) -> None:
+        """A new pty under `port`; the servos as they were."""
+        with self._io:
+            if self._master is None:
+                self._plug()
+                self.history.append(Call("replug", (), "ok"))
+
+    def _plug(self) -> None:
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)  # bytes pass unchanged: no echo, no CR/LF mapping
+        os.symlink(os.ttyname(self._slave), self.port)
+
+    @property
+    def plugged(self) -> bool:
+        return self._master is not None
+
     def position_deg(self, servo_id: int) -> float:
         with self._lock:
             self._advance()
@@ -213,11 +248,15 @@ class DxlEmulator:
     def close(self) -> None:
         self._stop.set()
         self._thread.join(timeout=2.0)
-        for fd in (self._master, self._slave):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        with self._io:
+            for fd in (self._master, self._slave):
+                try:
+                    if fd is not None:
+                        os.close(fd)
+                except OSError:
+                    pass
+            self._master = self._slave = None
+        shutil.rmtree(self._dir, ignore_errors=True)
 
     def __enter__(self) -> DxlEmulator:
         return self
@@ -229,17 +268,26 @@ class DxlEmulator:
     def _serve(self) -> None:
         buf = bytearray()
         while not self._stop.is_set():
-            ready, _, _ = select.select([self._master], [], [], 0.05)
-            if not ready:
-                continue
-            try:
-                buf += os.read(self._master, 4096)
-            except OSError:
-                return
+            with self._io:
+                plugged = self._master is not None
+                if plugged:
+                    self._serve_once(self._master, buf)
+                else:  # unplugged: what was half-read is lost with the port
+                    buf.clear()
+            time.sleep(0 if plugged else 0.01)  # `unplug` and `replug` take the pty between turns
+
+    def _serve_once(self, master: int, buf: bytearray) -> None:
+        ready, _, _ = select.select([master], [], [], 0.02)
+        if not ready:
+            return
+        try:
+            buf += os.read(master, 4096)
             for packet in self._packets(buf):
                 reply = self._handle(packet)
                 if reply:
-                    os.write(self._master, reply)
+                    os.write(master, reply)
+        except OSError:
+            pass
 
     def _packets(self, buf: bytearray) -> list[bytes]:
         """Cut complete instruction packets off the front of `buf`, skipping garbage."""

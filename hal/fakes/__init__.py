@@ -2,6 +2,8 @@
 
 Every fake takes a `Faults` and records its calls in a `history` list of
 `Call(call, args, outcome)`, so tests can assert on what happened and what went wrong.
+The servo bus and the tracker can also be unplugged (`unplug`, `replug`): meanwhile every call
+raises `DeviceGone`, recorded with the outcome "gone".
 """
 from __future__ import annotations
 

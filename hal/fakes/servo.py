@@ -3,7 +3,8 @@
 Fault kinds (drawn from `Faults`): "timeout" (the call raises DeviceTimeout naming the
 servo), "alert" (a hardware error that the fake handles as the real driver does: logged
 in `recoveries`, torque and goal restored, the call completes), "stall" (a servo stops
-short of its goal and keeps reporting that it moves).
+short of its goal and keeps reporting that it moves). `unplug()` takes the bus's port away
+(its USB adapter pulled: the servos keep their power, goals and torque) until `replug()`.
 """
 from __future__ import annotations
 
@@ -12,7 +13,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 from hal.fakes import Call, Faults
-from hal.interfaces import DeviceTimeout, HalError, LimitError, ServoRecovery
+from hal.interfaces import DeviceGone, DeviceTimeout, HalError, LimitError, ServoRecovery
 
 OVERLOAD = 0x20
 
@@ -60,6 +61,7 @@ class FakeServoBus:
         self._servos = {i: _Servo(self.start_deg.get(i, 0.0), self.start_deg.get(i, 0.0)) for i in self.servo_ids}
         self._last = self.clock()
         self._closed = False
+        self.unplugged = False
 
     # -- ServoBus -------------------------------------------------------------------
     def ping(self, servo_id: int) -> bool:
@@ -101,6 +103,13 @@ class FakeServoBus:
         self.history.append(Call("close", (), "ok"))
 
     # -- the world ------------------------------------------------------------------
+    def unplug(self) -> None:
+        """The bus's port vanishes: every call raises DeviceGone until `replug`."""
+        self.unplugged = True
+
+    def replug(self) -> None:
+        self.unplugged = False
+
     def true_positions(self) -> dict[int, float]:
         """Where the servos really are now (no call recorded, no fault drawn)."""
         self._advance()
@@ -121,6 +130,11 @@ class FakeServoBus:
         if self._closed:
             raise HalError("fake servo bus is closed")
         self._advance()
+        if self.unplugged:
+            self.history.append(Call(call, args, "gone"))
+            if not raise_timeout:  # a ping, as the driver's: no answer
+                return []
+            raise DeviceGone("fake servo bus: its port is gone (unplugged)")
         unknown = [sid for sid in servo_ids if sid not in self._servos]
         if unknown and call != "ping":
             self.history.append(Call(call, args, "timeout"))

@@ -2,7 +2,8 @@
 
 It can be mounted wrongly on the camera (`mount`, a rotation from hal.orientation.MOUNTS)
 and be given an axis remap (hal.bno055.AxisRemap) as the BNO055 is: it then reports what
-a chip so mounted and remapped would.
+a chip so mounted and remapped would. `unplug()` takes it off the bus (every read raises
+DeviceGone, as the driver does for a chip answering EIO) until `replug()`.
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np
 
 from hal.bno055 import AxisRemap
 from hal.fakes import Call, Faults
-from hal.interfaces import Calibration, HalError, Orientation, ViewAngles
+from hal.interfaces import Calibration, DeviceGone, HalError, Orientation, ViewAngles
 from hal.orientation import camera_frame, euler_angles
 
 
@@ -34,9 +35,20 @@ class FakeTracker:
         self._rng = random.Random(seed)
         self.mount = None if mount is None else np.asarray(mount, float)
         self.remap = remap or AxisRemap()
+        self.unplugged = False
+
+    def unplug(self) -> None:
+        """Off the bus: every read raises DeviceGone until `replug`."""
+        self.unplugged = True
+
+    def replug(self) -> None:
+        self.unplugged = False
 
     def _answer(self, call: str) -> None:
         """Raise HalError when every try NACKs, as the real driver does after its retries."""
+        if self.unplugged:
+            self.history.append(Call(call, (), "gone"))
+            raise DeviceGone("fake tracker: no answer on the I2C bus (EIO): unplugged")
         for _ in range(self.retries + 1):
             if not self.faults.hit("nack"):
                 return

@@ -35,7 +35,6 @@ class Shading:
     """Light-dependent state of a surface, per flat cell."""
 
     radiance: np.ndarray  # (T*T, 5) float32, reflected light per spectral band, 0..1
-    rgb: np.ndarray  # (T*T, 3) float32, the red, green and blue bands of `radiance`, for gathering
     direct: np.ndarray  # (T*T,) float64, direct light on each facet, 0 in shadow
 
 
@@ -63,11 +62,18 @@ def lit(height: np.ndarray, light: LightAngles = SUN) -> np.ndarray:
     az, el = math.radians(light.azimuth), math.radians(light.elevation)
     rise = math.tan(el)
     steps = int(math.ceil(float(height.max() - height.min()) / rise)) + 1
+    rows, cols = height.shape
+    # the plate and its wrap-around `steps` cells deep: each step's cells are a view of it, not a copy
+    wrapped = np.pad(height, steps, mode="wrap")
     out = np.ones(height.shape, bool)
+    raised = np.empty_like(height)
+    below = np.empty(height.shape, bool)
     for k in range(1, steps + 1):
         sx, sy = round(k * math.sin(az)), round(k * math.cos(az))
-        ahead = np.roll(height, (-sy, -sx), axis=(0, 1))  # the cell k steps toward the light
-        out &= ahead <= height + k * rise
+        ahead = wrapped[steps + sy:steps + sy + rows, steps + sx:steps + sx + cols]  # k steps toward the light
+        np.add(height, k * rise, out=raised)
+        np.less_equal(ahead, raised, out=below)
+        out &= below
     return out
 
 
@@ -78,7 +84,7 @@ def shade(surface: Surface, light: LightAngles = SUN) -> Shading:
     direct = np.clip(surface.normal @ light_vector(light), 0.0, None) * shadowless
     irradiance = AMBIENT + (1.0 - AMBIENT) * direct
     radiance = (surface.albedo * irradiance[:, None]).astype(np.float32)
-    return Shading(radiance, np.ascontiguousarray(radiance[:, (2, 1, 0)]), direct)
+    return Shading(radiance, direct)
 
 
 @lru_cache(maxsize=4)

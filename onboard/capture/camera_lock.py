@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from btf.capture_settings import CaptureSettings
+from btf.capture_settings import CaptureSettings, bounded_source
 from hal.controls import describe
 from hal.interfaces import Camera, CameraControls, CameraSettings, HalError
 from onboard.config import CameraConfig
@@ -83,4 +83,5 @@ class CameraLock:
         return held_by_wire(CaptureSettings(
             exposure_us=now.exposure_us, gain=now.gain, white_balance_kelvin=kelvin,
             white_balance_gains=None if kelvin is not None else now.white_balance_gains,
-            sensor_temperature_c=now.sensor_temperature_c, unlocked=not now.locked))
+            sensor_temperature_c=now.sensor_temperature_c, unlocked=not now.locked,
+            source=None if now.source is None else bounded_source(now.source)))

@@ -125,7 +125,7 @@ def load_exposure(state_dir: str | Path) -> float | None:
             return None
         value = float(raw["exposure_us"])
     except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
-        raise ValueError(f"{path}: not a stored exposure ({exc}); run `btf-robot calibrate exposure` again") from None
+        raise ValueError(f"{path}: not a stored exposure ({exc}); run 'btf-robot calibrate exposure' again") from None
     if not (math.isfinite(value) and value > 0):
         raise ValueError(f"{path}: exposure {value!r} is not a positive number of microseconds")
     return value

@@ -21,7 +21,7 @@ import dataclasses
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, TypeVar
+from typing import Any, Callable, ClassVar, NamedTuple, TypeVar
 
 import numpy as np
 
@@ -32,22 +32,58 @@ from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, 
 from btf.fit.fitter import FrameFitter
 from btf.record import FittedModel
 from hal.devices import Hal
-from hal.interfaces import CameraSettings, HalError, ViewAngles, view_from_orientation
+from hal.interfaces import CameraSettings, DeviceGone, DeviceSpent, HalError, ViewAngles, view_from_orientation
 from onboard.capture import skip
 from onboard.capture.camera_lock import CameraLock, reference_level
 from onboard.config import Config
+from radio.packets.schema import Recent
 
 T = TypeVar("T")
 MAX_POSES_REMEMBERED = 512  # previous models kept per pose for the UNCHANGED rule
 PUMP_S = 0.01  # how often the link is serviced while a step runs in the worker
 
 
-class PoseSkipped(Exception):
-    """A pose could not be measured after its retries; `reason` says which step failed."""
+@dataclass(frozen=True, slots=True)
+class PoseTiming:
+    """One pose's compute by step, seconds: features, segmentation, fit (the skip rules, the
+    fit, the camera record and any brackets), dependence, encode (its packet bodies)."""
 
-    def __init__(self, reason: str) -> None:
+    features: float = 0.0
+    segmentation: float = 0.0
+    fit: float = 0.0
+    dependence: float = 0.0
+    encode: float = 0.0
+
+    STEPS: ClassVar[tuple[str, ...]] = ("features", "segmentation", "fit", "dependence", "encode")
+
+    @property
+    def total(self) -> float:
+        return self.features + self.segmentation + self.fit + self.dependence + self.encode
+
+    def milliseconds(self) -> dict[str, float]:
+        """Each step and the total in ms, to 0.1 ms (the robot's log line)."""
+        return {**{f"{k}_ms": round(getattr(self, k) * 1e3, 1) for k in self.STEPS},
+                "total_ms": round(self.total * 1e3, 1)}
+
+
+class Segmented(NamedTuple):
+    """A frame's labels as the segmentation step gives them (a plain (labels, changed) pair
+    also does): `small` the MASK packet's map of them and `counts` each label's pixels, when
+    the step already counted them (else the pipeline does)."""
+
+    labels: np.ndarray
+    changed: bool
+    small: np.ndarray | None = None
+    counts: np.ndarray | None = None
+
+
+class PoseSkipped(Exception):
+    """A pose could not be measured after its retries; `reason` says which step failed, `fault`
+    whether a device did (then the sweep tries the pose again after its plan)."""
+
+    def __init__(self, reason: str, fault: bool = False) -> None:
         super().__init__(reason)
-        self.reason = reason
+        self.reason, self.fault = reason, fault
 
 
 @dataclass(frozen=True, slots=True)
@@ -68,6 +104,8 @@ class FittedView:
     # each region's observed levels, and its grain and band correlation when configured
     dependence: dict[int, Dependence] | None = None
     camera: CaptureSettings | None = None  # what it was taken with (None: a frame from elsewhere)
+    small: np.ndarray | None = field(default=None, repr=False)  # `labels` as MASK pools them, when known
+    timing: PoseTiming = PoseTiming()  # its compute by step (encode: filled where it is encoded)
 
 
 def feature_spec(cfg: Config) -> FeatureSpec:
@@ -82,7 +120,7 @@ class Pipeline:
         self,
         cfg: Config | Callable[[], Config],
         hal: Hal,
-        segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple[np.ndarray, bool]],
+        segmenter: Callable[[FeatureFrame, np.ndarray, ViewAngles], tuple],
         pump: Callable[[], None] | None = None,
         sleep: Callable[[float], None] = time.sleep,
         resend_mask: Callable[[], None] = lambda: None,
@@ -103,7 +141,7 @@ class Pipeline:
         self.pca_pending = False  # fitted, not yet attached to a capture
         self._fitter: FrameFitter | None = None
         self._previous: dict[tuple[int, int], dict[tuple[int, int], FittedModel]] = {}
-        self.faults: list[str] = []  # every retried fault, for STATUS
+        self.faults: Recent = Recent(32)  # every retried fault, for STATUS
         self.lock = CameraLock(hal.camera, cfg.camera) if hal is not None else None
 
     @property
@@ -145,16 +183,17 @@ class Pipeline:
     def retry(self, step: str, fn: Callable[[], T]) -> T:
         """`fn()`, tried `sweep.retries` more times on a device fault; PoseSkipped with the last one."""
         attempts = self.cfg.sweep.retries + 1
-        last = ""
+        last, spent = "", False
         for attempt in range(attempts):
             try:
                 return fn()
+            except DeviceGone as exc:  # not there: no retry helps now (the sweep waits for it)
+                raise DeviceGone(f"{step}: {exc}") from exc
             except (HalError, OSError, TimeoutError, ValueError) as exc:
-                last = f"{type(exc).__name__}: {exc}"
+                last, spent = f"{type(exc).__name__}: {exc}", isinstance(exc, DeviceSpent)
                 self.faults.append(f"{step}: {last}")
-                del self.faults[:-32]
                 self.pump()
-        raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}")
+        raise PoseSkipped(f"{step} failed after {attempts} attempts: {last}", fault=not spent)
 
     def move(self, view: ViewAngles) -> None:
         """Send the goals, then poll until settled; each bus call has its own retries."""
@@ -169,14 +208,15 @@ class Pipeline:
         while self.retry("settle", lambda: bus.is_moving(ids)):
             if time.monotonic() > deadline:
                 raise PoseSkipped(f"settle failed: servos {ids} still moving after "
-                                  f"{self.cfg.sweep.settle_timeout_s:.1f} s")
+                                  f"{self.cfg.sweep.settle_timeout_s:.1f} s", fault=True)
             self.pump()
             self.sleep(0.005)
         reached = self.retry("positions", lambda: bus.positions(ids))
         tol = arm.joints.tolerance_deg
         for sid, goal in goals.items():
             if abs(reached[sid] - goal) > tol:
-                raise PoseSkipped(f"move: servo {sid} stopped at {reached[sid]:.1f}°, short of {goal:.1f}°")
+                raise PoseSkipped(f"move: servo {sid} stopped at {reached[sid]:.1f}°, short of {goal:.1f}°",
+                                  fault=True)
 
     def measure_view(self) -> ViewAngles:
         v = self.retry("tracker", lambda: view_from_orientation(self.hal.tracker.orientation()))
@@ -255,6 +295,8 @@ class Pipeline:
     def _process(self, frame: np.ndarray, commanded: ViewAngles, measured: ViewAngles,
                  settings: CameraSettings | None) -> FittedView:
         cfg = self.cfg  # a SET while this runs applies from the next frame
+        clock = time.perf_counter
+        t0 = clock()
         try:
             if self.spec.space is FeatureSpace.PCA and self.pca is None:
                 self.pca = PcaBasis.fit(frame)  # once per scene; sent with the scene
@@ -262,9 +304,12 @@ class Pipeline:
             feats = compute(frame, self.spec, self.pca)
         except ValueError as exc:  # e.g. a band the camera does not have: skip with the reason
             raise PoseSkipped(f"features: {exc}") from None
-        labels, changed = self.segmenter(feats, frame, measured)
+        t1 = clock()
+        seg = Segmented(*self.segmenter(feats, frame, measured))
+        labels, changed = seg.labels, seg.changed
+        t2 = clock()
         n_labels = cfg.segment.n_labels
-        counts = skip.label_counts(labels, n_labels)
+        counts = skip.label_counts(labels, n_labels) if seg.counts is None else seg.counts[:n_labels]
         keep = skip.kept_labels(counts, cfg.skip.min_pixels)
         data = feats.data
         stride = skip.subsample_stride(counts, keep, cfg.skip.percentile_precision, data.shape[1])
@@ -283,14 +328,16 @@ class Pipeline:
             remember(self._previous, key, results)
         pca = self.pca if self.pca_pending else None
         self.pca_pending = False
+        t3 = clock()
         dep = None
         if cfg.features.dependence and results and not same:  # a bounded second pass
             dep = dependence.measure(data, labels, {k: r.model for k, r in primary.items()}, feats.levels,
                                      levels_seen=seen)
         elif results and not same:  # the levels each region took: free, and what synthesis keeps to
             dep = {lab: Dependence.observed(*seen[lab]) for lab in {lab for lab, _ in results} if lab in seen}
+        timing = PoseTiming(t1 - t0, t2 - t1, t3 - t2, clock() - t3)
         return FittedView(commanded, measured, feats.band_names, feats.levels, results, dropped,
-                          labels, changed, same, stride, pca, dep, camera)
+                          labels, changed, same, stride, pca, dep, camera, seg.small, timing)
 
     def bracket(self, results: dict[tuple[int, int], FittedModel], camera: CaptureSettings, labels: np.ndarray,
                 stride: int, levels: int) -> tuple[dict[tuple[int, int], FittedModel], CaptureSettings]:

@@ -14,16 +14,16 @@ from typing import Any
 import numpy as np
 
 from btf.fit.features import FeatureFrame
-from btf.fit.isodata import IsodataParams, Labeller, fit_centres, spread, subsample
+from btf.fit.isodata import IsodataParams, Labeller, fit_centres, light_gain, spread, subsample
 from hal.devices import Hal
 from hal.interfaces import ViewAngles
 from hal.state_file import write_state
 from onboard.capture.mask_file import load_mask
 from onboard.capture.palette import Palette
-from onboard.capture.pipeline import PoseSkipped
+from onboard.capture.pipeline import PoseSkipped, Segmented
 from onboard.config import Config, ConfigError, SegmentConfig
 from radio.packets.base import MAX_LABELS
-from radio.packets.mask import MAX_SIDE, downsample_labels
+from radio.packets.mask import MAX_SIDE, pool_labels
 
 
 class SegmentMethod(enum.Enum):
@@ -36,9 +36,11 @@ class Segmenter:
 
     ISODATA centres belong to the scene, not the frame: they are fitted once, matched to
     the palette, and baked into a `Labeller`; later frames are only looked up. A cheap
-    drift check on a small sample refits when the centres no longer fit the view.
-    Centres are refitted when the mean distance to the nearest centre on `drift_sample`
-    pixels grows past (1 + refit_drift) times its value when they were fitted; 0: every frame.
+    drift check on a small sample refits when the centres no longer fit the view: when the
+    mean distance to the nearest centre on `drift_sample` pixels grows past (1 + refit_drift)
+    times its value when they were fitted, even with the view's light level allowed for (one
+    gain over all bands: a sweep over one scene sees it brighter or darker by view angle and
+    exposure, and that is what a BTF measures, not a new scene); 0: every frame.
     A map is changed when more than `change_fraction` of the MASK map's cells differ
     from the last one sent (`mask_side`: the longest side of that map).
     """
@@ -76,7 +78,8 @@ class Segmenter:
         self.refit_drift = refit_drift
         self.drift_sample = drift_sample
         self.changed = False
-        self.small: np.ndarray | None = None
+        self.small: np.ndarray | None = None  # the last map noted, pooled as the MASK packet pools it
+        self.counts: np.ndarray | None = None  # its pixels per label 0..255
         self._sent: np.ndarray | None = None
         self.palette: Palette | None = None
         self._mask: np.ndarray | None = None
@@ -123,8 +126,7 @@ class Segmenter:
         self._frames += 1
         check = subsample(x, self.drift_sample, p.seed + self._frames)
         lab = self._labeller
-        if (lab is None or lab.bands != x.shape[1] or self.refit_drift == 0
-                or spread(check, lab.centres) > self._fit_spread * (1 + self.refit_drift)):
+        if lab is None or lab.bands != x.shape[1] or self.refit_drift == 0 or self._drifted(check, lab.centres):
             centres = fit_centres(subsample(x, p.subsample, p.seed), p)
             lab = self._labeller = Labeller(centres, self.palette.match(centres))
             # One level of slack keeps a near-perfect fit from refitting on noise.
@@ -132,14 +134,20 @@ class Segmenter:
             self.refits += 1
         return lab.assign(data)
 
+    def _drifted(self, check: np.ndarray, centres: np.ndarray) -> bool:
+        """Whether the scene's centres no longer fit the sample, at its own light level."""
+        limit = self._fit_spread * (1 + self.refit_drift)
+        return spread(check, centres) > limit and spread(check / light_gain(check, centres), centres) > limit
+
     def force_send(self) -> None:
         """The next map counts as changed (the host asked for the mask)."""
         self._sent = None
 
     def note(self, labels: np.ndarray) -> None:
         """Record this frame's label map (from any source) and set `changed`: the map compared
-        is the one the MASK packet carries (radio.packets.mask.downsample_labels)."""
-        small = downsample_labels(labels, self.mask_side)
+        is the one the MASK packet carries (radio.packets.mask.downsample_labels), pooled in the
+        same count that gives each label's pixels (`counts`)."""
+        small, self.counts = pool_labels(labels, self.mask_side)
         sent = self._sent
         self.changed = (
             sent is None or sent.shape != small.shape
@@ -148,6 +156,11 @@ class Segmenter:
         if self.changed:
             self._sent = small
         self.small = small
+
+    def segmented(self, labels: np.ndarray) -> Segmented:
+        """The pipeline's view of the map just noted: the pooled map only when it is the one a
+        MASK packet carries (`mask_side` at its most)."""
+        return Segmented(labels, self.changed, self.small if self.mask_side == MAX_SIDE else None, self.counts)
 
 
 class Segmentation:
@@ -204,7 +217,7 @@ class Segmentation:
         """The next capture sends its label map whether or not it changed."""
         self.segmenter.force_send()
 
-    def __call__(self, feats: Any, frame: Any, measured: ViewAngles) -> tuple[Any, bool]:
+    def __call__(self, feats: Any, frame: Any, measured: ViewAngles) -> Segmented:
         method = self.cfg.segment.method
         if method == "scene":
             labels = self.truth.true_labels()
@@ -217,4 +230,4 @@ class Segmentation:
             except ValueError as exc:
                 raise PoseSkipped(f"segment: {exc}") from None
             self._save_palette()
-        return labels, self.segmenter.changed
+        return self.segmenter.segmented(labels)

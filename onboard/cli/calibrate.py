@@ -23,7 +23,7 @@ from hal.factory import HalConfigError, build_hal
 from hal.geometry import GOOD_FIT_DEG, NADIR_TOLERANCE_DEG, SQUARE_TOLERANCE_DEG, calibrate_arm, calibrate_tracker
 from onboard.capture.camera_lock import CameraLock
 from onboard.capture.exposure import calibrate_exposure, plan_extremes, save_exposure
-from onboard.cli.runner import CliError
+from onboard.cli.runner import CliError, HelpFormatter, bounded
 from onboard.cli.selftest import _hal_options
 from onboard.config import Config, SweepConfig, load
 from onboard.sweep.plan import SweepPlan
@@ -32,17 +32,52 @@ if TYPE_CHECKING:
     from hal.devices import Hal
 
 
+# Each target: one line for the list of targets, what its own --help says it does, and an example.
+TARGETS = {
+    "arm": ("fit the arm's joint offsets and signs against the tracker, and store them",
+            ("Move the arm through several poses, fit each joint's offset and sign (servo = sign * joint + offset) "
+             "against the tracker, and store the fit in the state dir (arm_calibration.json), which run and "
+             "selftest --config apply. Exit status 0 when the fit is good and stored, 1 when the hardware needs a "
+             "person (what to do is printed)."),
+            "calibrate arm --config robot.toml"),
+    "tracker": ("name the axis remap the tracker's mounting needs (nothing stored)",
+                ("Point the camera straight down, read the tracker, and name the BNO055 axis remap its mounting "
+                 "needs ([hal] tracker_remap); nothing is stored. Exit status 0 when the remap in force is right, "
+                 "1 when it is not (the setting to make is printed)."),
+                "calibrate tracker --config robot.toml"),
+    "exposure": ("store the exposure that keeps the sweep's brightest view below saturation",
+                 ("Measure the extremes of the config's sweep plan and store the exposure that keeps the brightest "
+                  "view below saturation by [camera] calibrate_margin (camera_exposure.json in the state dir, "
+                  "which run applies). Exit status 0 when stored, 1 when no exposure fits (what to do is printed)."),
+                 "calibrate exposure --config robot.toml"),
+}
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("what", choices=("arm", "tracker", "exposure"))
+    targets = p.add_subparsers(dest="what", required=True, metavar="TARGET",
+                               help="what to calibrate (each has its own --help)")
+    for name, (summary, description, example) in TARGETS.items():
+        t = targets.add_parser(name, help=summary, description=description, epilog=f"example:\n  btf-robot {example}",
+                               formatter_class=HelpFormatter)
+        _common_options(t)
+        if name == "exposure":
+            t.add_argument("--start-exposure", type=bounded(float, 1, 1e8, "microseconds"), metavar="US",
+                           help="the first exposure tried, in microseconds (default: where the camera stands)")
+        else:
+            t.add_argument("--tracker-remap", metavar="P", help="try this BNO055 remap (P0..P7 or CONFIG/SIGN) "
+                                                                "instead of the config's")
+            _fault_options(t)
+
+
+def _common_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--hal", choices=("fake", "emulated", "real"), help="device body (default: config or BTF_HAL)")
     p.add_argument("--config", metavar="FILE", help="robot TOML config: its [hal] section and state_dir")
-    p.add_argument("--state-dir", metavar="DIR", help="where the arm calibration is kept (default: the config's, "
+    p.add_argument("--state-dir", metavar="DIR", help="where the calibration is kept (default: the config's, "
                                                       "else ./state)")
-    p.add_argument("--tracker-remap", metavar="P", help="try this BNO055 remap (P0..P7 or CONFIG/SIGN) instead of "
-                                                        "the config's")
-    p.add_argument("--start-exposure", type=float, metavar="US",
-                   help="exposure: the first exposure tried, in microseconds (default: where the camera stands)")
     p.add_argument("--json", action="store_true", help="one JSON object instead of text")
+
+
+def _fault_options(p: argparse.ArgumentParser) -> None:
     fake = p.add_argument_group("deliberate faults of the fake and emulated bodies")
     fake.add_argument("--fake-joint-offset", action="append", default=[], metavar="JOINT=DEG",
                       help="build the arm with this joint off by DEG (yaw or tilt; repeatable)")
@@ -50,7 +85,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                       help="build the arm with this joint's servo turning the other way")
     fake.add_argument("--fake-tracker-mount", metavar="NAME",
                       help="mount the tracker wrongly: upside_down, turned_90, turned_180, turned_270, ...")
-    fake.add_argument("--fake-tracker-bias", type=float, metavar="DEG", help="tracker bias (default 0.5)")
+    fake.add_argument("--fake-tracker-bias", type=bounded(float, -180, 180, "degrees"), metavar="DEG",
+                      help="tracker bias (default 0.5)")
 
 
 def _options(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
@@ -61,23 +97,23 @@ def _options(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
     if args.state_dir:
         state_dir = Path(args.state_dir)
     offsets = {}
-    for item in args.fake_joint_offset:
+    for item in getattr(args, "fake_joint_offset", []):
         joint, _, deg = item.partition("=")
         try:
             offsets[joint.strip()] = float(deg)
         except ValueError:
             raise CliError(f"--fake-joint-offset wants JOINT=DEG such as tilt=3, got {item!r}") from None
-    faults = {"fake_joint_offsets": offsets or None, "fake_joint_reversed": args.fake_joint_reversed or None,
-              "fake_tracker_mount": args.fake_tracker_mount, "fake_tracker_bias_deg": args.fake_tracker_bias}
+    given = vars(args)  # the faults and the remap are options of arm and tracker only
+    faults = {"fake_joint_offsets": offsets or None, "fake_joint_reversed": given.get("fake_joint_reversed") or None,
+              "fake_tracker_mount": given.get("fake_tracker_mount"),
+              "fake_tracker_bias_deg": given.get("fake_tracker_bias")}
     options.update({k: v for k, v in faults.items() if v is not None})
-    if args.tracker_remap:
-        options["tracker_remap"] = args.tracker_remap
+    if given.get("tracker_remap"):
+        options["tracker_remap"] = given["tracker_remap"]
     return options, state_dir
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.start_exposure is not None and not (args.start_exposure > 0 and args.start_exposure < float("inf")):
-        raise CliError(f"--start-exposure must be a positive number of microseconds, got {args.start_exposure:g}")
     options, state_dir = _options(args)
     try:
         hal = build_hal(options, state_dir=state_dir)
@@ -124,9 +160,9 @@ def _arm(args: argparse.Namespace, hal: Hal, state_dir: Path) -> int:
           f"{report.check_error_deg:.2f} deg")
     if not report.ok:
         print(f"NOT stored: a residual above {GOOD_FIT_DEG:g} deg is no rigid offset. On real hardware: tighten the "
-              "servo horns and the tracker's mount, check `btf-robot calibrate tracker`, then run this again.")
+              "servo horns and the tracker's mount, check 'btf-robot calibrate tracker', then run this again.")
         return 1
-    print(f"stored in {stored}; `btf-robot run` applies it at start (remove the file to go back to the config's "
+    print(f"stored in {stored}; 'btf-robot run' applies it at start (remove the file to go back to the config's "
           "[hal] arm calibration)")
     for name in ("yaw", "tilt"):
         if getattr(report.fit, name).sign < 0:
@@ -157,7 +193,7 @@ def _tracker(args: argparse.Namespace, hal: Hal) -> int:
     setting = r.needed.placement or f"0x{r.needed.config:02X}/0x{r.needed.sign:02X}"
     print(f'set tracker_remap = "{setting}" in [hal] of the robot config (the driver writes it at every start; '
           "the BNO055 forgets it at power-off), or remount the tracker upright; then run "
-          "`btf-robot calibrate tracker` again (try it now with --tracker-remap " + setting + ")")
+          "'btf-robot calibrate tracker' again (try it now with --tracker-remap " + setting + ")")
     return 1
 
 
@@ -173,7 +209,7 @@ def _exposure(args: argparse.Namespace, hal: Hal, state_dir: Path) -> int:
         granted = lock.set_exposure(args.start_exposure)
     if not granted.locked:
         print(f"calibrate exposure: the camera does not hold a manual exposure ({describe(granted)}); lock it "
-              "first (`btf-robot selftest` names what it refuses)", file=sys.stderr)
+              "first ('btf-robot selftest' names what it refuses)", file=sys.stderr)
         return 1
     hal.arm.enable()
 
@@ -210,6 +246,6 @@ def _exposure_said(args: argparse.Namespace, hal: Hal, report: Any, stored: str 
     b = report.brightest
     print(f"  chosen: {report.exposure_us:.0f} us, the brightest view (elevation {b.elevation:g}, azimuth "
           f"{b.azimuth:g}) topping at {100 * (1 - report.margin):.0f}% of full scale")
-    print(f"stored in {stored}; `btf-robot run` applies it over [camera] exposure (remove the file to go back to "
+    print(f"stored in {stored}; 'btf-robot run' applies it over [camera] exposure (remove the file to go back to "
           "the config's)")
     return 0

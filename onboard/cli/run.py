@@ -2,12 +2,15 @@
 
 Exit status 2: the configuration is wrong (restarting cannot mend it); 1: the environment is
 (a full disk, a device or port not there yet: systemd restarts it, see examples/btf-robot.service).
+Everything the configuration decides is checked before anything is created on disk: the state
+directory is made only once the configuration, the key, the HAL and the segmentation stand.
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
 import errno
+import json
 import logging
 import os
 import signal
@@ -17,19 +20,23 @@ import tempfile
 import time
 from pathlib import Path
 
-from hal.factory import build_hal
-from hal.interfaces import HalError
+from serial import SerialException
+
+from hal.factory import HalConfigError, build_hal, choose_body
+from hal.interfaces import Body, HalError
 from onboard import config as config_mod
 from onboard.capture.exposure import EXPOSURE_FILE, load_exposure
 from onboard.capture.segmentation import Segmentation
-from onboard.cli.runner import CliError, RetryLater
+from onboard.cli.runner import CliError, RetryLater, bounded
 from onboard.config import CameraValue, ConfigError
 from onboard.link.outbox import OutboxError
 from onboard.runtime import Runtime, open_state
 from onboard.watchdog import Notifier
 from radio.auth import CounterFileLost, FileCounterStore, write_fresh
+from radio.channel_port import parse_url
 from radio.keys import KeyFileError, load_key
 from radio.link import Link
+from radio.packets.base import iso_time
 from radio.ports import open_url
 from radio.pump import LinkPump
 
@@ -40,12 +47,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", help="override link.url (a device, pty path, loop://, socket://, btfsim://?port=...)")
     p.add_argument("--exit-when-idle", action="store_true",
                    help="exit 0 once no sweep is running and every packet is acknowledged")
-    p.add_argument("--max-seconds", type=float, default=0.0, help="stop after this long (0: never)")
+    p.add_argument("--max-seconds", type=bounded(float, 0, None, "seconds"), default=0.0,
+                   help="stop after this many seconds (0: never)")
     p.add_argument("--new-sweep", action="store_true",
                    help="start a new sweep of the config's plan even if its last sweep finished "
                         "(by default an interrupted sweep resumes and a finished one is not repeated)")
+    p.add_argument("--log-json", action="store_true",
+                   help="log one JSON object per line (time, message and the line's fields, e.g. each "
+                        "pose's compute by step) instead of plain text")
     p.add_argument("--new-key", action="store_true",
-                   help="link.key_file holds a key never used before (just made by `btf-host keygen`): "
+                   help="link.key_file holds a key never used before (just made by 'btf-host keygen'): "
                         "start its link counters afresh; only needed with [link] clock = \"none\"")
 
 
@@ -57,8 +68,8 @@ def _setup(args: argparse.Namespace):
         if args.port:
             cfg = dataclasses.replace(cfg, link=dataclasses.replace(cfg.link, url=args.port))
         config_mod.check(cfg)
+        _check_devices(cfg)
         config_mod.check_key_file(cfg)
-        _check_state_dir(cfg.state_dir)
         try:
             key = load_key(cfg.link.key_file)
         except KeyFileError as exc:
@@ -66,6 +77,22 @@ def _setup(args: argparse.Namespace):
     except ConfigError as exc:
         raise CliError(str(exc)) from None
     return cfg, key
+
+
+def _check_devices(cfg) -> None:
+    """What the HAL and the link need of the configuration, said before anything opens: a body
+    chosen (hal.body or BTF_HAL), a servo port for the real one, a simulated radio's options."""
+    try:
+        body = choose_body({"body": cfg.hal.body}, os.environ)
+    except HalConfigError as exc:
+        raise ConfigError(f"hal: {exc}") from None
+    if body is Body.REAL and not cfg.hal.servo_port:
+        raise ConfigError("hal.servo_port is required for the real body (e.g. /dev/ttyUSB0)")
+    if cfg.link.url.lower().startswith("btfsim:"):
+        try:
+            parse_url(cfg.link.url)
+        except SerialException as exc:
+            raise ConfigError(f"link.url: {exc}") from None
 
 
 def _calibrated_exposure(cfg):
@@ -132,9 +159,8 @@ def _counters(cfg, new_key: bool):
         raise RetryLater(f"state_dir {cfg.state_dir}: counters: {exc}") from None
 
 
-def _build(cfg, key: bytes, args: argparse.Namespace, hal, port):
+def _build(cfg, key: bytes, args: argparse.Namespace, hal, port, segment: Segmentation):
     """The runtime on its link; what opening its state had to say is in its notes."""
-    segment = Segmentation(cfg, hal)
     counters = _counters(cfg, args.new_key)
     try:
         outbox, disk, note = open_state(cfg)
@@ -143,8 +169,6 @@ def _build(cfg, key: bytes, args: argparse.Namespace, hal, port):
     link = Link(cfg.link.node_id, cfg.link.peer_id, cfg.link.link_id, key, counters,
                 mtu=cfg.link.mtu, heartbeat=cfg.link.heartbeat_s, link_timeout=cfg.link.failsafe_s,
                 incarnation=bytes.fromhex(outbox.incarnation))
-    h, w = cfg.hal.size
-    hal.camera.open(w, h)
     rt = Runtime(cfg, hal, LinkPump(link, port), segment, outbox=outbox, disk=disk, notifier=Notifier(),
                  new_sweep=args.new_sweep)
     # A missing counters file beside a new outbox is a first start (or a whole state lost, which
@@ -155,15 +179,26 @@ def _build(cfg, key: bytes, args: argparse.Namespace, hal, port):
     return rt
 
 
-def console_log() -> None:
+class JsonLines(logging.Formatter):
+    """A log record as one JSON object: its UTC time, level, message and the fields it carries
+    (`extra={"fields": {...}}`, e.g. a pose's compute by step)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        line = {"time": iso_time(record.created), "level": record.levelname.lower(), "message": record.getMessage()}
+        line.update(getattr(record, "fields", {}))
+        return json.dumps(line, separators=(",", ":"))
+
+
+def console_log(as_json: bool = False) -> None:
     """One short line per pose, command and link change on stderr: plain text for journald,
-    which stamps each line; a terminal gets the time in front."""
+    which stamps each line; a terminal gets the time in front; `as_json`: JSON lines."""
     log = logging.getLogger("btf.robot")
     for old in list(log.handlers):
         log.removeHandler(old)
     handler = logging.StreamHandler(sys.stderr)
     tty = hasattr(sys.stderr, "isatty") and sys.stderr.isatty()
-    handler.setFormatter(logging.Formatter("%(asctime)s %(message)s" if tty else "%(message)s", "%H:%M:%S"))
+    handler.setFormatter(JsonLines() if as_json else
+                         logging.Formatter("%(asctime)s %(message)s" if tty else "%(message)s", "%H:%M:%S"))
     log.addHandler(handler)
     log.setLevel(logging.INFO)
     log.propagate = False
@@ -171,20 +206,33 @@ def console_log() -> None:
 
 def run(args: argparse.Namespace) -> int:
     cfg, key = _setup(args)
-    console_log()
+    console_log(getattr(args, "log_json", False))
 
     cfg = _calibrated_exposure(cfg)
     try:
         hal = build_hal(cfg.hal, state_dir=cfg.state_dir)  # with the arm calibration stored there
-    except HalError as exc:
+    except HalConfigError as exc:  # no body chosen, an unknown option: restarting cannot mend it
+        raise CliError(f"hal: {exc}") from None
+    except HalError as exc:  # a device not there yet
         raise RetryLater(f"hal: {exc}") from None
+    try:
+        hal.camera.open(cfg.hal.size[1], cfg.hal.size[0])
+        segment = Segmentation(cfg, hal)  # reads the palette kept in state_dir, writes nothing
+        _check_state_dir(cfg.state_dir)  # the first thing made on disk
+    except BaseException as exc:
+        hal.close()
+        if isinstance(exc, ConfigError) or (isinstance(exc, HalError) and hal.body is not Body.REAL):
+            raise CliError(f"hal: {exc}" if isinstance(exc, HalError) else str(exc)) from None  # no device to wait for
+        if isinstance(exc, HalError):
+            raise RetryLater(f"hal: camera: {exc}") from None
+        raise
     try:
         port = _open_port(cfg.link.url, cfg.link.baud)
     except Exception as exc:
         hal.close()
         raise RetryLater(f"link.url {cfg.link.url}: cannot open: {exc}") from None
     try:
-        rt = _build(cfg, key, args, hal, port)
+        rt = _build(cfg, key, args, hal, port, segment)
     except (CliError, RetryLater):
         hal.close()
         port.close()

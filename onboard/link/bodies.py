@@ -6,8 +6,8 @@ outbox database so a restart never reuses one.
 """
 from __future__ import annotations
 
+import dataclasses
 import time
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
@@ -16,11 +16,8 @@ import numpy as np
 from hal.interfaces import ViewAngles
 from onboard.capture.pipeline import FittedView
 from radio import packets as pk
-
-
-def iso_time(t: float) -> str:
-    """A wall-clock time as STATUS shows it to a person: ISO 8601 in UTC, to the second."""
-    return datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+from radio.packets.base import iso_time  # noqa: F401  (the robot's log lines show times with it)
+from radio.packets.commands import fit_answer
 
 
 class SeqCounter:
@@ -71,40 +68,66 @@ def models_body(robot_id: int, seq: int, now: float, space: str, cap: FittedView
     return int(pk.Kind.MODELS), body
 
 
+def fitting_models_body(robot_id: int, seq: int, now: float, space: str,
+                        cap: FittedView) -> tuple[tuple[int, bytes], tuple[int, ...]]:
+    """MODELS for a capture within the link's largest message (`pk.MAX_BODY`), and the regions
+    left out to fit: none unless every region's models would not fit (many labels of many 16-bit
+    bands), then the fewest, smallest by pixel count first."""
+    try:
+        return models_body(robot_id, seq, now, space, cap), ()
+    except pk.PacketTooLarge:
+        pass
+    counts: dict[int, int] = {}
+    for (label, _), r in cap.results.items():
+        counts[label] = int(r.count)
+    order = sorted(counts, key=lambda lab: (-counts[lab], lab))  # the largest regions kept first
+    best, fits, over = models_body(robot_id, seq, now, space, only_labels(cap, ())), 0, len(order)
+    while over - fits > 1:  # the first `fits` regions fit, the first `over` do not
+        mid = (fits + over) // 2
+        try:
+            best, fits = models_body(robot_id, seq, now, space, only_labels(cap, order[:mid])), mid
+        except pk.PacketTooLarge:
+            over = mid
+    return best, tuple(sorted(order[fits:]))
+
+
+def only_labels(cap: FittedView, labels) -> FittedView:
+    """`cap` with the models, dependence and brackets of `labels` only."""
+    keep = set(labels)
+    camera = cap.camera
+    if camera is not None and camera.bracketed:
+        camera = dataclasses.replace(camera, bracketed={k: v for k, v in camera.bracketed.items() if k in keep})
+    return dataclasses.replace(
+        cap, results={k: r for k, r in cap.results.items() if k[0] in keep}, camera=camera,
+        dependence=None if cap.dependence is None else {k: d for k, d in cap.dependence.items() if k in keep})
+
+
 def unchanged_body(robot_id: int, seq: int, ref_seq: int, now: float, cap: FittedView) -> tuple[int, bytes]:
     packet = pk.UnchangedPacket(robot_id, seq, now, _pose(cap.commanded), _pose(cap.measured), ref_seq)
     return int(pk.Kind.UNCHANGED), pk.encode(packet)
 
 
-def mask_body(robot_id: int, seq: int, labels: np.ndarray) -> tuple[int, bytes]:
-    return int(pk.Kind.MASK), pk.encode_mask(labels, robot_id=robot_id, seq=seq)
+def mask_body(robot_id: int, seq: int, labels: np.ndarray, pooled: np.ndarray | None = None) -> tuple[int, bytes]:
+    """MASK for a label map; `pooled`: the map the segmentation already pooled from it."""
+    return int(pk.Kind.MASK), pk.encode_mask(labels, robot_id=robot_id, seq=seq, pooled=pooled)
 
 
 def status_body(robot_id: int, now: float, state: pk.RobotState, pose: ViewAngles | None,
                 pending: int, used: int, last_seq: int | None, text: str,
-                extras: dict | None = None) -> tuple[int, bytes]:
+                report: pk.StatusReport | None = None) -> tuple[int, bytes]:
     packet = pk.StatusPacket(robot_id, now, state, None if pose is None else _pose(pose),
-                             pending, used, last_seq, text[:500], _extras(extras or {}))
+                             pending, used, last_seq, text, report=report or pk.StatusReport())
     return int(pk.Kind.STATUS), pk.encode(packet)
 
 
-def reply_body(command_id: int, ok: bool, text: str, extras: dict | None = None,
+def reply_body(command_id: int, ok: bool, text: str, answer: dict | pk.StatusReport | None = None,
                reason: pk.Reason = pk.Reason.INTERNAL) -> tuple[int, bytes]:
-    if ok:
-        packet: Any = pk.AckPacket(command_id, text[:500], _extras(extras or {}))
-        return int(pk.Kind.ACK), pk.encode(packet)
-    return int(pk.Kind.NACK), pk.encode(pk.NackPacket(command_id, reason, text[:500]))
-
-
-def _extras(d: dict) -> dict:
-    """Fit a result map into the packet's extension fields (16 keys, scalars or short lists)."""
-    out: dict[str, Any] = {}
-    for k, v in list(d.items())[:16]:
-        if isinstance(v, (list, tuple)):
-            v = [x if isinstance(x, (int, float, str, bool)) or x is None else str(x) for x in v][:64]
-        elif not (isinstance(v, (int, float, str, bool)) or v is None):
-            v = str(v)
-        if isinstance(v, str):
-            v = v[:500]
-        out[str(k)[:32]] = v
-    return out
+    """The ACK (text: the command's name; `answer`: its values, or STATUS's report) or the NACK
+    of a command. The encoder cuts a long text visibly."""
+    if not ok:
+        return int(pk.Kind.NACK), pk.encode(pk.NackPacket(command_id, reason, text))
+    if isinstance(answer, pk.StatusReport):
+        return int(pk.Kind.ACK), pk.encode(pk.AckPacket(command_id, text, status=answer))
+    name = pk.CommandName.__members__.get(text)
+    values = fit_answer(name, dict(answer or {})) if name is not None else dict(answer or {})
+    return int(pk.Kind.ACK), pk.encode(pk.AckPacket(command_id, text, values))

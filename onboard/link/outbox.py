@@ -17,6 +17,10 @@ A `replies` table remembers the answers to the last `REMEMBERED_REPLIES` command
 committed with the packet carrying it and whatever the command produced; a command id
 seen again (the base retrying across a robot restart) is answered from here, not re-run.
 
+A message the base could not use (its NACK UNUSABLE names the message) is set aside with
+`set_aside`: moved, with its body when it is still queued, into the dead letters
+(`onboard.link.dead_letters`), so it is never sent again and STATUS shows it.
+
 A new outbox draws a random `incarnation`: its row ids and capture numbers start again, and
 the host tells them from the old ones' by it. On a full disk the writes that free room or say
 why (acknowledgement deletes, replies, STATUS: every write without a `reserve`) restart the
@@ -36,12 +40,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Mapping, TypeVar
 
+from onboard.link import dead_letters
+
 T = TypeVar("T")
 
 # Rough per-row cost of SQLite's record and index overhead, so many tiny rows count too.
 ROW_OVERHEAD = 64
 DEFAULT_QUOTA = 64 * 1024 * 1024
-SCHEMA_VERSION = 3  # 2 added the state table, 3 the replies; older files gain them on open
+SCHEMA_VERSION = 4  # 2 added the state table, 3 the replies, 4 the dead letters; older files gain them on open
 INCARNATION_KEY = "incarnation"  # state entry: this outbox's random id, hex
 REMEMBERED_REPLIES = 256  # commands answered from memory; older ids are forgotten
 
@@ -60,6 +66,7 @@ _SCHEMA = (
     kind INTEGER NOT NULL,
     body BLOB NOT NULL
 )""",
+    dead_letters.TABLE,
 )
 
 
@@ -126,7 +133,7 @@ class Outbox:
             raise OutboxError(f"outbox {self.path}: WAL journal not available (got {mode!r})")
         self._conn.execute("PRAGMA synchronous=FULL")
         version = self._conn.execute("PRAGMA user_version").fetchone()[0]
-        if version not in (0, 1, 2, SCHEMA_VERSION):
+        if version not in (0, 1, 2, 3, SCHEMA_VERSION):
             raise OutboxDamaged(f"outbox {self.path}: schema version {version}, expected {SCHEMA_VERSION}")
         for statement in _SCHEMA:
             self._conn.execute(statement)
@@ -142,7 +149,8 @@ class Outbox:
         for table, test in (("outbox", "typeof(kind) != 'integer' OR typeof(body) != 'blob'"),
                             ("replies", "typeof(command_id) != 'integer' OR typeof(msg_id) != 'integer'"
                                         " OR typeof(kind) != 'integer' OR typeof(body) != 'blob'"),
-                            ("state", "typeof(key) != 'text' OR typeof(value) != 'text'")):
+                            ("state", "typeof(key) != 'text' OR typeof(value) != 'text'"),
+                            ("dead_letters", dead_letters.TYPES)):
             bad = self._conn.execute(f"SELECT COUNT(*) FROM {table} WHERE {test}").fetchone()[0]
             if bad:
                 return f"{bad} {table} rows hold values of the wrong type"
@@ -300,6 +308,38 @@ class Outbox:
             self._count -= 1
             self._payload -= int(row[0])
             return True
+
+    def set_aside(self, msg_id: int, reason: str, refused: float | None = None) -> bool:
+        """The base refused message `msg_id`: out of the queue (never offered again) into the dead
+        letters (`onboard.link.dead_letters`), with its body if it is still queued; whether it was."""
+        stamp = time.time() if refused is None else float(refused)
+        with self._lock:
+            row = self._conn.execute("SELECT kind, created, body FROM outbox WHERE id = ?", (msg_id,)).fetchone()
+            known = self._conn.execute("SELECT 1 FROM dead_letters WHERE msg_id = ?", (msg_id,)).fetchone()
+            if known is not None and row is None:
+                return False
+            self._write(lambda: self._transaction(
+                lambda: dead_letters.move(self._conn, msg_id, row, stamp, str(reason), known is not None)),
+                essential=True)
+            if row is not None:
+                self._count -= 1
+                self._payload -= len(row[2])
+            return row is not None
+
+    def dead_letters(self, limit: int = dead_letters.KEPT) -> tuple[int, list[dead_letters.DeadLetter]]:
+        """How many messages were ever set aside, and the newest `limit` of those kept."""
+        with self._lock:
+            return dead_letters.read(self._conn, limit)
+
+    def _transaction(self, body: Callable[[], None]) -> None:
+        self._conn.execute("BEGIN IMMEDIATE")
+        try:
+            body()
+            self._conn.execute("COMMIT")
+        except BaseException:
+            if self._conn.in_transaction:
+                self._conn.execute("ROLLBACK")
+            raise
 
     # -- accounting --------------------------------------------------------------------
 

@@ -1,6 +1,12 @@
 """The robot's side of the link: every packet is stored in the outbox before it is offered to
 the link, at most `link.window` at a time, and leaves the outbox when the base acknowledges
-it. Link events other than acknowledgements go back to the runtime.
+it. Link events other than acknowledgements go back to the runtime, except the base's refusal
+of a message (a NACK UNUSABLE naming it): that message is set aside in the outbox's dead
+letters, never offered again (`Outbox.set_aside`), and the refusal is one of the robot's errors.
+A message the link refuses as longer than its largest (an outbox row written before that bound)
+is set aside the same way and the next one offered: one message never stalls those after it.
+A refusal that arrives in the same read as the message's acknowledgement is applied first, so
+the dead letter keeps the body; one that arrives later finds only the id to keep.
 
 On a full disk an acknowledged row whose delete fails stays marked and is deleted at a later
 turn (it is never offered again), and a STATUS or a query's answer that not even the outbox's
@@ -13,7 +19,9 @@ from typing import Callable
 from onboard.link.outbox import Outbox, OutboxError, OutboxFull
 from onboard.link.transport import Transport
 from onboard.state import RuntimeState
-from radio.link import Acked, Event, LinkStats, QueueFull
+from radio import FrameError
+from radio import packets as pk
+from radio.link import Acked, Delivered, Event, LinkStats, MessageTooLarge, QueueFull
 
 
 class LinkService:
@@ -43,6 +51,9 @@ class LinkService:
             return True
         except QueueFull:
             return False
+        except MessageTooLarge as exc:
+            self.state.errors.append(f"a message of kind {kind} not sent: {exc}")
+            return False
 
     def read(self, now: float) -> list[Event]:
         """The link's events; acknowledged packets leave the outbox here."""
@@ -51,7 +62,7 @@ class LinkService:
             if isinstance(event, Acked):
                 self._in_flight.discard(event.msg_id)
                 self._unacked.add(event.msg_id)
-            else:
+            elif not (isinstance(event, Delivered) and self._refused(event.payload)):
                 events.append(event)
         for msg_id in sorted(self._unacked):
             try:
@@ -66,6 +77,36 @@ class LinkService:
             if gone:
                 self.on_ack()
         return events
+
+    def _refused(self, payload: bytes) -> bool:
+        """Whether `payload` is the base's refusal of one of the robot's messages (then set aside)."""
+        try:
+            p = pk.decode(payload)
+        except FrameError:
+            return False  # the dispatcher says what was wrong with it
+        if not isinstance(p, pk.NackPacket) or p.msg_id is None:
+            return False
+        self._in_flight.discard(p.msg_id)
+        try:
+            held = self.outbox.set_aside(p.msg_id, p.text)
+        except OutboxError as exc:
+            self.state.errors.append(f"the base refused message {p.msg_id} ({p.text}); not set aside: {exc}")
+            return True
+        self.state.errors.append(f"the base refused message {p.msg_id} ({p.text}): set aside, not sent again"
+                                 + ("" if held else " (already acknowledged)"))
+        if held:
+            self.on_ack()
+        return True
+
+    def _too_large(self, msg_id: int, why: str) -> None:
+        """The link refused message `msg_id` as too long: into the dead letters, never offered again."""
+        try:
+            self.outbox.set_aside(msg_id, why)
+        except OutboxError as exc:
+            self.state.errors.append(f"message {msg_id} not sent ({why}); not set aside: {exc}")
+            return
+        self.state.errors.append(f"message {msg_id} not sent: {why}; set aside")
+        self.on_ack()
 
     def stats(self) -> LinkStats | None:
         """The link's counters (None for a link that keeps none)."""
@@ -82,6 +123,10 @@ class LinkService:
                     self.transport.send(body, msg_id=msg_id, now=now)
                 except QueueFull:  # the link holds enough already: offer the rest later
                     break
+                except MessageTooLarge as exc:
+                    self._last_sent = msg_id
+                    self._too_large(msg_id, str(exc))
+                    continue
                 self._in_flight.add(msg_id)
                 self._last_sent = msg_id
         self.transport.write(now)

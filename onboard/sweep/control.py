@@ -3,53 +3,70 @@
 Exactly once: a pose's packets, the sweep progress that marks it done and the next capture
 sequence are one outbox transaction (`Outbox.commit`), so a kill at any instant leaves the
 pose queued and done, or neither; the host drops re-sent rows by (robot, incarnation, seq).
-Faults become retries, then a skipped pose with its reason; the sweep goes on. A full outbox
-or a disk short of room pauses it; the pose is measured again when there is room.
+Faults become retries, then a skipped pose with its reason; the sweep goes on, and after its
+last planned pose measures again each pose a device fault skipped (`[sweep] retry_skipped`
+more tries each). Its last STATUS lists the poses still missing, each with why. A full outbox
+or a disk short of room pauses it; the pose is measured again when there is room. A device that
+is gone (unplugged) pauses it too, said in a STATUS and the log: the pose is tried again every
+PROBE_S, and once the device answers the sweep resumes (said again), nothing skipped for it.
 """
 from __future__ import annotations
 
 import copy
 import logging
+import time
+from typing import Callable
 
 from onboard.capture.filing import Captures
+from hal.interfaces import DeviceGone
 from onboard.capture.pipeline import FittedView, Pipeline, PoseSkipped
 from onboard.link.outbox import DiskFull, Outbox, OutboxFull
-from onboard.link.status import Status
+from onboard.link.status import Status, skipped_pose, sweep_report
 from onboard.state import Interrupted, Mode, RuntimeState
 from onboard.sweep.plan import Boot, SweepPlan, SweepProgress, SweepStore
 from onboard.watchdog import Notifier
 from radio import packets as pk
 
 log = logging.getLogger("btf.robot")
+PROBE_S = 1.0  # while a device is gone, how often its pose is tried again
 
 
 class SweepControl:
     def __init__(self, state: RuntimeState, outbox: Outbox, pipeline: Pipeline, captures: Captures,
-                 status: Status, notifier: Notifier, reserve: int, new_sweep: bool = False) -> None:
+                 status: Status, notifier: Notifier, reserve: int, new_sweep: bool = False,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.state, self.outbox, self.pipeline, self.captures = state, outbox, pipeline, captures
         self.status, self.notifier = status, notifier
         self.sweeps = SweepStore(outbox, legacy_dir=state.cfg.state_dir)
         self.reserve = reserve  # outbox bytes kept free for replies and STATUS
         self.new_sweep = new_sweep
         self.full_until_ack = False  # a commit hit the quota: measure again after an ACK
+        self.clock = clock
+        self._probe_at = 0.0  # when a pose waiting for a device that is gone is tried again
 
     def plan(self) -> SweepPlan:
         s = self.state.cfg.sweep
         return SweepPlan(s.start, s.stop, s.step, s.azimuths)
 
+    def _in_force(self, progress: SweepProgress) -> SweepProgress:
+        """`progress` with the configuration's tries of a skipped pose (a SET changes them)."""
+        progress.retry_skipped = self.state.cfg.sweep.retry_skipped
+        return progress
+
     def start(self, plan: SweepPlan | None = None) -> SweepProgress:
         """A new sweep (of the config's plan unless one is given), saved before it begins."""
-        self.state.progress = self.sweeps.start(self.plan() if plan is None else plan)
+        self.state.progress = self._in_force(self.sweeps.start(self.plan() if plan is None else plan))
         self.state.mode = Mode.SWEEPING
         return self.state.progress
 
     def begin(self, progress: SweepProgress) -> None:
         """`progress` (a new sweep already committed) is the sweep now."""
-        self.state.progress, self.state.mode = progress, Mode.SWEEPING
+        self.state.progress, self.state.mode = self._in_force(progress), Mode.SWEEPING
 
     def autostart(self) -> Boot:
         """At boot: resume an interrupted sweep; never restart a finished one on its own."""
-        self.state.progress, boot = self.sweeps.autostart(self.plan(), new=self.new_sweep)
+        progress, boot = self.sweeps.autostart(self.plan(), new=self.new_sweep)
+        self.state.progress = self._in_force(progress)
         self.new_sweep = False
         if boot in (Boot.STARTED, Boot.RESUMED):
             self.state.mode = Mode.SWEEPING
@@ -70,6 +87,8 @@ class SweepControl:
         The pose's packets and the progress past it are committed together; when the
         outbox cannot take them, nothing changes and the pose is measured again later."""
         p = self.state.progress
+        if p is not None:
+            self._in_force(p)
         if p is None or p.done:
             return "done"
         if self.outbox.full_for(self.reserve) or self.full_until_ack:
@@ -79,18 +98,44 @@ class SweepControl:
             self.state.paused_reason = (f"disk {self.state.disk}: {self.state.disk_free} bytes free under "
                                         f"{self.state.cfg.state_dir}; acquisition paused until there is room")
             return "paused"
-        nxt = copy.deepcopy(p)
+        if self.state.device_gone and self.clock() < self._probe_at:
+            return "paused"
+        nxt, cap, reason, fault = copy.deepcopy(p), None, "", False
         try:
             with self.state.arm_work():
                 cap = self._measure(p)
         except Interrupted:  # the command or failsafe that interrupted has set the state
             return "interrupted"
+        except DeviceGone as exc:
+            return self._gone(str(exc))
+        except PoseSkipped as exc:
+            reason, fault = exc.reason, exc.fault
         except Exception as exc:
             # A fault the pipeline did not foresee skips the pose with its reason
             # instead of failing the same pose forever.
-            reason = exc.reason if isinstance(exc, PoseSkipped) else f"internal: {type(exc).__name__}: {exc}"
-            return self._file(p, nxt, None, reason)
-        return self._file(p, nxt, cap, "")
+            reason = f"internal: {type(exc).__name__}: {exc}"
+        self._back()
+        return self._file(p, nxt, cap, reason, fault)
+
+    def _gone(self, why: str) -> str:
+        """A device is not there: nothing measured, nothing skipped; the pose is tried again in
+        PROBE_S. The first time, said (log, errors, STATUS)."""
+        self._probe_at = self.clock() + PROBE_S
+        if not self.state.device_gone:
+            self.state.device_gone = f"{why}; sweep paused until it answers again"
+            text = f"device gone: {self.state.device_gone}"
+            self.state.errors.append(text)
+            log.warning("%s", text)
+            self.status.send(text, pk.StatusReport(paused=self.state.device_gone))
+        return "paused"
+
+    def _back(self) -> None:
+        """The devices answer again (the pose went through, or failed for another reason): said."""
+        if self.state.device_gone:
+            text = f"devices answer again: sweep resumes (was: {self.state.device_gone.split('; sweep paused')[0]})"
+            self.state.device_gone = ""
+            log.warning("%s", text)
+            self.status.send(text, pk.StatusReport(paused=self.state.paused_reason))
 
     def _measure(self, p: SweepProgress) -> FittedView:
         commanded = p.current()
@@ -102,14 +147,15 @@ class SweepControl:
                               f"{measured.azimuth:.1f}°)")
         return self.pipeline.shoot(commanded, measured)
 
-    def _file(self, p: SweepProgress, nxt: SweepProgress, cap: FittedView | None, reason: str) -> str:
+    def _file(self, p: SweepProgress, nxt: SweepProgress, cap: FittedView | None, reason: str,
+              fault: bool = False) -> str:
         """Commit the pose's packets (or its skip) with the progress past it."""
+        index, again = p.current_index(), p.retrying
         if cap is None:
-            skipped = nxt.record_skipped(reason)
-            packets = [self.status.packet(f"skipped pose: {skipped.reason}", {
-                "sweep": p.sweep_id, "skipped_index": skipped.index,
-                "skipped_elevation": skipped.commanded.elevation,
-                "skipped_azimuth": skipped.commanded.azimuth})]
+            skipped = nxt.record_skipped(reason, fault)
+            said = f"skipped pose again (try {skipped.tries} of {p.retry_skipped + 1})" if again else "skipped pose"
+            packets = [self.status.packet(f"{said}: {skipped.reason}", pk.StatusReport(
+                sweep=sweep_report(p, skipped=pk.Kept((skipped_pose(skipped),)))))]
             state: dict[str, str] = {}
             result = "skipped"
         else:
@@ -119,9 +165,7 @@ class SweepControl:
             result = "measured"
         if nxt.done:
             nxt.active = False
-            packets.append(self.status.packet("sweep done", {
-                "sweep": p.sweep_id, "measured": len(nxt.measured), "skipped": len(nxt.skipped)},
-                pk.RobotState.IDLE))
+            packets.append(self._done_packet(p, nxt))
         try:
             self.outbox.commit(packets, {**state, **self.sweeps.entry(nxt)}, reserve=self.reserve)
         except OutboxFull as exc:
@@ -134,9 +178,27 @@ class SweepControl:
         self.state.progress = nxt
         if cap is not None:
             self.captures.filed(cap, seq)
-        self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {nxt.next_index} of {nxt.plan.count}")
+        self._said(p, nxt, index, again, cap, seq if cap is not None else None, reason, result)
+        return result
+
+    def _done_packet(self, p: SweepProgress, nxt: SweepProgress) -> tuple[int, bytes]:
+        """The STATUS that ends a sweep: how many poses were measured, and the ones missing with why."""
+        missing = tuple(skipped_pose(k) for k in nxt.skipped)
+        return self.status.packet(
+            "sweep done",
+            pk.StatusReport(sweep=sweep_report(p, active=False, measured=len(nxt.measured),
+                                               skipped=pk.Kept((), len(nxt.skipped)), missing=pk.Kept(missing))),
+            pk.RobotState.IDLE)
+
+    def _said(self, p: SweepProgress, nxt: SweepProgress, index: int | None, again: bool, cap: FittedView | None,
+              seq: int | None, reason: str, result: str) -> None:
+        """The pose's line in the log and the service status; the sweep's when it is done."""
+        n = p.plan.count
+        self.notifier.status(f"sweep {nxt.sweep_id}: {result} pose {(index or 0) + 1} of {n}"
+                             + (" (again)" if again else ""))
         where = p.current()
-        pose = f"sweep {p.sweep_id} pose {nxt.next_index}/{nxt.plan.count} at {where.elevation:.1f}°/{where.azimuth:.1f}°"
+        pose = (f"sweep {p.sweep_id} pose {(index or 0) + 1}/{n}{' again' if again else ''} at "
+                f"{where.elevation:.1f}°/{where.azimuth:.1f}°")
         if cap is None:
             log.info("%s: skipped: %s", pose, reason)
         else:
@@ -144,7 +206,7 @@ class SweepControl:
                      cap.measured.azimuth, len(cap.results), " (unchanged)" if cap.unchanged else "")
         if nxt.done:
             self.state.mode = Mode.IDLE
-            done = f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, {len(nxt.skipped)} skipped"
+            done = f"sweep {nxt.sweep_id} done: {len(nxt.measured)} measured, {len(nxt.skipped)} missing"
             self.notifier.status(done)
-            log.info("%s", done)
-        return result
+            log.info("%s%s", done, "".join(f"; {k.commanded.elevation:.1f}°/{k.commanded.azimuth:.1f}°: {k.reason}"
+                                           for k in nxt.skipped[:8]) + ("; ..." if len(nxt.skipped) > 8 else ""))

@@ -2,7 +2,10 @@
 
 A plan is the list of commanded poses (elevation start..stop by step, for each
 azimuth). Progress records, per sweep, which poses are done, the measured view each
-capture was filed under, and the poses skipped with their reason.
+capture was filed under, and the poses skipped with their reason. After the plan's last
+pose, each pose skipped for a device fault is measured again, up to `retry_skipped` more
+times (`[sweep] retry_skipped`), the oldest first; the sweep is done when every pose is
+measured or out of tries, and the poses still skipped are the ones missing, each with why.
 
 Progress lives in the outbox database's state table, so the runtime commits a pose's
 packets and the progress that marks it done in one transaction: a kill at any instant
@@ -87,7 +90,9 @@ class SweepPlan:
 class SkippedPose:
     index: int
     commanded: ViewAngles
-    reason: str
+    reason: str  # why its last try failed
+    fault: bool = False  # a device failed (it may work when tried again), not the pose itself
+    tries: int = 1
 
 
 @dataclass
@@ -98,33 +103,67 @@ class SweepProgress:
     plan: SweepPlan
     next_index: int = 0
     measured: list[tuple[int, ViewAngles]] = field(default_factory=list)
-    skipped: list[SkippedPose] = field(default_factory=list)
+    skipped: list[SkippedPose] = field(default_factory=list)  # oldest first; measured again: removed
     active: bool = True
+    retry_skipped: int = 0  # more tries, after the plan, of a pose skipped for a device fault
 
     @property
     def poses(self) -> list[ViewAngles]:
         return self.plan.poses()
 
+    def _retry(self) -> SkippedPose | None:
+        """The skipped pose to try again, once the plan is through (None: none left to try)."""
+        if self.next_index < self.plan.count:
+            return None
+        return next((k for k in self.skipped if k.fault and k.tries <= self.retry_skipped), None)
+
+    @property
+    def retrying(self) -> bool:
+        """The plan is through and a skipped pose is being measured again."""
+        return self._retry() is not None
+
     @property
     def done(self) -> bool:
-        return self.next_index >= self.plan.count
+        return self.next_index >= self.plan.count and self._retry() is None
 
     def current(self) -> ViewAngles | None:
-        return None if self.done else self.plan.pose(self.next_index)
+        if self.next_index < self.plan.count:
+            return self.plan.pose(self.next_index)
+        again = self._retry()
+        return None if again is None else again.commanded
+
+    def current_index(self) -> int | None:
+        """The plan index of `current()`."""
+        if self.next_index < self.plan.count:
+            return self.next_index
+        again = self._retry()
+        return None if again is None else again.index
 
     def already_measured(self, view: ViewAngles, tolerance_deg: float) -> bool:
         """Whether a capture of this sweep was filed within tolerance of `view`."""
         return any(angular_distance(view, m) <= tolerance_deg for _, m in self.measured)
 
     def record_measured(self, view: ViewAngles) -> None:
-        self.measured.append((self.next_index, view))
-        self.next_index += 1
+        again = self._retry()
+        if again is None:
+            self.measured.append((self.next_index, view))
+            self.next_index += 1
+        else:
+            self.measured.append((again.index, view))
+            self.skipped.remove(again)
 
-    def record_skipped(self, reason: str) -> SkippedPose:
+    def record_skipped(self, reason: str, fault: bool = False) -> SkippedPose:
+        """The current pose failed for `reason` (`fault`: a device's, worth another try later)."""
+        again = self._retry()
+        if again is not None:  # one more try failed: it goes behind the others still to try
+            self.skipped.remove(again)
+            skipped = SkippedPose(again.index, again.commanded, reason, fault, again.tries + 1)
+            self.skipped.append(skipped)
+            return skipped
         pose = self.current()
         if pose is None:
             raise ValueError("the sweep is already complete")
-        skipped = SkippedPose(self.next_index, pose, reason)
+        skipped = SkippedPose(self.next_index, pose, reason, fault)
         self.skipped.append(skipped)
         self.next_index += 1
         return skipped
@@ -135,9 +174,10 @@ class SweepProgress:
             "plan": self.plan.to_record(),
             "next_index": self.next_index,
             "measured": [[i, v.elevation, v.azimuth] for i, v in self.measured],
-            "skipped": [[s.index, s.commanded.elevation, s.commanded.azimuth, s.reason]
+            "skipped": [[s.index, s.commanded.elevation, s.commanded.azimuth, s.reason, s.fault, s.tries]
                         for s in self.skipped],
             "active": self.active,
+            "retry_skipped": self.retry_skipped,
         }
 
     @classmethod
@@ -147,10 +187,17 @@ class SweepProgress:
             plan=SweepPlan.from_record(rec["plan"]),
             next_index=int(rec["next_index"]),
             measured=[(int(i), ViewAngles(float(e), float(a))) for i, e, a in rec["measured"]],
-            skipped=[SkippedPose(int(i), ViewAngles(float(e), float(a)), str(r))
-                     for i, e, a, r in rec["skipped"]],
+            # A sweep saved before retries held [index, elevation, azimuth, reason].
+            skipped=[SkippedPose(int(i), ViewAngles(float(e), float(a)), str(r), *_tried(more))
+                     for i, e, a, r, *more in rec["skipped"]],
             active=bool(rec["active"]),
+            retry_skipped=int(rec.get("retry_skipped", 0)),
         )
+
+
+def _tried(more: list) -> tuple[bool, int]:
+    fault, tries = (more + [False, 1])[:2]
+    return bool(fault), int(tries)
 
 
 def angular_distance(a: ViewAngles, b: ViewAngles) -> float:

@@ -1,12 +1,19 @@
-"""Packet bodies: schema-versioned msgpack arrays, one frozen dataclass per kind.
+"""Packet bodies: schema-versioned msgpack arrays, one frozen dataclass per kind, one module per
+kind (`models`: MODELS and UNCHANGED, `mask`, `status`, `command`, `answers`: ACK and NACK, `log`).
 
-A body is the msgpack array [SCHEMA_VERSION, kind, field, ...] with an optional trailing map
-of extension fields (`extras`) that later schema growth may use; everything else is decoded
-strictly. `decode` takes untrusted bytes: bounded unpacking, then the type and range of every
-field is checked; anything wrong raises `radio.FrameError` with the reason. `encode` checks
-its own output the same way, so a packet that encodes always decodes.
+A body is the msgpack array [version, kind, field, ...] with an optional trailing map of
+extension fields (`extras`). Each kind's fields are declared once, with their types and bounds
+(`radio.packets.schema`); the same declarations encode, decode and write the schema's document
+(`python -m radio.packets`, docs/packets.md). `decode` takes untrusted bytes: bounded unpacking,
+then the type and range of every field, nested records included, is checked; anything wrong
+raises `radio.FrameError` with the reason. `encode` fits what a sender may cut (a long text, the
+oldest items of a bounded list, counted) and checks its own output the same way, so a packet
+that encodes always decodes.
 
-MODELS (schema 3, layout in `radio.packets.models`) carry each model as four percentiles in
+A kind is encoded at its newest schema version (3; 4 for STATUS, ACK and NACK, 5 for MODELS,
+whose layouts grew); its older layouts still decode.
+
+MODELS (schema 5, layout in `radio.packets.models`) carry each model as four percentiles in
 fixed point: for 8-bit sensors 16-bit codes with a step of 2**-8 gray level, so each is within
 2**-9 < 0.01 gray level of the fitted value, and the host recomputes the robot's models bit for
 bit. An ordinary model costs 8 bytes; a label one bitmap bit and a varint of its pixel count and
@@ -16,228 +23,72 @@ bands with a maximal header is 279 bytes of body.
 """
 from __future__ import annotations
 
-import enum
 import struct
 from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Any, ClassVar
+from typing import Any
 
 from radio import FrameError
+from radio.packets.answers import AckPacket, NackPacket, Reason
 from radio.packets.base import (
     MAX_BODY,
+    NEWEST_VERSION,
     SCHEMA_VERSION,
-    UINT32,
     Kind,
-    angles_from_wire,
-    angles_to_wire,
+    PacketTooLarge,
     pack_body,
     split_fields,
     unpack_body,
-    want_enum,
-    want_float,
-    want_int,
-    want_str,
 )
-from radio.packets.commands import CommandName, check_args
+from radio.packets.command import CommandPacket
+from radio.packets.commands import CommandName
+from radio.packets.log import LogLevel, LogPacket
 from radio.packets.mask import MAX_SIDE, MaskPacket, downsample_labels, mask_packet
-from radio.packets.models import LabelModels, ModelsPacket, models_packet
+from radio.packets.models import LabelModels, ModelsPacket, UnchangedPacket, models_packet
+from radio.packets.schema import Kept, layout, newest, values_from_wire, values_to_wire, width
+from radio.packets.status import (
+    DeadLetter,
+    DeadLetters,
+    Disk,
+    FailsafeEvent,
+    Plan,
+    Rejection,
+    RobotState,
+    SkippedPose,
+    StatusPacket,
+    StatusReport,
+    SweepReport,
+)
 
 __all__ = [
-    "SCHEMA_VERSION", "MAX_BODY", "MAX_SIDE", "Kind", "CommandName", "Reason", "LogLevel",
+    "SCHEMA_VERSION", "NEWEST_VERSION", "MAX_BODY", "MAX_SIDE", "Kind", "CommandName", "Reason", "LogLevel",
     "RobotState", "LabelModels", "ModelsPacket", "UnchangedPacket", "MaskPacket", "StatusPacket",
-    "CommandPacket", "AckPacket", "NackPacket", "LogPacket", "Packet", "encode", "decode",
-    "encode_models", "encode_mask", "models_packet", "mask_packet", "downsample_labels",
+    "CommandPacket", "AckPacket", "NackPacket", "LogPacket", "Packet", "KINDS", "encode", "decode",
+    "encode_models", "encode_mask", "models_packet", "mask_packet", "downsample_labels", "StatusReport",
+    "SweepReport", "Plan", "SkippedPose", "FailsafeEvent", "Rejection", "Disk", "DeadLetter", "DeadLetters",
+    "Kept", "version_of", "PacketTooLarge",
 ]
-
-
-class Reason(enum.IntEnum):
-    """Why a command was refused (NACK)."""
-
-    UNKNOWN_COMMAND = 1
-    BAD_ARGUMENT = 2
-    BUSY = 3
-    OUT_OF_LIMITS = 4
-    HARDWARE = 5
-    OUTBOX_FULL = 6
-    NOT_FOUND = 7
-    INTERNAL = 8
-    TORQUE_OFF = 9  # the servos were released (TORQUE_OFF): TORQUE_ON first
-
-
-class LogLevel(enum.IntEnum):  # the values of the stdlib logging levels
-    DEBUG = 10
-    INFO = 20
-    WARNING = 30
-    ERROR = 40
-
-
-class RobotState(enum.IntEnum):
-    IDLE = 0
-    MOVING = 1
-    CAPTURING = 2
-    SWEEPING = 3
-    PAUSED = 4
-    FAULT = 5
-
-
-@dataclass(frozen=True, slots=True)
-class UnchangedPacket:
-    """A capture whose models all lie within tolerance of capture `ref_seq` at the same pose."""
-
-    KIND: ClassVar[Kind] = Kind.UNCHANGED
-    robot_id: int
-    seq: int
-    time: float
-    commanded: tuple[float, float]
-    measured: tuple[float, float]
-    ref_seq: int
-    extras: Mapping[str, Any] = field(default_factory=dict)
-
-    def _wire(self) -> list:
-        return [
-            self.robot_id, self.seq, float(self.time),
-            *angles_to_wire(self.commanded, "commanded"), *angles_to_wire(self.measured, "measured"),
-            self.ref_seq,
-        ]
-
-    @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> UnchangedPacket:
-        seq = want_int(f[1], "capture seq", 0, UINT32)
-        ref = want_int(f[7], "reference seq", 0, UINT32)
-        if ref >= seq:
-            raise FrameError(f"reference capture {ref} is not before capture {seq}")
-        return cls(
-            want_int(f[0], "robot id", 0, 0xFFFF), seq, want_float(f[2], "time", 0.0),
-            angles_from_wire(f[3], f[4], "commanded"), angles_from_wire(f[5], f[6], "measured"),
-            ref, extras,
-        )
-
-
-@dataclass(frozen=True, slots=True)
-class StatusPacket:
-    """The robot's state; also the payload of every heartbeat."""
-
-    KIND: ClassVar[Kind] = Kind.STATUS
-    robot_id: int
-    time: float
-    state: RobotState
-    pose: tuple[float, float] | None  # measured (elevation, azimuth), None if unknown
-    outbox_pending: int
-    outbox_bytes: int
-    last_seq: int | None
-    text: str = ""
-    extras: Mapping[str, Any] = field(default_factory=dict)
-
-    def _wire(self) -> list:
-        pose = [None, None] if self.pose is None else angles_to_wire(self.pose, "pose")
-        return [self.robot_id, float(self.time), int(self.state), *pose, self.outbox_pending,
-                self.outbox_bytes, self.last_seq, self.text]
-
-    @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> StatusPacket:
-        pose = None if f[3] is None and f[4] is None else angles_from_wire(f[3], f[4], "pose")
-        return cls(
-            want_int(f[0], "robot id", 0, 0xFFFF), want_float(f[1], "time", 0.0),
-            want_enum(f[2], RobotState, "robot state"), pose,
-            want_int(f[5], "outbox pending", 0, UINT32), want_int(f[6], "outbox bytes", 0, 2**63 - 1),
-            None if f[7] is None else want_int(f[7], "last seq", 0, UINT32),
-            want_str(f[8], "status text"), extras,
-        )
-
-
-@dataclass(frozen=True, slots=True)
-class CommandPacket:
-    """A remote-control command; `command_id` makes retries idempotent. Its arguments are
-    checked against the command table (`radio.packets.commands`)."""
-
-    KIND: ClassVar[Kind] = Kind.COMMAND
-    command_id: int
-    name: CommandName
-    args: Mapping[str, Any] = field(default_factory=dict)
-    extras: Mapping[str, Any] = field(default_factory=dict)
-
-    def _wire(self) -> list:
-        args = {k: list(v) if isinstance(v, tuple) else v for k, v in self.args.items()}
-        return [self.command_id, int(self.name), args]
-
-    @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> CommandPacket:
-        cid = want_int(f[0], "command id", 0, UINT32)
-        name = want_enum(f[1], CommandName, "command")
-        if not isinstance(f[2], dict):
-            raise FrameError(f"{name.name} arguments must be a map")
-        return cls(cid, name, check_args(name, f[2]), extras)
-
-
-@dataclass(frozen=True, slots=True)
-class AckPacket:
-    """The robot accepted (and, for quick commands, carried out) command `command_id`."""
-
-    KIND: ClassVar[Kind] = Kind.ACK
-    command_id: int
-    text: str = ""
-    extras: Mapping[str, Any] = field(default_factory=dict)
-
-    def _wire(self) -> list:
-        return [self.command_id, self.text]
-
-    @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> AckPacket:
-        return cls(want_int(f[0], "command id", 0, UINT32), want_str(f[1], "ack text"), extras)
-
-
-@dataclass(frozen=True, slots=True)
-class NackPacket:
-    """The robot refused command `command_id`, with a reason code and a human sentence."""
-
-    KIND: ClassVar[Kind] = Kind.NACK
-    command_id: int
-    reason: Reason
-    text: str = ""
-    extras: Mapping[str, Any] = field(default_factory=dict)
-
-    def _wire(self) -> list:
-        return [self.command_id, int(self.reason), self.text]
-
-    @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> NackPacket:
-        return cls(want_int(f[0], "command id", 0, UINT32), want_enum(f[1], Reason, "nack reason"),
-                   want_str(f[2], "nack text"), extras)
-
-
-@dataclass(frozen=True, slots=True)
-class LogPacket:
-    KIND: ClassVar[Kind] = Kind.LOG
-    robot_id: int
-    time: float
-    level: LogLevel
-    text: str
-    extras: Mapping[str, Any] = field(default_factory=dict)
-
-    def _wire(self) -> list:
-        return [self.robot_id, float(self.time), int(self.level), self.text]
-
-    @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> LogPacket:
-        return cls(want_int(f[0], "robot id", 0, 0xFFFF), want_float(f[1], "time", 0.0),
-                   want_enum(f[2], LogLevel, "log level"), want_str(f[3], "log text"), extras)
-
 
 Packet = (ModelsPacket | UnchangedPacket | MaskPacket | StatusPacket | CommandPacket
           | AckPacket | NackPacket | LogPacket)
-_CLASSES: dict[Kind, Any] = {
+KINDS: dict[Kind, Any] = {
     cls.KIND: cls for cls in (ModelsPacket, UnchangedPacket, MaskPacket, StatusPacket,
                               CommandPacket, AckPacket, NackPacket, LogPacket)
 }
-_NFIELDS = {Kind.MODELS: 6, Kind.UNCHANGED: 8, Kind.MASK: 8, Kind.STATUS: 9, Kind.COMMAND: 3,
-            Kind.ACK: 2, Kind.NACK: 3, Kind.LOG: 4}
+
+
+def version_of(kind: Kind) -> int:
+    """The schema version `kind` is encoded at."""
+    return newest(KINDS[kind])
 
 
 def _decode(body: bytes, compute: bool) -> Packet:
     items = unpack_body(body)
-    kind = Kind(items[1])
-    fields, extras = split_fields(items, kind, _NFIELDS[kind])
-    return _CLASSES[kind]._from_wire(fields, extras, compute)
+    version, kind = items[0], Kind(items[1])
+    cls = KINDS[kind]
+    if version > newest(cls):
+        raise FrameError(f"unsupported schema version {version} for {kind.name} (at most {newest(cls)})")
+    fields, extras = split_fields(items, kind, width(cls, version))
+    return cls.from_values(values_from_wire(layout(cls, version), fields), extras, version, compute)
 
 
 def decode(body: bytes) -> Packet:
@@ -246,11 +97,18 @@ def decode(body: bytes) -> Packet:
 
 
 def encode(packet: Packet) -> bytes:
-    """The packet's body; raises ValueError if a field is out of the schema's range."""
+    """The packet's body; raises ValueError if a field is out of the schema's range, and
+    PacketTooLarge (a ValueError) if the body would be longer than a link message (MAX_BODY)."""
     try:
-        body = pack_body(packet.KIND, packet._wire(), packet.extras)
+        cls = type(packet)
+        given = packet.wire_values()
+        values = {f.name: f.type.fit(given[f.name]) for f in layout(cls)}
+        body = pack_body(cls.KIND, newest(cls), values_to_wire(layout(cls), values), packet.extras)
+        if len(body) > MAX_BODY:
+            raise PacketTooLarge(f"{cls.KIND.name} body of {len(body)} bytes exceeds the link's largest "
+                                 f"message, {MAX_BODY} bytes")
         _decode(body, compute=False)  # the decoder's checks are the one statement of the schema
-    except (FrameError, OverflowError, TypeError, AttributeError, struct.error) as exc:
+    except (FrameError, OverflowError, TypeError, AttributeError, KeyError, struct.error) as exc:
         raise ValueError(f"cannot encode {type(packet).__name__}: {exc}") from None
     return body
 

@@ -7,21 +7,42 @@ from __future__ import annotations
 
 import enum
 import math
+from datetime import datetime, timezone
 from collections.abc import Mapping
 from typing import Any
 
 import msgpack
 
 from radio import FrameError
+from radio.fragment import MAX_MESSAGE
 
-SCHEMA_VERSION = 3  # 2: MODELS packs angles, labels, codes and records into one blob; 3: the read records
-MAX_BODY = 96 * 1024  # 256 labels x 16 bands x 4 codes x 4 bytes, with room to spare
+# The schema version every kind has a layout at; a kind whose layout grew since is encoded at its
+# own newer version (`radio.packets.schema.newest`), and its older layouts still decode.
+# 2: MODELS packs angles, labels, codes and records into one blob; 3: the read records;
+# 4: STATUS and the ACK of STATUS carry the typed report, a NACK may refuse a robot's message;
+# 5: the MODELS camera section's flags are a varint and may carry the frame's source file.
+SCHEMA_VERSION = 3
+NEWEST_VERSION = 5
+# A body is one link message: a longer one could not be sent (`radio.fragment.MAX_MESSAGE`).
+MAX_BODY = MAX_MESSAGE
 MAX_STR = 512
 MAX_ARRAY = 256
 MAX_EXTRAS = 16
+MAX_MAP = 64  # a nested record's fields
 MAX_EXTRA_KEY = 32
 MAX_EXTRA_LIST = 64
 UINT32 = 2**32 - 1
+UINT64 = 2**64 - 1
+INT64 = 2**63 - 1
+# A wall-clock time in seconds since 1970: no robot's clock reads past 2106, and a time that
+# cannot be shown as a date is refused with the packet, before anything is stored.
+MAX_TIME = float(2**32)
+
+
+def iso_time(t: float | None) -> str | None:
+    """A wall-clock time as a person reads it (the robot's log, the station's events, `cmd`, the
+    page): ISO 8601 in UTC, to the second; None stays None. Every time a packet decodes to has one."""
+    return None if t is None else datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 # -- sizes a real sensor cannot exceed ------------------------------------------------------
 # Every size a decoded field gives (a frame, a label map, a pixel count, label and band
@@ -35,6 +56,11 @@ MAX_BANDS = 16
 MAX_NAME = 16  # a feature space or band name
 MIN_LEVELS, MAX_LEVELS = 2, 65536  # a sensor's levels (PercentileCodec.for_levels' range)
 MAX_ANGLES = 64  # angles in a SWEEP command's list
+
+
+class PacketTooLarge(ValueError):
+    """A packet whose body would exceed MAX_BODY: the encoder refuses it (the sender decides
+    what to leave out or split), since no link could carry it."""
 
 
 class Kind(enum.IntEnum):
@@ -60,9 +86,9 @@ def unpack_body(body: bytes) -> list:
         raise FrameError(f"packet body of {len(body)} bytes exceeds {MAX_BODY}")
     try:
         obj = msgpack.unpackb(
-            bytes(body), raw=False, strict_map_key=True, use_list=True, timestamp=0,
+            bytes(body), raw=False, strict_map_key=False, use_list=True, timestamp=0,
             max_str_len=MAX_STR, max_bin_len=MAX_BODY, max_array_len=MAX_ARRAY,
-            max_map_len=MAX_EXTRAS, max_ext_len=0,
+            max_map_len=MAX_MAP, max_ext_len=0,
         )
     # msgpack reports malformed input as ValueError subclasses (also bad UTF-8), but
     # deep nesting and odd ext payloads can surface as other errors.
@@ -70,15 +96,15 @@ def unpack_body(body: bytes) -> list:
         raise FrameError(f"not a valid msgpack body: {exc}") from None
     if type(obj) is not list or len(obj) < 2:
         raise FrameError("packet body must be an array [version, kind, ...]")
-    if type(obj[0]) is not int or obj[0] != SCHEMA_VERSION:
-        raise FrameError(f"unsupported schema version {obj[0]!r} (expected {SCHEMA_VERSION})")
+    if type(obj[0]) is not int or not SCHEMA_VERSION <= obj[0] <= NEWEST_VERSION:
+        raise FrameError(f"unsupported schema version {obj[0]!r} (expected {SCHEMA_VERSION}..{NEWEST_VERSION})")
     if type(obj[1]) is not int or obj[1] not in Kind._value2member_map_:
         raise FrameError(f"unknown packet kind {obj[1]!r}")
     return obj
 
 
-def pack_body(kind: Kind, fields: list, extras: Extras) -> bytes:
-    items = [SCHEMA_VERSION, int(kind), *fields]
+def pack_body(kind: Kind, version: int, fields: list, extras: Extras) -> bytes:
+    items = [version, int(kind), *fields]
     if extras:
         items.append(check_extras(dict(extras), "extras"))
     return msgpack.packb(items, use_bin_type=True)

@@ -2,8 +2,9 @@
 
 Flagged by bit 6 of the blob's label-bitmap length byte, it follows the dependence section
 (before the model records). Layout, big-endian, each field present only when its flag is set:
-  flags    one byte: 0x01 unlocked, 0x02 exposure, 0x04 gain, 0x08 white balance in kelvin,
-           0x10 white balance gains, 0x20 sensor temperature, 0x40 reference, 0x80 brackets
+  flags    schema 5: a varint (one byte below 0x80); schemas 3 and 4: one byte. 0x01 unlocked,
+           0x02 exposure, 0x04 gain, 0x08 white balance in kelvin, 0x10 white balance gains,
+           0x20 sensor temperature, 0x40 reference, 0x80 brackets, 0x100 source (schema 5)
   exposure varint, µs
   gain     varint, 1/256 steps
   kelvin   varint, K
@@ -13,20 +14,22 @@ Flagged by bit 6 of the blob's label-bitmap length byte, it follows the dependen
            level as a percentile code of the capture's codec (2 bytes for 8-bit sensors)
   brackets one byte n (1..MAX_BRACKETS), n exposure varints (µs); one byte m, then m pairs
            (label id, 1-based bracket index), labels strictly increasing and in the capture
-A locked capture without reference or brackets costs 10 bytes (flags, exposure 3, gain 2,
-kelvin 2, sensor 2).
+  source   one byte n (1..64), n bytes of printable UTF-8: the file the frame was read from
+A locked capture without reference, brackets or source costs 10 bytes (flags, exposure 3, gain 2,
+kelvin 2, sensor 2); at schema 5 brackets or a source add one byte of flags.
 """
 from __future__ import annotations
 
 import dataclasses
 import struct
 
-from btf.capture_settings import MAX_BRACKETS, CaptureSettings
+from btf.capture_settings import MAX_BRACKETS, MAX_SOURCE, CaptureSettings
 from btf.codec import PercentileCodec
 from radio import FrameError
 from radio.varint import get_varint, put_varint
 
-UNLOCKED, EXPOSURE, GAIN, KELVIN, GAINS, SENSOR, REFERENCE, BRACKETS = (1 << i for i in range(8))
+UNLOCKED, EXPOSURE, GAIN, KELVIN, GAINS, SENSOR, REFERENCE, BRACKETS, SOURCE = (1 << i for i in range(9))
+VARINT_FLAGS = 5  # the schema version from which the flags are a varint (and may carry SOURCE)
 GAIN_SCALE, WB_GAIN_SCALE, SENSOR_SCALE, CLIPPED_SCALE = 256, 1024, 100, 255
 MAX_EXPOSURE_US = 2**32 - 1  # about 72 minutes
 _SENSOR = struct.Struct(">h")
@@ -53,8 +56,10 @@ def held_by_wire(s: CaptureSettings) -> CaptureSettings:
         sensor_temperature_c=within(s.sensor_temperature_c, SENSOR_SCALE, -32768, 32767))
 
 
-def encode_camera(s: CaptureSettings, n_bands: int, codec: PercentileCodec, label_ids: list[int]) -> bytes:
-    """The section's bytes for `s` (ValueError when a value does not fit its field)."""
+def encode_camera(s: CaptureSettings, n_bands: int, codec: PercentileCodec, label_ids: list[int],
+                  version: int = VARINT_FLAGS) -> bytes:
+    """The section's bytes for `s` at schema `version` (ValueError when a value does not fit its
+    field, or the version has no field for it)."""
     flags = UNLOCKED if s.unlocked else 0
     out = bytearray()
     if s.exposure_us is not None:
@@ -93,7 +98,18 @@ def encode_camera(s: CaptureSettings, n_bands: int, codec: PercentileCodec, labe
         out.append(len(s.bracketed))
         for label in sorted(s.bracketed):
             out += bytes((label, s.bracketed[label]))
-    return bytes((flags,)) + bytes(out)
+    if s.source is not None:
+        if version < VARINT_FLAGS:
+            raise ValueError(f"camera source needs schema {VARINT_FLAGS}")
+        flags |= SOURCE
+        raw = s.source.encode("utf-8")
+        out.append(len(raw))
+        out += raw
+    if version < VARINT_FLAGS:
+        return bytes((flags,)) + bytes(out)
+    head = bytearray()
+    put_varint(head, flags)
+    return bytes(head) + bytes(out)
 
 
 def _byte(blob: bytes, pos: int, name: str) -> tuple[int, int]:
@@ -110,9 +126,17 @@ def _varint(blob: bytes, pos: int, name: str, scale: int = 1) -> tuple[float, in
 
 
 def decode_camera(blob: bytes, pos: int, n_bands: int, codec: PercentileCodec,
-                  label_ids: list[int]) -> tuple[CaptureSettings, int]:
-    """(the settings, the position after the section); FrameError naming the bad field."""
-    flags, pos = _byte(blob, pos, "flags")
+                  label_ids: list[int], version: int = VARINT_FLAGS) -> tuple[CaptureSettings, int]:
+    """(the settings, the position after the section) of a schema-`version` body; FrameError
+    naming the bad field."""
+    if version < VARINT_FLAGS:
+        flags, pos = _byte(blob, pos, "flags")
+    else:
+        if pos >= len(blob):
+            raise FrameError("camera section ends inside its flags")
+        flags, pos = get_varint(blob, pos, "camera flags", 2)
+        if flags >= SOURCE << 1:
+            raise FrameError(f"camera flags 0x{flags:x} name fields this schema does not have")
     values: dict = {"unlocked": bool(flags & UNLOCKED)}
     if flags & KELVIN and flags & GAINS:
         raise FrameError("camera section gives both a white balance temperature and gains")
@@ -142,6 +166,8 @@ def decode_camera(blob: bytes, pos: int, n_bands: int, codec: PercentileCodec,
         values["reference_clipped"] = clipped / CLIPPED_SCALE
     if flags & BRACKETS:
         values["brackets"], values["bracketed"], pos = _brackets(blob, pos, label_ids, "exposure_us" in values)
+    if flags & SOURCE:
+        values["source"], pos = _source(blob, pos)
     try:
         return CaptureSettings(**values), pos
     except ValueError as exc:
@@ -169,3 +195,16 @@ def _brackets(blob: bytes, pos: int, label_ids: list[int],
     if any(not 1 <= i <= n for _, i in pairs):
         raise FrameError(f"camera bracketed label names a bracket outside 1..{n}")
     return tuple(exposures), dict(pairs), pos + 2 * m
+
+
+def _source(blob: bytes, pos: int) -> tuple[str, int]:
+    n, pos = _byte(blob, pos, "source length")
+    if not 1 <= n <= MAX_SOURCE or pos + n > len(blob):
+        raise FrameError(f"camera source of {n} bytes: 1..{MAX_SOURCE}, within the section")
+    try:
+        text = blob[pos:pos + n].decode("utf-8")
+    except UnicodeDecodeError:
+        raise FrameError("camera source is not UTF-8") from None
+    if not text.isprintable():
+        raise FrameError("camera source holds unprintable characters")
+    return text, pos + n

@@ -1,9 +1,9 @@
-"""The remote-control commands, declared once: each one's name, argument schema, what it
-does to the arm, its `btf-host cmd` form and help.
+"""The remote-control commands, declared once: each one's name, argument schema, answer
+schema, what it does to the arm, its `btf-host cmd` form and help.
 
-The packet decoder checks a COMMAND's arguments against `COMMANDS` (`check_args`), the robot
-dispatches on it (`onboard.dispatch`: `moves_arm`, `interrupts`, `query`), and `btf-host cmd`
-builds its subcommands and help from it (`tools.cli.cmd`).
+The packet decoder checks a COMMAND's arguments against `COMMANDS` (`check_args`) and an ACK's
+answer (`check_answer`), the robot dispatches on it (`onboard.dispatch`: `moves_arm`,
+`interrupts`, `query`), and `btf-host cmd` builds its subcommands and help from it (`tools.cli.cmd`).
 """
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from typing import Any, Callable
 
 from radio import FrameError
-from radio.packets.base import MAX_ANGLES, UINT32, check_extras, want_float, want_int, want_str
+from radio.packets.base import MAX_ANGLES, MAX_TIME, UINT32, check_extras, want_float, want_int, want_str
+from radio.packets.schema import Field, Flag, Float, Int, Maybe, Text
 
 
 class CommandName(enum.IntEnum):
@@ -42,6 +43,8 @@ class Arg:
     help: str = ""
     default: Any = None  # given on the command line when the option is left out
     metavar: str | None = None
+    limits: tuple[float, float] | None = None  # the range `check` accepts (each value of a list), for a person
+    unit: str = ""
 
 
 @dataclass(frozen=True, slots=True)
@@ -55,6 +58,8 @@ class Command:
     moves_arm: bool = False  # refused while a pose is being measured
     interrupts: bool = False  # ends the pose being measured
     query: bool = False  # reads state only: answered even in failsafe
+    answer: tuple[Field, ...] = ()  # the ACK's values (a Maybe one may be left out)
+    example: str = ""  # its arguments in a `btf-host cmd` example
 
     def key_sets(self) -> tuple[frozenset[str], ...]:
         return self.forms or (frozenset(a.key for a in self.args) - self.optional,)
@@ -68,7 +73,7 @@ def floats(text: str) -> list[float]:
     try:
         return [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
-        raise ValueError(f"{text!r}: expected comma-separated numbers") from None
+        raise ValueError("expected comma-separated numbers") from None
 
 
 def json_or_text(text: str) -> Any:
@@ -85,55 +90,95 @@ def _angle_list(v: Any, name: str, lo: float, hi: float) -> tuple[float, ...]:
     return tuple(want_float(x, name, lo, hi, allow_int=True) for x in v)
 
 
-def _angle(name: str, lo: float, hi: float) -> Callable[[Any], float]:
-    return lambda v: want_float(v, name, lo, hi, allow_int=True)
+def _angle(key: str, name: str, lo: float, hi: float, help: str, default: Any = None) -> Arg:
+    return Arg(key, lambda v: want_float(v, name, lo, hi, allow_int=True), f"--{key}", help=help, default=default,
+               limits=(lo, hi), unit="degrees")
+
+
+def _angles(key: str, lo: float, hi: float, help: str, default: Any = None) -> Arg:
+    return Arg(key, lambda v: _angle_list(v, key, lo, hi), f"--{key}", floats, help, default=default,
+               limits=(lo, hi), unit="degrees")
 
 
 C = CommandName
 COMMANDS: dict[CommandName, Command] = {c.name: c for c in (
-    Command(C.PING, "ping", "check the robot answers (its clock in the reply)", query=True),
+    Command(C.PING, "ping", "check the robot answers (its clock in the reply)", query=True,
+            answer=(Field("time", Float(0.0, MAX_TIME), "the robot's clock, seconds since 1970"),)),
     Command(C.STATUS, "status", "the robot's state", query=True),
     Command(C.GOTO, "goto", "move the arm; the reply holds the measured angle", (
-        Arg("elevation", _angle("elevation", -90.0, 90.0), "--elevation", help="degrees above the horizon"),
-        Arg("azimuth", _angle("azimuth", -360.0, 360.0), "--azimuth", help="degrees", default=0.0),
-    ), moves_arm=True),
-    Command(C.CAPTURE, "capture", "capture at the current pose", moves_arm=True),
+        _angle("elevation", "elevation", -90.0, 90.0, "degrees above the horizon, -90..90"),
+        _angle("azimuth", "azimuth", -360.0, 360.0, "degrees, -360..360", default=0.0),
+    ), moves_arm=True, example="--elevation 60 --azimuth 90",
+        answer=(Field("elevation", Float(-90.0, 90.0), "the measured elevation"),
+                Field("azimuth", Float(-720.0, 720.0), "the measured azimuth"))),
+    Command(C.CAPTURE, "capture", "capture at the current pose", moves_arm=True, answer=(
+        Field("seq", Int(0, UINT32), "the capture's number"),
+        Field("models", Int(0, 256 * 16), "models it holds"))),
     Command(C.SWEEP, "sweep", "start a sweep: --start/--stop/--step or --elevations", (
-        Arg("start", _angle("sweep start", -90.0, 90.0), "--start", help="first elevation, e.g. 90"),
-        Arg("stop", _angle("sweep stop", -90.0, 90.0), "--stop", help="last elevation, e.g. 30"),
-        Arg("step", _angle("sweep step", 0.1, 180.0), "--step", help="elevation step, e.g. 10"),
-        Arg("elevations", lambda v: _angle_list(v, "elevations", -90.0, 90.0), "--elevations", floats,
-            "explicit elevations, e.g. 90,80,70"),
-        Arg("azimuths", lambda v: _angle_list(v, "azimuths", -360.0, 360.0), "--azimuths", floats,
-            "e.g. 0,90", default=[0.0]),
+        _angle("start", "sweep start", -90.0, 90.0, "first elevation, e.g. 90"),
+        _angle("stop", "sweep stop", -90.0, 90.0, "last elevation, e.g. 30"),
+        _angle("step", "sweep step", 0.1, 180.0, "elevation step, e.g. 10"),
+        _angles("elevations", -90.0, 90.0, "explicit elevations, e.g. 90,80,70"),
+        _angles("azimuths", -360.0, 360.0, "e.g. 0,90", default=[0.0]),
     ), forms=(frozenset({"start", "stop", "step"}), frozenset({"elevations"})),
-        optional=frozenset({"azimuths"}), interrupts=True),
-    Command(C.ABORT, "abort", "stop the sweep and hold the arm", interrupts=True),
+        optional=frozenset({"azimuths"}), interrupts=True, example="--start 90 --stop 30 --step 10 --azimuths 0,90",
+        answer=(Field("sweep", Int(0, UINT32), "the new sweep's number"), Field("poses", Int(1, 4096), "its poses"))),
+    Command(C.ABORT, "abort", "stop the sweep and hold the arm", interrupts=True,
+            answer=(Field("aborted", Flag(), "always true"),)),
     Command(C.SET, "set", "change a run-time setting", (
         Arg("key", lambda v: want_str(v, "setting key", 64, allow_empty=False), "setting", str,
             "section.key, e.g. skip.min_pixels"),
         Arg("value", lambda v: check_extras({"value": v}, "setting")["value"], "value", json_or_text,
             "the value (JSON if it parses, else a string)"),
-    )),
+    ), example="skip.min_pixels 50",
+        answer=(Field("set", Text(64), "the key set"),
+                Field("camera", Maybe(Text(300)), "what the camera took, for a camera key"),
+                Field("locked", Maybe(Flag()), "whether the camera holds its settings, for a camera key"))),
     Command(C.TORQUE_OFF, "torque-off", "stop and release the servos (torque-on brings them back)",
-            interrupts=True),
-    Command(C.TORQUE_ON, "torque-on", "power the servos and hold the arm where it stands", moves_arm=True),
+            interrupts=True, answer=(Field("torque", Flag(), "false: released"),)),
+    Command(C.TORQUE_ON, "torque-on", "power the servos and hold the arm where it stands", moves_arm=True,
+            answer=(Field("torque", Flag(), "true: holding"),)),
     Command(C.REBOOT_SERVO, "reboot-servo", "reboot one servo (clears its alert)", (
-        Arg("servo_id", lambda v: want_int(v, "servo id", 0, 252), "--servo-id", int, "the servo's bus id"),
-    ), moves_arm=True),
+        Arg("servo_id", lambda v: want_int(v, "servo id", 0, 252), "--servo-id", int, "the servo's bus id, 0..252",
+            limits=(0, 252)),
+    ), moves_arm=True, example="--servo-id 2", answer=(Field("rebooted", Int(0, 252), "the servo rebooted"),)),
     Command(C.SEND_MASK, "send-mask", "re-send the label map of a capture", (
-        Arg("seq", lambda v: want_int(v, "capture seq", 0, UINT32), "--seq", int, "capture sequence number"),
-    )),
+        Arg("seq", lambda v: want_int(v, "capture seq", 0, UINT32), "--seq", int, "capture sequence number",
+            limits=(0, UINT32)),
+    ), example="--seq 12", answer=(Field("queued", Flag(), "whether the map is on its way now"),
+                                   Field("seq", Maybe(Int(0, UINT32)), "the capture whose map was queued"),
+                                   Field("next_capture", Maybe(Flag()), "the next capture's map will be sent with it"))),
 )}
 
 
 def check_args(name: CommandName, args: dict) -> dict[str, Any]:
     """The command's arguments, each checked; FrameError for a missing, extra or bad one."""
     cmd = COMMANDS[name]
-    given = {str(k) for k in args}
+    if any(type(k) is not str for k in args):
+        raise FrameError(f"{name.name} argument names must be strings")
+    given = set(args)
     forms = cmd.key_sets()
     if not any(given - cmd.optional == form for form in forms):
         extra = f" (+ optional {sorted(cmd.optional)})" if cmd.optional else ""
         want = " or ".join(str(sorted(f)) + extra for f in forms)
         raise FrameError(f"{name.name} takes arguments {want}, got {sorted(given)}")
     return {a.key: a.check(args[a.key]) for a in cmd.args if a.key in given}
+
+
+def check_answer(name: CommandName, answer: dict) -> dict[str, Any]:
+    """An ACK's values for command `name`, each checked; FrameError for a missing, extra or bad one."""
+    fields = {f.name: f for f in COMMANDS[name].answer}
+    extra = sorted(set(answer) - set(fields))
+    if extra:
+        raise FrameError(f"the answer to {name.name} has no {', '.join(map(str, extra))}")
+    for f in fields.values():
+        if f.name not in answer and not isinstance(f.type, Maybe):
+            raise FrameError(f"the answer to {name.name} lacks its {f.label}")
+    return {k: fields[k].type.check(v, f"{name.name} answer {k}") for k, v in answer.items()}
+
+
+def fit_answer(name: CommandName, answer: dict) -> dict[str, Any]:
+    """An answer as the robot sends it: each declared value fitted into its bounds (a long text cut
+    visibly), undeclared ones left for the encoder to refuse."""
+    fields = {f.name: f for f in COMMANDS[name].answer}
+    return {k: fields[k].type.fit(v) if k in fields else v for k, v in answer.items()}

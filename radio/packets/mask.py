@@ -13,14 +13,28 @@ from typing import Any, ClassVar
 import numpy as np
 
 from radio import FrameError
-from radio.packets.base import MAX_FRAME_SIDE, MAX_MASK_SIDE, UINT32, Kind, want_bin, want_int
+from radio.packets.base import MAX_FRAME_SIDE, MAX_MASK_SIDE, UINT32, Kind
+from radio.packets.schema import Bin, Declared, Field, Int
 
 MAX_SIDE = MAX_MASK_SIDE
 
 
 @dataclass(frozen=True, slots=True)
-class MaskPacket:
+class MaskPacket(Declared):
+    """A capture's label map, mode-pooled to at most 64 x 64, as runs: row-major, adjacent runs of
+    different labels, their lengths summing to the map's cells."""
+
     KIND: ClassVar[Kind] = Kind.MASK
+    WIRE: ClassVar[tuple[Field, ...]] = (
+        Field("robot_id", Int(0, 0xFFFF), "the robot", label="robot id"),
+        Field("seq", Int(0, UINT32), "the capture's number", label="capture seq"),
+        Field("frame_height", Int(1, MAX_FRAME_SIDE), "the camera frame's height"),
+        Field("frame_width", Int(1, MAX_FRAME_SIDE), "its width"),
+        Field("mask_height", Int(1, MAX_SIDE), "the pooled map's height (at most the frame's)"),
+        Field("mask_width", Int(1, MAX_SIDE), "its width (at most the frame's)"),
+        Field("values", Bin(), "the label of each run", label="mask values"),
+        Field("runs", Bin(), "each run's length, big-endian uint16", label="mask runs"),
+    )
     robot_id: int
     seq: int
     frame_shape: tuple[int, int]  # the camera frame (height, width) the map was taken from
@@ -40,23 +54,20 @@ class MaskPacket:
         (fh, fw), (h, w) = self.frame_shape, self.shape
         return small[cell_of(fh, h)[:, None], cell_of(fw, w)[None, :]]
 
-    def _wire(self) -> list:
+    def wire_values(self) -> dict[str, Any]:
         runs = np.asarray(self.runs, dtype=np.int64)
         if runs.size and (runs.min() < 1 or runs.max() > 0xFFFF):
             raise ValueError("mask runs must be 1..65535 long")
-        return [
-            self.robot_id, self.seq, *self.frame_shape, *self.shape,
-            bytes(self.values), runs.astype(">u2").tobytes(),
-        ]
+        (fh, fw), (h, w) = self.frame_shape, self.shape
+        return {"robot_id": self.robot_id, "seq": self.seq, "frame_height": fh, "frame_width": fw,
+                "mask_height": h, "mask_width": w, "values": bytes(self.values), "runs": runs.astype(">u2").tobytes()}
 
     @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> MaskPacket:
-        robot = want_int(f[0], "robot id", 0, 0xFFFF)
-        seq = want_int(f[1], "capture seq", 0, UINT32)
-        fh = want_int(f[2], "frame height", 1, MAX_FRAME_SIDE)
-        fw = want_int(f[3], "frame width", 1, MAX_FRAME_SIDE)
-        h, w = want_int(f[4], "mask height", 1, min(MAX_SIDE, fh)), want_int(f[5], "mask width", 1, min(MAX_SIDE, fw))
-        values, raw_runs = want_bin(f[6], "mask values"), want_bin(f[7], "mask runs")
+    def from_values(cls, f: dict[str, Any], extras: dict, version: int, compute: bool = True) -> MaskPacket:
+        robot, seq, fh, fw = f["robot_id"], f["seq"], f["frame_height"], f["frame_width"]
+        h, w, values, raw_runs = f["mask_height"], f["mask_width"], f["values"], f["runs"]
+        if h > fh or w > fw:
+            raise FrameError(f"mask {h} x {w} is larger than its frame {fh} x {fw}")
         if len(raw_runs) != 2 * len(values) or not values:
             raise FrameError("mask needs one 2-byte run length per label value")
         runs = np.frombuffer(raw_runs, dtype=">u2").astype(np.int64)
@@ -76,6 +87,12 @@ def downsample_labels(labels: np.ndarray, max_side: int = MAX_SIDE) -> np.ndarra
     This is the map a MASK packet carries, and the one the robot compares to decide whether
     a new MASK is due. Cells are rows and columns between the rounded points of an even split.
     """
+    return pool_labels(labels, max_side)[0]
+
+
+def pool_labels(labels: np.ndarray, max_side: int = MAX_SIDE) -> tuple[np.ndarray, np.ndarray]:
+    """(downsample_labels' map, the pixels of each label 0..255): both from one count of each
+    cell's labels, so a caller that needs both reads the map once."""
     labels = np.asarray(labels)
     if labels.ndim != 2 or labels.size == 0:
         raise ValueError(f"label map must be a non-empty 2-D array, got shape {labels.shape}")
@@ -86,16 +103,21 @@ def downsample_labels(labels: np.ndarray, max_side: int = MAX_SIDE) -> np.ndarra
     H, W = labels.shape
     scale = max(H, W) / max_side
     if scale <= 1.0:
-        return labels.astype(np.uint8)
+        return labels.astype(np.uint8), np.bincount(labels.reshape(-1), minlength=256)
     h, w = max(1, min(max_side, round(H / scale))), max(1, min(max_side, round(W / scale)))
     rows, cols = cell_edges(H, h), cell_edges(W, w)
     col_cell = np.repeat(np.arange(w, dtype=np.intp), np.diff(cols)) << 8
     out = np.empty((h, w), dtype=np.uint8)
+    total = np.zeros(w * 256, dtype=np.int64)
+    index = np.empty((int(np.diff(rows).max()), W), dtype=np.intp)
     for i in range(h):  # one row of cells at a time: memory is a few frame rows, not the frame
         band = labels[rows[i]:rows[i + 1]]
-        counts = np.bincount((col_cell[None, :] | band).ravel(), minlength=w * 256)
+        at = index[:len(band)]
+        np.bitwise_or(col_cell, band, out=at)
+        counts = np.bincount(at.reshape(-1), minlength=w * 256)
         out[i] = counts.reshape(w, 256).argmax(axis=1)  # first maximum: the lower label on ties
-    return out
+        total += counts
+    return out, total.reshape(w, 256).sum(axis=0)
 
 
 def cell_edges(full: int, cells: int) -> np.ndarray:
@@ -110,10 +132,11 @@ def cell_of(full: int, cells: int) -> np.ndarray:
 
 def mask_packet(
     labels: np.ndarray, *, robot_id: int, seq: int, max_side: int = MAX_SIDE,
-    extras: Mapping[str, Any] | None = None,
+    extras: Mapping[str, Any] | None = None, pooled: np.ndarray | None = None,
 ) -> MaskPacket:
-    """Downsample a frame's label map and run-length encode it."""
-    small = downsample_labels(labels, max_side)
+    """Downsample a frame's label map and run-length encode it; `pooled`: the map
+    downsample_labels(labels, max_side) already made (not made again)."""
+    small = downsample_labels(labels, max_side) if pooled is None else np.asarray(pooled, dtype=np.uint8)
     flat = small.reshape(-1)
     starts = np.flatnonzero(np.r_[True, flat[1:] != flat[:-1]])
     runs = np.diff(np.r_[starts, flat.size])

@@ -1,5 +1,5 @@
-"""MODELS packets: one capture's Johnson models. (UNCHANGED, the note that nothing moved since
-capture `ref_seq` at the same pose, is a plain record in `radio.packets`.)
+"""MODELS packets: one capture's Johnson models; UNCHANGED, the note that nothing moved since
+capture `ref_seq` at the same pose.
 
 A model travels as its four Slifker-Shapiro percentiles x(-3z), x(-z), x(z), x(3z) in the
 fitter's fixed point (`PercentileCodec.for_levels(levels)`: 16-bit codes for 8-bit sensors,
@@ -25,8 +25,9 @@ The MODELS blob, big-endian, msgpack's per-field bytes saved where they add up:
            band correlation (`radio.packets.dependence`: a versioned section, 93 bytes per
            RGB label at the robot's window; robots before the version sent 11); never flagged
            empty
-  camera   when flagged: the capture's camera settings, reference level and brackets
-           (`radio.packets.camera`, 10 bytes for a locked capture without either)
+  camera   when flagged: the capture's camera settings, reference level, brackets and (schema
+           5) the frame's source file (`radio.packets.camera`, 10 bytes for a locked capture
+           without any of these)
   records  (`radio.packets.records`) absent when every model is plain; else 2 bits per model (model i at bits 2(i%4) of
            byte i//4): 0 plain, 1 a read byte, 2 never, 3 a flagged record; then, for each
            non-plain model in order, for 1 the read byte (bits 0-3 z index, bits 4-5 the
@@ -65,14 +66,13 @@ from radio.packets.base import (
     Kind,
     angles_from_wire,
     angles_to_wire,
-    want_bin,
-    want_float,
     want_int,
-    want_str,
 )
-from radio.packets.camera import decode_camera, encode_camera
+from radio.packets.camera import VARINT_FLAGS, decode_camera, encode_camera
 from radio.packets.dependence import decode_dependence, encode_dependence, quantized
 from radio.packets.records import Tail, censor_code, read_tails, tail_bytes, tail_of
+from radio.packets.schema import Angles, Bin, Declared, Field, Int, ListOf, Text, wire
+from radio.packets.status import TIME
 from radio.varint import get_varint, put_varint
 
 _HEAD = struct.Struct(">hHhHH")  # angles, levels - 1
@@ -111,9 +111,26 @@ class LabelModels:
         return (0.0, 0.0) if t is None else (t.censored_low, t.censored_high)
 
 
+ROBOT = Int(0, 0xFFFF)
+SEQ = Int(0, UINT32)
+NAME = Text(MAX_NAME, empty=False)
+
+
 @dataclass(frozen=True, slots=True)
-class ModelsPacket:
+class ModelsPacket(Declared):
+    """One capture's models: the header fields, then one blob (`radio/packets/models.py` gives its layout)."""
+
     KIND: ClassVar[Kind] = Kind.MODELS
+    BYTES_SINCE: ClassVar[int] = VARINT_FLAGS  # the blob's camera section grew a source
+    WIRE: ClassVar[tuple[Field, ...]] = (
+        Field("robot_id", ROBOT, "the robot", label="robot id"),
+        Field("seq", SEQ, "the capture's number", label="capture seq"),
+        Field("time", TIME, "the robot's clock at the capture, seconds since 1970"),
+        Field("feature_space", NAME, "rgb, hsv, gray, pca, ...", label="feature space"),
+        Field("bands", ListOf(NAME, MAX_BANDS, 1), "band names, distinct", label="band name"),
+        Field("blob", Bin(), "angles, levels, labels, codes, dependence, camera and records (above)",
+              label="models blob"),
+    )
     robot_id: int
     seq: int
     time: float
@@ -135,9 +152,9 @@ class ModelsPacket:
         """(label, band index) -> the decoded model."""
         return {k: f.model for k, f in self.fits.items()}
 
-    def _wire(self) -> list:
-        return [self.robot_id, self.seq, float(self.time), self.feature_space, list(self.bands),
-                self._blob()]
+    def wire_values(self) -> dict[str, Any]:
+        return {"robot_id": self.robot_id, "seq": self.seq, "time": self.time, "feature_space": self.feature_space,
+                "bands": self.bands, "blob": self._blob()}
 
     def _blob(self) -> bytes:
         if not MIN_LEVELS <= self.levels <= MAX_LEVELS:
@@ -168,7 +185,7 @@ class ModelsPacket:
         if self.dependence:
             out += encode_dependence(self.dependence, ids, len(self.bands), self.levels)
         if self.camera is not None:
-            out += encode_camera(self.camera, len(self.bands), codec, ids)
+            out += encode_camera(self.camera, len(self.bands), codec, ids, self.BYTES_SINCE)
         entries = [tail_bytes(t, lab.z_index) for lab in self.labels
                    for t in (lab.tails + (None,) * len(self.bands))[:len(self.bands)]]
         if any(c for c, _ in entries):
@@ -179,16 +196,11 @@ class ModelsPacket:
         return bytes(out)
 
     @classmethod
-    def _from_wire(cls, f: list, extras: dict, compute: bool = True) -> ModelsPacket:
-        robot, seq = want_int(f[0], "robot id", 0, 0xFFFF), want_int(f[1], "capture seq", 0, UINT32)
-        t = want_float(f[2], "time", 0.0)
-        space = want_str(f[3], "feature space", MAX_NAME, allow_empty=False)
-        if type(f[4]) is not list or not 1 <= len(f[4]) <= MAX_BANDS:
-            raise FrameError(f"bands must be a list of 1..{MAX_BANDS} names")
-        bands = tuple(want_str(b, "band name", MAX_NAME, allow_empty=False) for b in f[4])
+    def from_values(cls, values: dict[str, Any], extras: dict, version: int, compute: bool = True) -> ModelsPacket:
+        robot, seq, t, space, bands = (values[k] for k in ("robot_id", "seq", "time", "feature_space", "bands"))
         if len(set(bands)) != len(bands):
             raise FrameError("band names repeat")
-        blob = want_bin(f[5], "models blob")
+        blob = values["blob"]
         if len(blob) < _HEAD.size + 1:
             raise FrameError("models blob is shorter than its header")
         cel, caz, mel, maz, levels = _HEAD.unpack_from(blob)
@@ -222,7 +234,7 @@ class ModelsPacket:
             dependence, pos = decode_dependence(blob, ids, n_bands, levels, pos)
         camera = None
         if has_camera:
-            camera, pos = decode_camera(blob, pos, n_bands, codec, ids)
+            camera, pos = decode_camera(blob, pos, n_bands, codec, ids, version)
         tails = read_tails(blob, pos, [z for _, _, z in heads], n_bands)
         records = tuple(
             LabelModels(label, count, z_index, tuple(tuple(int(c) for c in m) for m in codes[i]), tails[i])
@@ -231,6 +243,23 @@ class ModelsPacket:
         if compute:
             object.__setattr__(packet, "fits", _recompute(packet, codec))
         return packet
+
+
+@dataclass(frozen=True, slots=True)
+class UnchangedPacket(Declared):
+    """A capture whose models all lie within tolerance of capture `ref_seq` at the same pose."""
+
+    KIND: ClassVar[Kind] = Kind.UNCHANGED
+    robot_id: int = wire(ROBOT, "the robot", label="robot id")
+    seq: int = wire(SEQ, "the capture's number", label="capture seq")
+    time: float = wire(TIME, "the robot's clock at the capture, seconds since 1970")
+    commanded: tuple[float, float] = wire(Angles(), "the pose it was sent to")
+    measured: tuple[float, float] = wire(Angles(), "the pose it measured")
+    ref_seq: int = wire(SEQ, "the earlier capture whose models these are", label="reference seq")
+    extras: Mapping[str, Any] = field(default_factory=dict)
+
+    def problem(self) -> str:
+        return "" if self.ref_seq < self.seq else f"reference capture {self.ref_seq} is not before capture {self.seq}"
 
 
 def models_packet(

@@ -15,7 +15,7 @@ from benchmarks.stability_grid import SATURATIONS, Point, Saturation, curve, gri
 from benchmarks.stability_score import METHODS, Cause, Size, Truth, diagnose, evaluate, fit_and_score, score
 from btf.johnson import Family, Johnson
 
-EXPECTED = {"bracketing", "core", "dependence", "hostmem", "ingest", "onboard", "page", "peers", "runtime", "sampling", "scene", "stability",
+EXPECTED = {"bracketing", "core", "dependence", "hostile", "hostmem", "ingest", "onboard", "page", "peers", "runtime", "sampling", "scene", "stability",
             "startup",
             "subsample", "synth", "texture", "wire", "link", "failsafe"}
 
@@ -91,6 +91,15 @@ def test_ingest_quick_run_times_every_executor_on_the_same_database(quick):
     for r in rows:
         assert float(r.split("|")[3]) > 0  # images/s
     assert "1.00x" in rows[1]  # the pool of one is the unit
+
+
+def test_ingest_quick_run_times_the_store_with_and_without_a_sync_at_each_commit(quick):
+    text, _ = quick("ingest")
+    rows = tables(text)[1][2:]
+    modes = [(r.split("|")[1].strip(), r.split("|")[3].strip()) for r in rows]
+    assert modes == [("NORMAL", "no"), ("FULL", "yes"), ("FULL", "yes"), ("FULL", "yes")]
+    assert all(float(r.split("|")[4]) > 0 for r in rows)  # captures/s
+    assert re.search(r"radio carries at most \d+ captures/s", text)
 
 
 def test_runner_writes_results_headed_by_the_machine(tmp_path, capsys):

@@ -6,7 +6,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from btf.fit import isodata as I
-from btf.fit.isodata import IsodataParams, assign, isodata
+from btf.fit.isodata import IsodataParams, Labeller, assign, isodata
 
 CENTRES = np.array([[40, 40, 40], [200, 60, 60], [60, 200, 60], [60, 60, 200]], float)
 
@@ -152,3 +152,22 @@ def test_never_nan_never_empty_labels_in_range(data, k, min_samples, seed):
     counts = np.bincount(res.labels.ravel(), minlength=len(res.centres))
     assert len(counts) == len(res.centres) and np.all(counts > 0)
     assert res.centres.min() >= data.min() and res.centres.max() <= data.max()
+
+
+def test_the_labellers_colour_table_gives_every_frame_layout_the_brute_force_labels():
+    rng = np.random.default_rng(11)
+    img = rng.integers(0, 256, (120, 90, 3), dtype=np.uint8)
+    c = rng.uniform(0, 255, (6, 3))
+    brute = np.argmin(((img.reshape(-1, 1, 3) - c[None]) ** 2).sum(axis=2), axis=1).reshape(img.shape[:2])
+    names = np.array([5, 3, 9, 0, 1, 7], np.uint8)
+    lab = Labeller(c, names)
+    for frame in (img, img[:, ::-1], img[::2, 1::3], img[:1, :1], np.ascontiguousarray(img[:, :1])):
+        want = names[np.argmin(((frame.reshape(-1, 1, 3) - c[None]) ** 2).sum(axis=2), axis=1)]
+        got = lab.assign(frame)
+        assert got.shape == frame.shape[:2]
+        assert (got.ravel() != want).mean() < 1e-3  # float32 rounding at exact ties only
+    assert (lab.assign(img) != names[brute]).mean() < 1e-3
+    # the last pixel is read on its own (its word would run past the frame): a colour of its own
+    edge = img.copy()
+    edge[-1, -1] = np.round(c[2]).astype(np.uint8)
+    assert lab.assign(edge)[-1, -1] == names[2]

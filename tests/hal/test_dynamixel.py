@@ -13,7 +13,7 @@ from hal.dynamixel import DynamixelServoBus, deg_to_ticks, ticks_to_deg
 from hal.dynamixel_table import ALERT, SIZE, TABLE_SIZE, TICKS_PER_TURN, VELOCITY_UNIT_RPM, Reg
 from hal.emulators.dxl import DxlEmulator, crc16, instruction_packet, status_packet, stuff, unstuff
 from hal.fakes import Faults
-from hal.interfaces import DeviceTimeout, HalError, LimitError, ServoBus, ServoRecovery
+from hal.interfaces import DeviceGone, DeviceTimeout, HalError, LimitError, ServoBus, ServoRecovery
 
 TICK_DEG = 360.0 / 4096
 
@@ -228,14 +228,36 @@ def test_alerted_servo_refusing_torque_is_recovered_not_reported_as_refused(bus,
 def test_unplugged_or_closed_port_is_a_clear_error_never_a_traceback(emu):
     bus = DynamixelServoBus(emu.port, latency_ms=4.0)
     bus.set_torque([1], True)
-    emu.close()  # the adapter is gone: the pty reports I/O errors
-    for call in (lambda: bus.positions([1]), lambda: bus.hardware_error(1), lambda: bus.move({1: 3.0})):
-        with pytest.raises(HalError, match=rf"on {emu.port}: .*port failed"):
+    emu.close()  # the adapter is gone: the pty reports I/O errors, then its node is gone
+    with pytest.raises(DeviceGone, match=rf"on {emu.port}: .*port failed .*unplugged\?"):
+        bus.positions([1])
+    for call in (lambda: bus.hardware_error(1), lambda: bus.move({1: 3.0})):
+        with pytest.raises(DeviceGone, match=rf"on {emu.port}: .*port not there \(No such file or directory\)"):
             call()
     assert not bus.ping(1)
     bus.close()
-    with pytest.raises(HalError, match="port failed.*not open"):
+    with pytest.raises(HalError, match="port failed.*not open") as closed:
         bus.positions([1])
+    assert not isinstance(closed.value, DeviceGone)  # closed on purpose: nothing to wait for
+
+
+def test_a_bus_unplugged_mid_sweep_is_gone_until_replugged_then_goes_on_where_it_was(bus, emu):
+    bus.set_torque([1, 2], True)
+    bus.move({1: 20.0, 2: -10.0})
+    settle(bus)
+    emu.unplug()  # the USB adapter pulled: the servos keep their power and goals
+    with pytest.raises(DeviceGone, match="port failed"):
+        bus.positions([1, 2])
+    with pytest.raises(DeviceGone, match="port not there"):
+        bus.move({1: 30.0})
+    assert not bus.ping(1) and [c.call for c in emu.history[-1:]] == ["unplug"]  # nothing reached the servos
+    emu.servos[1].table[Reg.TORQUE_ENABLE] = 0  # as a servo that browned out meanwhile
+    emu.replug()
+    assert bus.positions([1, 2]) == pytest.approx({1: 20.0, 2: -10.0}, abs=TICK_DEG)
+    assert emu.servos[1].table[Reg.TORQUE_ENABLE] == 1  # torque and goals restored on reopening
+    bus.move({1: 30.0})
+    settle(bus)
+    assert bus.positions([1])[1] == pytest.approx(30.0, abs=TICK_DEG)
 
 
 @pytest.mark.parametrize("goal", [float("nan"), float("inf"), -float("inf")])

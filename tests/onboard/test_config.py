@@ -63,12 +63,12 @@ def test_good_file_loads_into_frozen_records_with_paths_relative_to_the_file(tmp
         ("[sweep]\nautostart = 1", "sweep.autostart must be true or false"),
         ("[hal]\nsize = [10]", "hal.size must have 2 items"),
         ("[hal]\nbody = 'magic'", "hal.body must be one of"),
-        ("[sweep]\nstep = -5", "sweep.step must be positive"),
-        ("[sweep]\nstart = 120", "sweep.start must lie in [0, 90]"),
+        ("[sweep]\nstep = -5", "sweep.step must lie in 0.01..180, got -5"),
+        ("[sweep]\nstart = 120", "sweep.start must lie in 0..90, got 120"),
         ("[sweep]\nstart = nan", "must be finite"),
         ("[segment]\nmethod = 'mask'\nmask = 'nowhere.png'", "no such file"),
         ("hal = 3", "[hal] must be a table"),
-        ("[sweep]\nstep = 0.001", "exceeds 4096"),
+        ("[sweep]\nstop = 0\nstep = 0.02", "exceeds 4096"),
     ],
 )
 def test_each_bad_config_raises_one_line_naming_the_problem(tmp_path, text, words):
@@ -114,6 +114,32 @@ def test_btf_robot_run_stops_at_start_with_one_line_and_exit_2(tmp_path, text, w
     assert out.returncode == 2, out.stderr
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and words in lines[0] and "Traceback" not in out.stderr
+
+
+def test_btf_robot_run_without_a_hal_body_is_a_configuration_error_not_restarted(tmp_path, monkeypatch, capsys):
+    """No hal.body and no BTF_HAL: exit 2, which the shipped systemd unit does not restart."""
+    from onboard.cli import main
+
+    monkeypatch.delenv("BTF_HAL", raising=False)
+    (tmp_path / "robot.key").write_text("00" * 32)
+    (tmp_path / "robot.key").chmod(0o600)
+    path = tmp_path / "robot.toml"
+    path.write_text('state_dir = "state"\n[link]\nkey_file = "robot.key"\n')
+    assert main(["run", "--config", str(path), "--port", "loop://", "--max-seconds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.splitlines()) == 1 and "hal.body" in err and "Traceback" not in err
+    unit = (ROOT / "examples" / "btf-robot.service").read_text()
+    assert "RestartPreventExitStatus=2" in unit
+
+
+@pytest.mark.parametrize("value", ["-5", "nan", "inf", "soon"])
+def test_btf_robot_run_refuses_a_max_seconds_that_is_negative_or_not_finite(value, capsys):
+    from onboard.cli import main
+
+    assert main(["run", "--config", "robot.toml", "--max-seconds", value]) == 2
+    err = capsys.readouterr().err
+    assert err.splitlines() == [err.strip()] and err.startswith(f"btf-robot run: error: --max-seconds {value}: ")
+    assert "at least 0 seconds" in err
 
 
 def test_a_failing_state_disk_after_start_is_one_line_and_exit_1(tmp_path, monkeypatch, capsys):

@@ -100,4 +100,6 @@ def test_the_example_starts_the_robot(tmp_path, body):
             robot.kill()
     assert robot.wait(timeout=30) == 0, lines
     assert lines[0] == f"boot: robot 1 on the {body} HAL, mode sweeping, sweep 1 started", lines
-    assert re.match(r"sweep 1 pose 1/7 at 90\.0°/0\.0°: seq 1, measured", lines[1]), lines
+    assert re.match(r"capture 1 compute: features [0-9.]+, segmentation [0-9.]+, fit [0-9.]+, dependence [0-9.]+, "
+                    r"encode [0-9.]+; total [0-9.]+ ms$", lines[1]), lines
+    assert re.match(r"sweep 1 pose 1/7 at 90\.0°/0\.0°: seq 1, measured", lines[2]), lines

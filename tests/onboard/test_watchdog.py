@@ -74,7 +74,7 @@ def test_runtime_says_ready_kicks_the_watchdog_at_half_its_period_and_reports_st
     assert statuses[0] == "boot"
     assert [s for s in statuses if " pose " in s] == [
         f"sweep 1: measured pose {i} of 4" for i in range(1, 5)]
-    assert statuses[-1] == "sweep 1 done: 4 measured, 0 skipped" and rt.mode is Mode.IDLE
+    assert statuses[-1] == "sweep 1 done: 4 measured, 0 missing" and rt.mode is Mode.IDLE
     assert all("=" in field for _, m in got for field in m.split("\n"))  # KEY=value lines only
 
 

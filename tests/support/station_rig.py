@@ -2,6 +2,7 @@
 station's tests (tests/test_station*.py)."""
 from __future__ import annotations
 
+import http.client
 import json
 import os
 import signal
@@ -10,9 +11,11 @@ import sys
 import time
 from collections import Counter
 from pathlib import Path
+from urllib.parse import urlsplit
 
 from radio.keys import write_key
 from tests.support import ROOT
+from tests.support.browser import page_address
 from tests.support.robots import EVERY_POSE, IDLE, LINKED, robot_toml
 from tools.demo.pty_cable import PtyCable
 from tools.station.control import StationClient, socket_path
@@ -53,12 +56,15 @@ class Rig:
         self.procs.append(p)
         return p
 
-    def station(self, *argv: str, key: Path | None = None) -> subprocess.Popen:
+    def station(self, *argv: str, key: Path | None = None, env: dict[str, str] | None = None,
+                preexec_fn=None) -> subprocess.Popen:
+        """`btf-host station` on the cable (`env`: added to this process's environment)."""
         self.stations += 1
         err = open(self.where / f"station-{self.stations}.err", "wb")
         p = subprocess.Popen([*python("tools.cli"), "station", "--port", self.cable.paths[1], "--db", str(self.db),
                               "--key", str(key or self.key), "--status-every", "1", *argv],
-                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err)
+                             cwd=ROOT, stdout=subprocess.DEVNULL, stderr=err,
+                             env=None if env is None else {**os.environ, **env}, preexec_fn=preexec_fn)
         self.procs.append(p)
         return p
 
@@ -131,3 +137,21 @@ def robot_log(where: Path) -> list[str]:
 def kill9(p: subprocess.Popen) -> None:
     os.kill(p.pid, signal.SIGKILL)
     p.wait(timeout=30)
+
+def served(rig, *argv):
+    """A station serving the page on a free port: (process, host, port, token)."""
+    station = rig.station("--http", "127.0.0.1:0", *argv)
+    url = urlsplit(page_address(rig.where / f"station-{rig.stations}.err"))
+    token = url.query.removeprefix("token=")
+    return station, url.hostname, url.port, token
+
+
+def request(host, port, method, path, body=None, headers=None):
+    """One HTTP request: (status, headers, body)."""
+    conn = http.client.HTTPConnection(host, port, timeout=30)
+    try:
+        conn.request(method, path, body=body, headers=headers or {})
+        resp = conn.getresponse()
+        return resp.status, dict(resp.getheaders()), resp.read()
+    finally:
+        conn.close()

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 
+from radio import packets as pk
 from radio.auth import SKEW_S, CounterFileLost, FileCounterStore, MemoryCounterStore, clock_counter, write_fresh
 from radio.link import Delivered, Link, PeerStale
 from radio.ports import FdPort
@@ -202,9 +203,9 @@ def test_status_carries_the_link_s_rejections_by_reason(fake_robot):
     rt, _ = fake_robot(robot_toml(SMALL, IDLE), transport=tr)
     rt.boot()
     tr.rejected.update({"tag": 3, "stale": 2})
-    extras = rt.dispatch.status({}, None)
-    assert extras["rejected"] == ["stale:2", "tag:3"]
-    assert extras["disk"] == "ok" and extras["disk_free"] > 0
+    report = rt.dispatch.status({}, None)
+    assert report.rejected.items == (pk.Rejection("stale", 2), pk.Rejection("tag", 3))
+    assert report.disk.state == "ok" and report.disk.free > 0
 
 
 def test_a_host_s_memory_counters_can_follow_the_clock_as_its_file_s_do():

@@ -4,13 +4,15 @@ from pathlib import Path
 import pytest
 
 from radio.link import Link
+from tests.support.browser import report_layout
 from tools.demo.end_to_end import DemoConfig, run_demo
 
 
 @pytest.fixture(scope="module")
 def first_run(tmp_path_factory):
-    """The demo's result, its report page and a copy of its database, taken before a later test
-    runs the demo again there."""
+    """The demo's result, its report page, a copy of its database and a copy of its report folder,
+    taken before a later test runs the demo again there."""
+    import shutil
     import sqlite3
 
     out = tmp_path_factory.mktemp("demo")
@@ -18,7 +20,8 @@ def first_run(tmp_path_factory):
     copy = tmp_path_factory.mktemp("demo-db") / "scene.db"
     with sqlite3.connect(res.db) as src, sqlite3.connect(copy) as dst:
         src.backup(dst)
-    return res, (out / "report" / "index.html").read_text(), copy
+    report = shutil.copytree(out / "report", tmp_path_factory.mktemp("demo-report") / "report")
+    return res, (out / "report" / "index.html").read_text(), copy, report
 
 
 @pytest.fixture(scope="module")
@@ -63,6 +66,19 @@ def test_the_report_shows_a_btf_section_per_scene_with_its_leave_one_out_table(f
         assert f"BTF of {scene} (robot" in page
     # 5 elevations: 40, 45 and 50 have measured neighbours on both sides
     assert page.count("<table class=loo>") == 3 and page.count("Leave one out: the interpolation beats") == 3
+
+
+def test_the_demos_report_opens_on_its_bars_tables_and_link_and_every_capture_names_its_pose(first_run):
+    result, page, _, report = first_run
+    got = report_layout(report / "index.html")
+    assert 0 <= got["summary"] < got["bars"] <= 900  # a 1400x900 window's first screen
+    shown = {h.split(":")[0]: bottom for h, bottom in got["heads"]}
+    assert max(shown["Table 1"], shown["Table 2"], shown["The link"]) <= 900, shown
+    assert got["summary"] < got["toc"] < got["capture"]
+    assert all(natural == width for natural, width in got["plots"])
+    bars = page[page.index("<ul class=bars>"):page.index("</ul>")]
+    assert bars.count("<li class=ok>") == sum(result.bars().values()) == 3
+    assert page.count("<p class=source>robot ") == sum(result.captures.values()) and "`" not in page
 
 
 def test_the_demos_interpolation_beats_the_nearest_angle_or_says_why(host, first_run):
@@ -131,7 +147,7 @@ def test_a_robot_that_dies_is_reported_with_the_last_lines_of_its_stderr(tmp_pat
 def test_report_and_console_state_the_same_run_time(first_run):
     from tools.cli.demo import _summary
 
-    result, page, _ = first_run
+    result, page = first_run[:2]
     console = "\n".join(_summary(result))
     stated = f"run time {result.seconds:.1f} s"
     assert stated in console and stated in page.lower()

@@ -99,7 +99,7 @@ def bench(tmp_path):
 
 
 def _pressure(statuses: list) -> list:
-    return [p for p in statuses if p.extras.get("disk") in ("low", "full")]
+    return [p for p in statuses if p.report.disk is not None and p.report.disk.state in ("low", "full")]
 
 
 def test_a_disk_filled_mid_sweep_pauses_acquisition_says_so_and_every_pose_arrives_once(bench):

@@ -161,8 +161,8 @@ def test_killed_robot_restarts_and_the_host_holds_every_capture_exactly_once(tmp
     assert [p.text for p in statuses].count("sweep done") >= 1
     # Boots after the sweep finished say so, and every boot names the one sweep.
     boots = [p for p in statuses if p.text == "boot"]
-    assert boots[-1].extras["sweep_state"] == "finished", boots[-1].extras
-    assert {p.extras["sweep"] for p in boots} == {1}
+    assert boots[-1].report.sweep.boot == "finished", boots[-1].report
+    assert {p.report.sweep.id for p in boots} == {1}
     # Restarts open new sessions above the persisted counters: no fresh frame was taken for
     # a replay (torn frames cut by a kill only fail their CRC or COBS).
     rejected = host.stats().rejected

@@ -13,9 +13,11 @@ from radio.auth import MemoryCounterStore
 from radio.channel import ChannelConfig
 from radio.channel_port import Cable
 from radio.link import Delivered, Link
+from radio.packets.base import iso_time
 from radio.pump import LinkPump
 from tests.support import ROOT
 from tests.support.robots import IDLE, SMALL, robot_toml
+from tools.station.snapshot import StationSnapshot
 
 C = pk.CommandName
 ROBOT = robot_toml(IDLE)
@@ -104,11 +106,15 @@ def test_a_clean_boot_and_a_lost_link_leave_no_errors_and_status_times_are_iso(f
     status = {p.command_id: p for p in got if isinstance(p, pk.AckPacket)}
     assert set(status) == {1, 2}
     for ack in status.values():
-        assert ack.extras["errors"] == () and ack.extras["mode"] == "idle"
-    (event,) = status[2].extras["failsafe"]
+        assert ack.status.errors.items == () and ack.status.mode == "idle"
+    # times travel as clock seconds and are shown as ISO 8601 (the station's snapshot, its page)
+    snap = StationSnapshot("pty", "db", 0.0)
+    snap.note_status_answer(status[2].status, 1.0)
+    (event,) = snap.to_json(1.0)["robot"]["failsafe"]
     assert re.fullmatch(ISO + r" for \d+\.\d s", event), event
     report = next(p for p in got if isinstance(p, pk.StatusPacket) and p.text.startswith("failsafe"))
-    assert re.fullmatch(ISO, report.extras["failsafe_since"]) and report.extras["failsafe_s"] >= 0.0
+    (held,) = report.report.failsafe.items
+    assert re.fullmatch(ISO, iso_time(held.since)) and held.until - held.since >= 0.0
 
 
 def test_set_takes_a_list_as_the_packet_carries_it(fake_robot):
@@ -181,5 +187,5 @@ def test_the_robot_says_a_line_per_pose_and_command_on_its_console(tmp_path):
     assert [x.split(":")[0] for x in poses] == [f"sweep 1 pose {i}/3 at {e}.0°/0.0°"
                                                  for i, e in ((1, 90), (2, 80), (3, 70))]
     assert all(re.search(r": seq \d+, measured [\d.]+°/[\d.]+°, \d+ models$", x) for x in poses), poses
-    assert "sweep 1 done: 3 measured, 0 skipped" in lines
+    assert "sweep 1 done: 3 measured, 0 missing" in lines
     assert "\x1b" not in text and "\r" not in text  # no colours, no progress bars

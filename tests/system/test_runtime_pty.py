@@ -71,10 +71,15 @@ def test_fake_robot_sweep_reaches_the_receiver_over_a_pty(tmp_path, scene, label
 def test_with_faults_every_skipped_pose_reaches_the_receiver_with_its_reason(tmp_path):
     packets = receive_sweep(tmp_path, "black", rate=0.1)
     models = [p for p in packets if isinstance(p, pk.ModelsPacket)]
-    skipped = [p for p in packets if isinstance(p, pk.StatusPacket) and "skipped_index" in p.extras]
+    skipped = [p for p in packets if isinstance(p, pk.StatusPacket) and p.report.sweep and p.report.sweep.skipped]
     done = [p for p in packets if isinstance(p, pk.StatusPacket) and p.text == "sweep done"]
-    assert done and done[-1].extras["skipped"] == len(skipped)
-    assert len(models) + len(skipped) == 7
+    assert done
+    # A skipped pose is tried again after the plan: each ends measured, or missing with its reason.
+    measured = {round(p.commanded[0]) for p in models}
+    missing = {round(m.elevation): m.reason for m in done[-1].report.sweep.missing.items}
+    assert len(models) == len(measured) and not measured & set(missing)
+    assert measured | set(missing) == {30, 40, 50, 60, 70, 80, 90}
+    assert all(missing.values())
     assert all(p.text.startswith("skipped pose:") and "failed" in p.text for p in skipped)
 
 

@@ -38,7 +38,8 @@ def settings_json(s: CaptureSettings | None) -> dict[str, Any] | None:
             "white_balance_gains": None if s.white_balance_gains is None else list(s.white_balance_gains),
             "sensor_temperature_c": s.sensor_temperature_c, "unlocked": s.unlocked,
             "reference": None if s.reference is None else list(s.reference), "reference_clipped": s.reference_clipped,
-            "brackets": list(s.brackets), "bracketed": {str(k): v for k, v in sorted(s.bracketed.items())}}
+            "brackets": list(s.brackets), "bracketed": {str(k): v for k, v in sorted(s.bracketed.items())},
+            "source": s.source}
 
 
 def describe(s: CaptureSettings | None) -> str:

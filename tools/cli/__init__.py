@@ -11,6 +11,7 @@ import argparse
 
 from onboard.cli import runner
 from onboard.cli.runner import Subcommand
+from tools.store.schema import CorruptDatabase
 
 PROG = "btf-host"
 # The subcommands, in the order --help lists them: what each does, and one example.
@@ -20,13 +21,13 @@ COMMANDS: tuple[Subcommand, ...] = (
     Subcommand("mask", "segment an image into K clutter classes",
                "mask photo.png --method kmeans --k 4 --out mask.png"),
     Subcommand("synth", "synthesize an image from models inside a mask",
-               "synth --model models.json --mask mask.png --out synth.png"),
+               "synth --model models.json --mask mask.png --angle 60 --out synth.png"),
     Subcommand("compare", "correlation, histogram difference, chi2, KS and W1 between two images",
                "compare photo.png synth.png --mask mask.png"),
     Subcommand("pdfs", "the paper's Table 2: histogram error of Johnson against its peers per region",
                "pdfs photo.png --mask mask.png"),
     Subcommand("ingest", "fit every image of a dataset folder into a database (resumable)",
-               "ingest DATASET_DIR --layout plain --db dataset.db"),
+               "ingest DATASET_DIR --layout folder --db dataset.db"),
     Subcommand("resolve", "facet-based or statistical modelling for a grain size",
                "resolve --grain-mm 0.5"),
     Subcommand("report", "an HTML report of a database: results first, then images, plots and tables",
@@ -63,4 +64,5 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return runner.main(PROG, "tools.cli", COMMANDS, DESCRIPTION, argv)
+    # A damaged row met by any reader (synth, report, ...) is one line and status 2, as at opening.
+    return runner.main(PROG, "tools.cli", COMMANDS, DESCRIPTION, argv, bad_input=(CorruptDatabase,))

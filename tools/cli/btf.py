@@ -13,7 +13,7 @@ from tools.store.database import CorruptDatabase, Store
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--db", required=True, help="database written by station, listen, ingest or demo")
     add_source_filters(p)
-    p.add_argument("--space", help=f"only captures in this feature space ({', '.join(FEATURE_SPACES)})")
+    p.add_argument("--space", choices=FEATURE_SPACES, help="only captures in this feature space")
     p.add_argument("--json", action="store_true", help="one JSON document instead of the table")
     p.add_argument("--plot", metavar="FILE.png", help="draw the BTF of the one robot and scene into this PNG")
     add_force(p)
@@ -52,7 +52,7 @@ def _check(args: argparse.Namespace) -> None:
     if args.plot is not None:
         if Path(args.plot).suffix.lower() != ".png":
             raise CliError(f"--plot {args.plot}: the plot is a PNG file (name it .png)")
-        check_out(args.plot, (args.db,), args.force)
+        check_out(args.plot, (args.db,), args.force, suffixes=(".png",), option="--plot")
 
 
 def run(args: argparse.Namespace) -> int:

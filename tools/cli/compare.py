@@ -7,21 +7,22 @@ import sys
 
 import numpy as np
 
+from onboard.cli.runner import bounded
 from tools.analysis.radiometry import CLIPPED_REFERENCE, normalise_image, reference_means
 from tools.cli.options import CliError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("ref")
-    p.add_argument("test")
+    p.add_argument("ref", help="the reference image (a photograph)")
+    p.add_argument("test", help="the image compared with it (a synthesis), same size and depth")
     p.add_argument("--mask", help="label mask: histogram metrics per region")
     p.add_argument("--space", choices=("rgb", "hsv", "gray"),
                    help="hsv treats H as circular; gray compares one band (default: gray when both images have "
                         "one band, e.g. thermal, else rgb)")
-    p.add_argument("--reference-label", type=int, metavar="L",
+    p.add_argument("--reference-label", type=bounded(int, 0, 255), metavar="L",
                    help="scale TEST's bands so its mean on mask label L (the grey reference card) matches REF's: "
                         "takes out a change of light or exposure between the two (needs --mask)")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print the metrics as one JSON document")
 
 
 def _normalise(ref, test, mask, label: int, path: str) -> list[float]:

@@ -5,16 +5,17 @@ import argparse
 import json
 from pathlib import Path
 
-from tools.cli.options import CliError
+from onboard.cli.runner import SEED, bounded
+from tools.cli.options import CliError, writable_place
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="demo-out",
                    help="output directory (created if missing; its scene.db, work/ and report/ are rebuilt)")
     p.add_argument("--force", action="store_true", help="use an --out directory that holds other files too")
-    p.add_argument("--size", type=int, nargs=2, default=(120, 160), metavar=("H", "W"),
-                   help="camera frame height and width (default 120 160)")
-    p.add_argument("--seed", type=int, default=1, help="seed of the channel and the synthesis")
+    p.add_argument("--size", type=bounded(int, 16, 1024, "pixels"), nargs=2, default=(120, 160), metavar=("H", "W"),
+                   help="camera frame height and width, each 16..1024 (default 120 160)")
+    p.add_argument("--seed", type=SEED, default=1, help="seed of the channel and the synthesis")
     p.add_argument("--json", action="store_true", help="print the results as one JSON document")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -47,6 +48,7 @@ DEMO_ENTRIES = {"scene.db", "scene.db-wal", "scene.db-shm", "work", "report"}
 def _check_out(out: Path, force: bool) -> None:
     if out.exists() and not out.is_dir():
         raise CliError(f"--out {out} is not a directory")
+    writable_place(out, f"--out {out}")
     if force or not out.is_dir():
         return
     others = sorted(p.name for p in out.iterdir() if p.name not in DEMO_ENTRIES)
@@ -64,8 +66,6 @@ def run(args: argparse.Namespace) -> int:
     from tools.demo.end_to_end import DemoConfig, run_demo
 
     h, w = args.size
-    if not (16 <= h <= 1024 and 16 <= w <= 1024):
-        raise CliError(f"--size {h} {w}: each side must lie in 16..1024")
     out = Path(args.out)
     _check_out(out, args.force)
     try:

@@ -3,8 +3,9 @@ DuckDB and Dask read (tools.data.export; docs/export.md), partitioned by robot a
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
-from tools.cli.options import CliError, add_force
+from tools.cli.options import CliError, add_force, writable_place
 from tools.store.database import CorruptDatabase, Store
 
 FORMATS = ("parquet", "csv")
@@ -14,13 +15,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--db", required=True, help="database written by station, listen, ingest or demo")
     p.add_argument("--out", required=True,
                    help="output directory; an earlier export of the same database gets only the new captures")
-    p.add_argument("--format", default="parquet", help="parquet (default) or csv")
+    p.add_argument("--format", default="parquet", choices=FORMATS, help="parquet (default) or csv")
     add_force(p)
 
 
 def run(args: argparse.Namespace) -> int:
-    if args.format not in FORMATS:
-        raise CliError(f"--format {args.format}: expected {' or '.join(FORMATS)}")
+    if not Path(args.out).is_file():  # a file is refused by the export itself
+        writable_place(Path(args.out), f"--out {args.out}")
     from tools.data.export import ExportError, export  # pyarrow: loaded to run, not for --help
 
     try:

@@ -6,51 +6,77 @@ import json
 import time
 
 from btf.dependence import window
-from tools.cli.options import FEATURE_SPACES, CliError, elevation
-from tools.store.database import CorruptDatabase, Store
+from onboard.cli.runner import RetryLater
+from tools.cli.options import FEATURE_SPACES, CliError, elevation, label
+from tools.store.database import CorruptDatabase, Store, StoreUnavailable
 
 ROBOT_ID = "host"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = "Fit Johnson models per (label, band); without --mask the whole image is label 0."
-    p.add_argument("image")
+    p.add_argument("image", help="the photograph to fit (8- or 16-bit PNG, TIFF, JPEG)")
     p.add_argument("--mask", help="label mask PNG, same size as the image")
     p.add_argument("--space", choices=FEATURE_SPACES,
                    help="feature space (default: the image's own: gray for a one-band image, rgb for colour)")
     p.add_argument("--angle", type=float, help="view elevation in degrees (needed with --db)")
-    p.add_argument("--db", help="store the models as a capture of robot 'host' in this database")
+    p.add_argument("--db", help="store the models as a capture in this database, under --robot and --scene")
+    p.add_argument("--robot", type=label, default=ROBOT_ID, metavar="NAME",
+                   help=f"with --db: the camera or series the photograph belongs to (default {ROBOT_ID!r})")
+    p.add_argument("--scene", type=label, metavar="NAME",
+                   help="with --db: the sample or place photographed; photographs of different robots or scenes "
+                        "are never interpolated together (synth and report choose one with --robot and --scene)")
     p.add_argument("--json", action="store_true", help="print the models document (MODELS.json)")
     p.add_argument("--independent-only", action="store_true",
                    help="skip measuring grain and band correlation (synthesis then draws independent pixels)")
 
 
-def _store(args: argparse.Namespace, fitted) -> int:
-    """Stores the fit as the next capture of robot 'host'; its sequence number."""
+def _open(db: str) -> Store:
+    """The database, opened before any fitting: a wrong path or file is said at once."""
     try:
-        with Store.open(args.db) as store:
-            seq = store.next_sequence(ROBOT_ID)
-            if not store.add_capture(ROBOT_ID, seq, time.time(), None, (args.angle, 0.0), fitted.feats.space.value,
-                                     fitted.feats.band_names, fitted.results, dependence=fitted.dependence,
-                                     levels=fitted.feats.levels):
-                raise CliError(f"database {args.db}: capture {ROBOT_ID}/{seq} was taken by another writer; "
-                               "not stored (run fit again)")
-            if args.mask:
-                store.add_mask(f"{ROBOT_ID}/{seq}", fitted.labels, ROBOT_ID)
+        return Store.open(db)
+    except StoreUnavailable as exc:  # a full disk, an I/O error: not the file's fault (exit 1)
+        raise RetryLater(str(exc)) from None
+    except CorruptDatabase as exc:
+        raise CliError(str(exc)) from None
+
+
+def _store(store: Store, args: argparse.Namespace, fitted) -> int:
+    """Stores the fit as the next capture of --robot under --scene; its sequence number."""
+    try:
+        seq = store.next_sequence(args.robot)
+        if not store.add_capture(args.robot, seq, time.time(), None, (args.angle, 0.0), fitted.feats.space.value,
+                                 fitted.feats.band_names, fitted.results, scene=args.scene or "",
+                                 dependence=fitted.dependence, levels=fitted.feats.levels):
+            raise CliError(f"database {args.db}: capture {args.robot}/{seq} was taken by another writer; "
+                           "not stored (run fit again)")
+        if args.mask:
+            store.add_mask(f"{args.robot}/{seq}", fitted.labels, args.robot)
     except CorruptDatabase as exc:
         raise CliError(str(exc)) from None
     return seq
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.db and args.angle is None:
+        raise CliError("--db needs --angle: every stored capture has a view angle")
+    if not args.db and (args.robot != ROBOT_ID or args.scene is not None):
+        raise CliError("--robot and --scene label what --db stores: give --db DB too")
+    if args.angle is not None:
+        elevation(args.angle)
+    store = _open(args.db) if args.db else None
+    try:
+        return _fit(args, store)
+    finally:
+        if store is not None:
+            store.close()
+
+
+def _fit(args: argparse.Namespace, store: Store | None) -> int:
     # heavy (OpenCV, scipy): loaded to run, not for --help
     from tools.analysis.models_doc import models_document
     from tools.data.images import fit_image
 
-    if args.db and args.angle is None:
-        raise CliError("--db needs --angle: every stored capture has a view angle")
-    if args.angle is not None:
-        elevation(args.angle)
     try:
         fitted = fit_image(args.image, args.mask, args.space, dependence=not args.independent_only)
     except ValueError as exc:  # ImageError too
@@ -58,10 +84,10 @@ def run(args: argparse.Namespace) -> int:
     feats, pca, results = fitted.feats, fitted.pca, fitted.results
     doc = models_document(feats.space.value, feats.band_names, feats.levels, args.angle, results,
                           pca=None if pca is None else pca.to_record(), image=str(args.image),
-                          dependence=fitted.dependence)
-    if args.db:
-        seq = _store(args, fitted)
-        doc["stored"] = {"db": str(args.db), "robot": ROBOT_ID, "sequence": seq}
+                          dependence=None if args.independent_only else fitted.dependence)
+    if store is not None:
+        seq = _store(store, args, fitted)
+        doc["stored"] = {"db": str(args.db), "robot": args.robot, "scene": args.scene or "", "sequence": seq}
     if args.json:
         print(json.dumps(doc, indent=1))
     else:
@@ -71,8 +97,9 @@ def run(args: argparse.Namespace) -> int:
                   f"gamma {row['gamma']:9.4f} delta {row['delta']:8.4f} xi {row['xi']:9.3f} "
                   f"lam {row['lam']:9.3f}  n {row['count']}{seen}")
         _print_dependence(doc["dependence"], feats.band_names)
-        if args.db:
-            print(f"stored as capture {ROBOT_ID}/{seq} in {args.db}")
+        if store is not None:
+            scene = f" (scene {args.scene})" if args.scene else ""
+            print(f"stored as capture {args.robot}/{seq}{scene} in {args.db}")
     return 0
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from onboard.cli.runner import bounded
 from tools.cli.options import CliError, elevation
 from tools.data.datasets import DatasetError, Layout
 from tools.data.ingest import INGEST_SPACES, NADIR, IngestError, ingest
@@ -14,14 +15,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = ("Fit every (image, label, band) of a dataset folder with the robot's fitter and store view and "
                      "illumination angles. Images already in the database are skipped.")
     p.add_argument("dir", help="dataset folder")
-    p.add_argument("--layout", required=True, help="curet | utia | folder")
-    p.add_argument("--db", required=True)
+    p.add_argument("--layout", required=True, choices=[m.value for m in Layout],
+                   help="curet: CUReT's sample folders and angles.txt; utia: UTIA's file names; folder: any images, "
+                        "angles from angles.csv or --angle")
+    p.add_argument("--db", required=True, help="the database to store into (created if missing; resumable)")
     p.add_argument("--mask", help="label mask PNG for every image, or a folder of <image stem>.png masks")
-    p.add_argument("--space", help=" | ".join(INGEST_SPACES) + " (default: each image's own, gray for one band, rgb for colour)")
+    p.add_argument("--space", choices=INGEST_SPACES,
+                   help="the bands fitted (default: each image's own, gray for one band, rgb for colour)")
     p.add_argument("--table", help="angle table (curet: angles.txt, folder: angles.csv in DIR by default)")
     p.add_argument("--angle", type=float, default=NADIR,
                    help="view elevation for a folder without angles (default: 90, straight down)")
-    p.add_argument("--workers", type=int, help="local processes (default: CPU count; 0: this process)")
+    p.add_argument("--workers", type=bounded(int, 0, 256, "processes"),
+                   help="local processes (default: CPU count; 0: this process)")
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786")
     p.add_argument("--keep-going", action="store_true",
                    help="skip images that cannot be fitted, name them at the end and exit with status 1")
@@ -34,12 +39,6 @@ def run(args: argparse.Namespace) -> int:
     # heavy (OpenCV, scipy): loaded to run, not for --help
     from tqdm import tqdm
 
-    if args.layout not in {m.value for m in Layout}:
-        raise CliError(f"layout {args.layout!r}: expected one of {', '.join(m.value for m in Layout)}")
-    if args.space is not None and args.space not in INGEST_SPACES:
-        raise CliError(f"feature space {args.space!r}: ingest stores one of {', '.join(INGEST_SPACES)}")
-    if args.workers is not None and args.workers < 0:
-        raise CliError(f"--workers must be >= 0, got {args.workers}")
     if args.scheduler is not None and args.workers is not None:
         raise CliError("--workers and --scheduler exclude each other: the cluster has its own workers")
     elevation(args.angle)

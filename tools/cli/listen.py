@@ -8,6 +8,7 @@ import json
 import sys
 import time
 
+from onboard.cli.runner import bounded
 from tools.cli.options import CliError
 from tools.cli.station import add_station_options
 from tools.station.start import open_station, serve
@@ -15,7 +16,7 @@ from tools.station.start import open_station, serve
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_station_options(p, log=False)
-    p.add_argument("--until-idle", type=float, default=0.0, metavar="S",
+    p.add_argument("--until-idle", type=bounded(float, 0, 86400, "s"), default=0.0, metavar="S",
                    help="exit after S seconds without a delivered packet (0: run until Ctrl-C)")
     p.add_argument("--json", action="store_true", help="one JSON object per received packet on stdout")
 
@@ -24,13 +25,13 @@ def run(args: argparse.Namespace) -> int:
     # heavy (OpenCV, scipy): loaded to run, not for --help
     from tqdm import tqdm
 
-    if args.until_idle < 0:
-        raise CliError(f"--until-idle {args.until_idle}: must not be negative")
     bar = tqdm(desc="captures", unit="cap", file=sys.stderr, disable=args.json or not sys.stderr.isatty())
 
     def show(item) -> None:
         if args.json:
             print(json.dumps(item.to_json()), flush=True)
+        elif item.kind.value == "link":  # the link itself (a wrong key, stale counters): its line alone
+            tqdm.write(f"{item.kind.value:>9}: {item.text}")
         else:
             tqdm.write(f"{item.kind.value:>9} robot {item.robot} seq {item.seq}: {item.text}"
                        + ("" if item.stored or item.kind.value not in ("capture", "mask", "unchanged")
@@ -65,4 +66,7 @@ def run(args: argparse.Namespace) -> int:
     if station.failure is not None:
         print(f"btf-host: error: {station.failure}", file=sys.stderr)
         return station.failure.status
+    if station.wrong_key:  # it listened to the end; nothing it heard could be read
+        print(f"btf-host: error: {station.wrong_key}", file=sys.stderr)
+        return 2
     return 0

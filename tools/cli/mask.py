@@ -2,10 +2,10 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 
+from onboard.cli.runner import SEED, bounded
 from tools.cli.options import CliError, add_force, check_out
 from tools.data.masks import segment as segment_image
 
@@ -13,12 +13,16 @@ METHODS = ("isodata", "kmeans", "felzenszwalb", "slic")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("image")
-    p.add_argument("--method", choices=METHODS, required=True)
-    p.add_argument("--k", type=int, default=4, help="clutter classes (default 4)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--scale", type=float, default=100.0, help="felzenszwalb scale")
-    p.add_argument("--segments", type=int, default=400, help="slic superpixels")
+    p.add_argument("image", help="the photograph to segment (8- or 16-bit PNG, TIFF, JPEG)")
+    p.add_argument("--method", choices=METHODS, required=True,
+                   help="isodata and kmeans cluster colours into --k classes; felzenszwalb and slic grow regions "
+                        "first, then cluster them")
+    p.add_argument("--k", type=bounded(int, 1, 255, "classes"), default=4, help="clutter classes, 1..255 (default 4)")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the clustering (the same seed, the same mask)")
+    p.add_argument("--scale", type=bounded(float, 0.001, 1e6), default=100.0,
+                   help="felzenszwalb scale: larger gives larger regions (default 100)")
+    p.add_argument("--segments", type=bounded(int, 1, 100_000, "superpixels"), default=400,
+                   help="slic superpixels (default 400)")
     p.add_argument("--out", required=True, help="output mask .png (never the input; an existing file needs --force)")
     add_force(p)
 
@@ -39,13 +43,7 @@ def run(args: argparse.Namespace) -> int:
         write_mask,
     )
 
-    if not 1 <= args.k <= 255:
-        raise CliError(f"--k {args.k}: must lie in 1..255")
-    if args.segments < 1:
-        raise CliError(f"--segments {args.segments}: slic needs at least 1 superpixel")
-    if not (math.isfinite(args.scale) and args.scale > 0):
-        raise CliError(f"--scale {args.scale}: felzenszwalb needs a positive number")
-    check_out(args.out, (args.image,), args.force)
+    check_out(args.out, (args.image,), args.force, suffixes=(".png",))  # labels stay exact in PNG only
     try:
         # 16-bit: segmented on its own range; one band: as gray RGB (the segmenters take colour)
         image = three_bands(stretched_8bit(read_image(args.image)))

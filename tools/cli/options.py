@@ -7,28 +7,53 @@ import os
 from collections import Counter
 from pathlib import Path
 
-from onboard.cli.runner import CliError  # noqa: F401  (subcommands raise it)
+from onboard.cli.runner import CliError, bounded
 
 # The feature spaces of tools.data.images.SPACES, named here so that building the parser needs no OpenCV.
 FEATURE_SPACES = ("rgb", "hsv", "gray", "pca")
+BAUD = bounded(int, 50, 4_000_000, "bits/s")  # a serial port's speed
 
 
 def add_force(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--force", action="store_true", help="replace an existing --out")
 
 
-def check_out(out: str | os.PathLike, inputs: tuple, force: bool) -> Path:
-    """The output path, refused when it is one of the command's inputs (even with --force)
-    or, without `force`, when it exists."""
+# The image files OpenCV writes (the host's images are written with it).
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".ppm", ".pgm")
+
+
+def check_out(out: str | os.PathLike, inputs: tuple, force: bool, suffixes: tuple[str, ...] = IMAGE_SUFFIXES,
+              option: str = "--out") -> Path:
+    """The output file, checked before any work: refused when it is one of the command's inputs
+    (even with --force), when its name ends in none of `suffixes`, when its directory is
+    missing or not writable, or, without `force`, when it exists."""
     path = Path(out)
     for given in inputs:
         if given is not None and _same_file(path, Path(given)):
-            raise CliError(f"--out {out} is an input of this command ({given}); write somewhere else")
+            raise CliError(f"{option} {out} is an input of this command ({given}); write somewhere else")
     if path.is_dir():
-        raise CliError(f"--out {out} is a directory; give a file name")
+        raise CliError(f"{option} {out} is a directory; give a file name")
+    if path.suffix.lower() not in suffixes:
+        what = f"{path.suffix} is not a file type this command writes" if path.suffix else "the name has no file type"
+        raise CliError(f"{option} {out}: {what}; end it in {', '.join(suffixes)}")
+    parent = path.parent if str(path.parent) else Path(".")
+    if not parent.is_dir():
+        raise CliError(f"{option} {out}: directory {parent} does not exist; create it first")
+    writable_place(parent, f"{option} {out}")
     if path.exists() and not force:
-        raise CliError(f"--out {out} exists; pass --force to replace it")
+        raise CliError(f"{option} {out} exists; pass --force to replace it")
     return path
+
+
+def writable_place(directory: Path, said: str) -> None:
+    """A directory a command can write into, or the nearest one it would be made in: else one line."""
+    where = directory if str(directory) else Path(".")
+    while not where.exists() and where != where.parent:
+        where = where.parent
+    if not where.is_dir():
+        raise CliError(f"{said}: {where} is not a directory")
+    if not os.access(where, os.W_OK | os.X_OK):
+        raise CliError(f"{said}: cannot write in {where} (permission denied); choose another place")
 
 
 def _same_file(a: Path, b: Path) -> bool:
@@ -45,6 +70,16 @@ def elevation(value: float, option: str = "--angle") -> float:
     if not 0.0 <= value <= 90.0:
         raise CliError(f"{option} {value:g}: an elevation lies in 0..90 degrees")
     return value
+
+
+LABEL_CHARS = 64
+
+
+def label(text: str) -> str:
+    """An argparse type: a robot or scene name as the database files captures under it."""
+    if not 1 <= len(text) <= LABEL_CHARS or not text.isprintable():
+        raise argparse.ArgumentTypeError(f"{text!r}: must be 1..{LABEL_CHARS} printable characters")
+    return text
 
 
 def add_source_filters(parser: argparse.ArgumentParser) -> None:

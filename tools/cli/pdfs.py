@@ -4,16 +4,17 @@ from __future__ import annotations
 import argparse
 import json
 
+from onboard.cli.runner import SEED
 from tools.cli.options import FEATURE_SPACES, CliError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("image")
-    p.add_argument("--mask", required=True)
+    p.add_argument("image", help="the photograph (8- or 16-bit PNG, TIFF, JPEG)")
+    p.add_argument("--mask", required=True, help="label mask PNG, same size as the image: one row per region")
     p.add_argument("--space", choices=FEATURE_SPACES,
-                   help="feature space (default: the image's own: gray for a one-band image, rgb for colour)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--json", action="store_true")
+                   help="the bands compared (default: the image's own: gray for a one-band image, rgb for colour)")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the peers' samples (the same seed, the same table)")
+    p.add_argument("--json", action="store_true", help="print the table as one JSON document")
 
 
 def run(args: argparse.Namespace) -> int:

@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from tools.cli.options import CliError, add_source_filters, choose_source
+from onboard.cli.runner import SEED
+from tools.cli.options import CliError, add_source_filters, choose_source, writable_place
 from tools.store.database import CorruptDatabase, Store
 
 
@@ -13,7 +14,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", required=True,
                    help="output directory (created if missing; one holding a report needs --force)")
     p.add_argument("--force", action="store_true", help="replace the report in --out")
-    p.add_argument("--seed", type=int, default=0, help="seed of the synthetic images")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the synthetic images")
     add_source_filters(p)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
@@ -21,6 +22,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def _check_out(out: Path, force: bool) -> None:
     if out.exists() and not out.is_dir():
         raise CliError(f"--out {out} is not a directory")
+    writable_place(out, f"--out {out}")
     if (out / "index.html").exists() and not force:
         raise CliError(f"--out {out}: {out / 'index.html'} exists; pass --force to replace the report")
 

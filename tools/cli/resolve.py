@@ -35,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--pixel-mm", type=float, help="physical view: pixel footprint on the surface in mm")
     p.add_argument("--incidence-deg", type=float, default=0.0, help="physical view: angle of incidence (default 0)")
     p.add_argument("--na", type=float, default=1.0, help="physical view: numerical aperture (default 1)")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print both views as one JSON document")
 
 
 SYMBOLS = {"grain_mm": ("D", " mm"), "wavelength_nm": ("lambda", " nm"), "pixel_per_facet": ("Kpf", ""),

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import warnings
 from pathlib import Path
@@ -11,9 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from btf.fit.features import PcaBasis
+from onboard.cli.runner import SEED, bounded
 from tools.analysis.interpolation import models_by_direction, requested_direction, synthesize_at_direction
-from tools.analysis.radiometry import check_space, sweep_dependence, sweep_models
 from tools.analysis.models_doc import dependence_from_document, models_from_document
+from tools.analysis.radiometry import check_space, sweep_dependence, sweep_models
 from tools.analysis.synth import ExtrapolationWarning, MissingModels, ReachWarning, synthesize_at
 from tools.cli.options import (
     FEATURE_SPACES,
@@ -31,8 +31,9 @@ from tools.store.database import CorruptDatabase, Store
 def add_arguments(p: argparse.ArgumentParser) -> None:
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--db", help="database of captures")
-    src.add_argument("--model", help="MODELS.json: one document of `fit --json`, or a list of them")
-    p.add_argument("--mask", required=True)
+    src.add_argument("--model", help="MODELS.json: one document of 'btf-host fit --json', or a list of them")
+    p.add_argument("--mask", required=True,
+                   help="label mask PNG: the regions to fill, each with its label's models; sets the image's size")
     p.add_argument("--angle",
                    help="view elevation, or EL,AZ[,LIGHT_EL,LIGHT_AZ] in degrees (needed with --db and with a "
                         "models file of several angles; several angles at once need --db)")
@@ -41,13 +42,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--light-azimuth", type=float, help="light azimuth, degrees")
     p.add_argument("--out", required=True, help="output image (never an input; an existing file needs --force)")
     add_force(p)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=SEED, default=0, help="seed of the drawing (the same seed, the same image)")
     p.add_argument("--space", choices=FEATURE_SPACES, help="which stored feature space (--db)")
     add_source_filters(p)
     p.add_argument("--independent", action="store_true",
                    help="draw every pixel on its own even when grain and band correlation are stored "
                         "(still within each region's observed levels)")
-    p.add_argument("--exposure", type=float, metavar="US",
+    p.add_argument("--exposure", type=bounded(float, 1, 1e8, "microseconds"), metavar="US",
                    help="synthesize as if every capture had been taken at this exposure, in microseconds "
                         "(--db, rgb or gray; default: each capture's own)")
     p.add_argument("--normalise-reference", action="store_true",
@@ -83,6 +84,10 @@ def _from_json(path: str) -> tuple[dict, dict, str, int, dict | None]:
         deps[0.0 if angle is None else angle] = dep
     first = parsed[0][2]
     levels = first.get("levels") or 256
+    depths = sorted({d.get("levels") or 256 for _, _, d in parsed}, key=str)
+    if len(depths) > 1:
+        raise CliError(f"models {path}: documents of images of {' and '.join(map(str, depths))} levels, which are "
+                       "never blended; keep one depth per models file")
     if type(levels) is not int or not 2 <= levels <= 65536:
         raise CliError(f"models {path}: levels {levels!r} is not an integer in 2..65536")
     if levels > 256 and first.get("space") not in ("rgb", "gray"):
@@ -103,7 +108,25 @@ def _source(store, args: argparse.Namespace) -> dict:
         space = spaces[0]
     if space not in spaces:
         raise CliError(f"database {args.db}: no captures in feature space {space} (it holds {', '.join(spaces)})")
+    _one_depth(store.captures(robot=robot, scene=scene, space=space), args.db, robot, scene)
     return {"robot": robot, "scene": scene, "space": space}
+
+
+def _one_depth(captures, db: str, robot: str, scene: str) -> None:
+    """Refuses captures of different sensor depths: their levels are not one scale to blend."""
+    by_depth: dict[int, list[float]] = {}
+    for c in captures:
+        by_depth.setdefault(c.levels, []).append(c.elevation)
+    if len(by_depth) > 1:
+        said = " and ".join(f"{_bits(levels)} ({', '.join(f'{e:g}°' for e in sorted(set(els))[:4])}"
+                            + (", ...)" if len(set(els)) > 4 else ")") for levels, els in sorted(by_depth.items()))
+        who = f"robot {robot}" + (f" scene {scene}" if scene else "")
+        raise CliError(f"database {db}: the captures of {who} mix {said} images, which are never blended; "
+                       "store each depth under its own --robot or --scene (fit --db takes both) and choose one")
+
+
+def _bits(levels: int) -> str:
+    return f"{levels.bit_length() - 1}-bit" if levels & (levels - 1) == 0 else f"{levels}-level"
 
 
 def _radiometry(args: argparse.Namespace, space: str) -> bool:
@@ -111,8 +134,6 @@ def _radiometry(args: argparse.Namespace, space: str) -> bool:
     asked = args.exposure is not None or args.normalise_reference
     if not asked:
         return False
-    if args.exposure is not None and not (math.isfinite(args.exposure) and args.exposure > 0):
-        raise CliError(f"--exposure must be a positive number of microseconds, got {args.exposure:g}")
     if not args.db:
         raise CliError("--exposure and --normalise-reference need --db (a models document carries no camera settings)")
 
@@ -180,7 +201,7 @@ def _run_direction(args: argparse.Namespace, direction) -> int:
     if not args.db:
         raise CliError("synth: several angles need --db (a models document holds one angle)")
     if args.space == "pca":
-        raise CliError("synth --db: pca bases are not stored yet; use --model from `fit --json`")
+        raise CliError("synth --db: pca bases are not stored yet; use --model from 'btf-host fit --json'")
     with _open_db(args.db) as store:
         source = _source(store, args)
         _radiometry(args, source["space"])

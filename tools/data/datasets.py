@@ -111,7 +111,7 @@ def read_curet_table(path: Path) -> dict[int, Angles]:
             continue
         where = f"angle table {path}, line {lineno}"
         if len(fields) != 5:
-            raise DatasetError(f"{where}: expected `number theta_v phi_v theta_i phi_i`, got {len(fields)} fields")
+            raise DatasetError(f"{where}: expected 'number theta_v phi_v theta_i phi_i', got {len(fields)} fields")
         try:
             number = int(fields[0])
             rad = [float(v) for v in fields[1:]]

@@ -20,6 +20,7 @@ from btf.fit.dependence import measure, observed
 from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from btf.fit.fitter import FrameFitter
 from tools.analysis.tiles import row_tiles
+from tools.data.decoders import complaint, damage_said, native_stderr, png_problem
 
 if TYPE_CHECKING:
     from btf.fit.features import FeatureFrame, PcaBasis
@@ -32,9 +33,14 @@ class ImageError(ValueError):
 def _imread(p: Path, what: str) -> np.ndarray:
     if not p.is_file():
         raise ImageError(f"{what} {p}: {'not a regular file' if p.exists() else 'no such file'}")
-    raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+    with native_stderr() as said:  # libpng's and OpenCV's own lines: into ours, or dropped
+        raw = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
     if raw is None or raw.size == 0:
-        raise ImageError(f"{what} {p}: not a readable image file")
+        damage = png_problem(p)
+        why = f" ({damage}; copy or export it again)" if damage else f" ({complaint(said)})" if complaint(said) else ""
+        raise ImageError(f"{what} {p}: not a readable image file{why}")
+    if damage_said(said):  # pixels returned, but not the file's: part of it filled in
+        raise ImageError(f"{what} {p}: damaged image file ({damage_said(said)}); copy or export it again")
     return raw
 
 
@@ -115,11 +121,13 @@ def _write(path: Path, array: np.ndarray, what: str) -> None:
         raise ImageError(f"{what} {path}: directory {path.parent} does not exist")
     ok = False
     try:
-        ok = cv2.imwrite(str(path), array)
+        with native_stderr() as said:
+            ok = cv2.imwrite(str(path), array)
     except cv2.error as exc:
         raise ImageError(f"{what} {path}: cannot write ({str(exc).splitlines()[-1]})") from None
     if not ok:
-        raise ImageError(f"{what} {path}: cannot write (unknown extension or unwritable place)")
+        why = complaint(said)
+        raise ImageError(f"{what} {path}: cannot write ({why or 'unknown extension or unwritable place'})")
 
 
 DEEP_SUFFIXES = (".png", ".tif", ".tiff")  # files that hold 16-bit pixels

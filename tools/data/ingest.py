@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, Callable, Iterator
 from tools.data.datasets import Angles, DatasetImage, Layout, scan
 from tools.data.images import ImageError, fit_image, read_mask
 from tools.store.database import Store
+from tools.store.rows import DATASET_PREFIX
 
 if TYPE_CHECKING:  # numpy and the fitter load with the first image, not with the command line
     from concurrent.futures import Executor
@@ -79,9 +80,6 @@ class IngestReport:
     skipped: int
     stored: int
     damaged: tuple[Damaged, ...] = ()
-
-
-DATASET_PREFIX = "dataset:"  # of the robot ids datasets' captures are stored under, before the folder
 
 
 def dataset_robot(root: str | Path) -> str:

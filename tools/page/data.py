@@ -1,23 +1,33 @@
 """The operator page's view of the database: the latest capture at each pose (read on a thread
 of its own, with its own connection, so the station's loop never waits on a query), and each
 capture's section and images (`tools.report.look`, `tools.report.capture_views`: the report's own), drawn in a
-worker process so that synthesis and plotting never hold the station's interpreter.
+worker process so that synthesis and plotting never hold the station's interpreter. The worker
+draws one thing at a time, what the operator chose (a section, its histograms) before the cards'
+pictures; a capture's first drawing with grain and band correlation costs most (a few tenths of a
+second: the correlations of its normal scores are solved for), later ones reuse that.
 """
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import heapq
+import itertools
 import multiprocessing
+import os
+import warnings
 from collections import OrderedDict
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any, Mapping
 
-from tools.analysis.radiometry import describe
+import numpy as np
+
+from radio.packets.base import iso_time
+from tools.analysis.radiometry import adjusted, describe
 from tools.page.btf_panel import panel
-from tools.report.capture_views import Frames, png, views
-from tools.report.look import capture_section
-from tools.station.snapshot import iso
+from tools.report.capture_views import Frames, capture_mask, histogram_png, png, views
+from tools.report.look import azimuth_shown, capture_section
 from tools.store.database import Store
 
 CACHED = 128  # rendered captures kept (thumbnails and sections)
@@ -33,9 +43,9 @@ def pose_key(c: Any) -> str:
 def card(c: Any) -> dict:
     """A capture as the page lists it."""
     return {"id": c.id, "key": pose_key(c), "robot": c.robot, "seq": c.sequence, "scene": c.scene,
-            "elevation": round(c.measured[0], 2), "azimuth": round(c.measured[1], 2),
+            "elevation": round(c.measured[0], 2), "azimuth": azimuth_shown(c.measured[1]),
             "commanded": None if c.commanded[0] is None else [c.commanded[0], c.commanded[1]],
-            "time": iso(c.time), "space": c.space, "camera": describe(c.camera),
+            "time": iso_time(c.time), "space": c.space, "camera": describe(c.camera),
             "unlocked": bool(c.camera is not None and c.camera.unlocked)}
 
 
@@ -68,10 +78,9 @@ _worker_store: dict[str, Any] = {}
 
 
 def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
-    """In the worker: `what` "thumb" ({"png"}: the card's picture) or "section" ({"html",
-    "images": {name: png}}) of one capture; {"missing": text} when there is nothing to draw."""
-    import numpy as np
-
+    """In the worker: `what` "thumb" ({"png"}: the card's picture), "section" ({"html", "images":
+    {name: png}}: its pictures, the histograms' place kept) or "histograms" ({"png"}: the plot, a
+    drawing of its own as it takes longest) of one capture; {"missing": text} when there is nothing."""
 
     store = _worker_store.get(db)
     if store is None:
@@ -86,25 +95,63 @@ def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
             v = views(store, cap, rng, Frames(fake), histograms=False)
         name = next((k for k in SHOWN_FIRST if k in v.images), None)
         return {"png": png(v.images[name])} if name else {"missing": v.problem or "nothing to draw"}
-    v = views(store, cap, rng, Frames(fake))
+    if what == "histograms":
+        return _histograms(store, cap, fake)
+    v = views(store, cap, rng, Frames(fake), histograms=False)
+    images = {k: png(img) for k, img in v.images.items()}
+    if v.fitted and not (v.no_mask or v.problem):  # what views() draws histograms for
+        v.images["histograms"] = b""  # its place in the section; drawn when the page asks for it
     html = capture_section(v, lambda k: f"capture/{capture_id}/{k}.png?r={rev}")
-    return {"html": html, "images": {k: png(img) for k, img in v.images.items()}}
+    return {"html": html, "images": images}
 
 
-def end_with_parent() -> None:
+def _histograms(store: Store, cap: Any, fake: Any) -> dict:
+    """The histograms with the Johnson curves (as `views` draws them), without synthesizing again."""
+    fitted = store.models(cap.id)
+    models = dict(adjusted({k: m.model for k, m in fitted.items()}, cap.camera))
+    mask = capture_mask(store, cap)
+    if mask is None or not models:
+        return {"missing": f"capture {cap.id} has no histograms"}
+    real = Frames(fake)(cap) if cap.space == "rgb" else None
+    return {"png": histogram_png(real, mask, models, cap.band_names, f"{cap.scene} {cap.elevation:.0f}°",
+                                 cap.levels)}
+
+
+def end_with_parent(parent: int | None = None) -> None:
     """In a child process of the station: SIGTERM when the station dies, even by SIGKILL
-    (Linux's PR_SET_PDEATHSIG), so no drawing worker or demo robot outlives it."""
+    (Linux's PR_SET_PDEATHSIG), so no drawing worker or demo robot outlives it. `parent`: the
+    station's pid, for a child that starts slowly (a spawned worker): if the station died before
+    this ran, no signal would come, so the child ends now."""
     import ctypes
     import signal
 
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
     except (OSError, AttributeError):
-        pass  # not Linux: the station's own exit path ends them
+        return  # not Linux: the station's own exit path ends them
+    if parent is not None and os.getppid() != parent:
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
+def _worker_start(station: int) -> None:
+    """The drawing worker's start: it ends with the station (pid `station`), and leaves Ctrl-C
+    (which the terminal sends its whole process group) to the station, which shuts it down."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    end_with_parent(station)
+
+
+def _loaded() -> None:
+    """Nothing: sent to a new worker so that it loads this module's libraries before the first request."""
 
 
 def _warm() -> None:
-    """Load the worker's libraries before the first request needs them."""
+    """Load the worker's libraries and draw one plot before the first request needs them (matplotlib's
+    first figure costs a second)."""
+    with warnings.catch_warnings():  # an empty plot's "no artists for the legend"
+        warnings.simplefilter("ignore")
+        histogram_png(None, np.zeros((2, 2), np.uint8), {}, ("Y",), "")
 
 
 def btf_query(query: Mapping[str, str]) -> dict:
@@ -131,6 +178,12 @@ class PageData:
         self._pool: ProcessPoolExecutor | None = None
         self._btf_pool: ProcessPoolExecutor | None = None
         self._cache: OrderedDict[tuple[int, str, int], dict] = OrderedDict()
+        self._pending: dict[tuple[int, str, int], asyncio.Future] = {}  # asked for, not drawn yet
+        self._waiters: dict[tuple[int, str, int], int] = {}  # requests still waiting for each
+        self._queue: list[tuple[int, int, tuple[int, str, int]]] = []  # (urgency, order, key): a heap
+        self._order = itertools.count()
+        self._drawing: asyncio.Task | None = None
+        self._warmed: Future | None = None
         self.rev = 0  # bumped when a mask arrives: drawings made before it may lack it
         self._btf: dict[tuple, dict] = {}  # the BTF panel's last answer
 
@@ -147,29 +200,76 @@ class PageData:
     def start_worker(self) -> None:
         if self._pool is None:
             self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                             initializer=end_with_parent)
-            self._pool.submit(_warm)
+                                             initializer=_worker_start, initargs=(os.getpid(),))
+            self._warmed = self._pool.submit(_warm)
         if self._btf_pool is None:  # its own process: the panel never waits behind a capture's drawing
             self._btf_pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=end_with_parent)
-            self._btf_pool.submit(_warm)
+                                                 initializer=_worker_start, initargs=(os.getpid(),))
+            self._btf_pool.submit(_loaded)
+
+    async def warm(self) -> None:
+        """Returns once the drawing worker has loaded its libraries (at once if it failed to)."""
+        self.start_worker()
+        with contextlib.suppress(Exception):  # a worker that cannot start says so at its first drawing
+            await asyncio.wrap_future(self._warmed)
 
     async def drawn(self, capture_id: int, what: str) -> dict:
+        """A drawing (`render`): from the cache, or queued for the worker one at a time, a capture's
+        section and histograms before any thumbnail (what the operator chose first, the cards after)."""
         key = (capture_id, what, self.rev)
         if key in self._cache:
             self._cache.move_to_end(key)
             return self._cache[key]
-        self.start_worker()
-        loop = asyncio.get_running_loop()
+        if key not in self._pending:  # asked twice: drawn once
+            self._pending[key] = asyncio.get_running_loop().create_future()
+            # a page that went away leaves no failure unretrieved (asyncio would log it)
+            self._pending[key].add_done_callback(lambda f: f.cancelled() or f.exception())
+            heapq.heappush(self._queue, (1 if what == "thumb" else 0, next(self._order), key))
+            if self._drawing is None or self._drawing.done():
+                self._drawing = asyncio.ensure_future(self._draw_queued())
+        self._waiters[key] = self._waiters.get(key, 0) + 1
         try:
-            out = await loop.run_in_executor(self._pool, render, self.db, capture_id, self.fake, what, self.rev)
-        except BrokenProcessPool:  # the worker died (killed, out of memory): a new one next time
-            self._pool = None
-            raise RuntimeError("the drawing worker stopped; reload to try again") from None
-        self._cache[key] = out
-        while len(self._cache) > CACHED:
-            self._cache.popitem(last=False)
-        return out
+            return await asyncio.shield(self._pending[key])
+        finally:  # a page that went away (or chose another capture) no longer waits
+            self._waiters[key] -= 1
+            if not self._waiters[key]:
+                del self._waiters[key]
+
+    async def _draw_queued(self) -> None:
+        """Draws what is queued, each at the revision in force when its turn comes: a drawing asked
+        for before a mask arrived is made once, new, for every request of it under any revision; one
+        that no request waits for any more (the page went on to a newer capture) is not made."""
+        loop = asyncio.get_running_loop()
+        while self._queue:
+            key = heapq.heappop(self._queue)[2]
+            if key not in self._pending:  # drawn already, when asked for under a later revision
+                continue
+            now = (key[0], key[1], self.rev)
+            waiting = [self._pending.pop(k) for k in {key, now} if k in self._pending]
+            if not (self._waiters.get(key) or self._waiters.get(now)):  # nobody waits for it any more
+                for done in waiting:
+                    done.cancel()
+                continue
+            self.start_worker()
+            try:
+                out = self._cache.get(now) or await loop.run_in_executor(
+                    self._pool, render, self.db, now[0], self.fake, now[1], now[2])
+            except BrokenProcessPool:  # the worker died (killed, out of memory): a new one next time
+                self._pool = None
+                failed = RuntimeError("the drawing worker stopped; reload to try again")
+            except Exception as exc:  # noqa: BLE001 - a drawing that fails is said by the page's request, in one line
+                failed = exc
+            else:
+                failed = None
+                if now[2] == self.rev:  # not if a mask arrived meanwhile: asked for again, drawn again
+                    self._cache[now] = out
+                while len(self._cache) > CACHED:
+                    self._cache.popitem(last=False)
+            for done in waiting:
+                if failed is None:
+                    done.set_result(out)
+                else:
+                    done.set_exception(failed)
 
     async def btf(self, query: Mapping[str, str]) -> tuple[int, dict]:
         """(HTTP status, JSON) of the BTF panel (`tools.page.btf_panel`), computed in a worker and

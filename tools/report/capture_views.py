@@ -5,7 +5,8 @@ page both draw captures with these (`tools.report.look` lays them out).
 
 Measured frames are not in the database (the robot sends models, not pixels): `Frames` finds
 them where the host can, a fake robot's render (its config names scene, size and seed) or the
-image an ingested dataset's capture was fitted from.
+image an ingested dataset's capture was fitted from. A capture without a label map whose models
+are all of region 0 (`ingest` or `fit` without a mask) is drawn as one region over the whole image.
 """
 from __future__ import annotations
 
@@ -29,7 +30,9 @@ from tools.station.receiver import mask_key
 from tools.store.database import Store, StoredCapture
 
 Measured = Callable[[StoredCapture], "np.ndarray | None"]
-DATASET = "dataset:"  # the robot id `ingest` files a dataset's captures under, before its folder
+WHOLE_SIZE = (128, 128)  # a whole-image region's size when its frame is not found
+HIST_PANEL_PX = (240, 190)  # one band's histogram panel, drawn at the size the report shows it
+HIST_DPI = 100
 
 
 @dataclass
@@ -39,6 +42,7 @@ class CaptureViews:
     images: dict[str, np.ndarray | bytes] = field(default_factory=dict)  # 8-bit views; "histograms": PNG bytes
     no_mask: bool = False  # no label map: nothing synthesized
     problem: str = ""  # why nothing was synthesized (no mask, a label of the mask without models)
+    whole: bool = False  # no label map, models of region 0 alone: the whole image is region 0
 
 
 def capture_mask(store: Store, cap: StoredCapture) -> np.ndarray | None:
@@ -72,6 +76,9 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
     mask = capture_mask(store, cap)
     # each region at the capture's exposure (a bracketed region's models scaled back)
     models = dict(adjusted({k: m.model for k, m in fitted.items()}, cap.camera))
+    if mask is None and models and {label for label, _ in models} == {0}:
+        mask = np.zeros(real.shape[:2] if real is not None else WHOLE_SIZE, np.uint8)
+        out.whole = True
     if mask is None or not models:
         out.no_mask = mask is None
         out.problem = "No label mask for this capture: nothing to synthesize." if mask is None else ""
@@ -94,7 +101,7 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
             out.images["correlated"] = stretched_8bit(corr, span)
     if histograms:
         out.images["histograms"] = histogram_png(real if real is not None and shown(cap, real) else None, mask, models,
-                                                 cap.band_names, f"{cap.scene} {cap.elevation:.0f}°", cap.levels)
+                                                 cap.band_names, cap.levels)
     return out
 
 
@@ -110,32 +117,53 @@ def model_curve(model, levels: int) -> tuple[np.ndarray, np.ndarray]:
     return ((bounds[:-1] + bounds[1:]) / 2)[1:-1], per_level[1:-1]
 
 
+def level_span(models: dict, band: int, levels: int) -> tuple[float, float]:
+    """The levels a band's models put their bulk on (all regions), with a margin: the x range of its panel."""
+    ends = [(float(m.ppf(1e-3)), float(m.ppf(1 - 1e-3))) for (_, b), m in models.items() if b == band]
+    if not ends:
+        return -0.5, levels - 0.5
+    lo, hi = min(e[0] for e in ends), max(e[1] for e in ends)
+    pad = max(3.0, 0.08 * (hi - lo))
+    return max(lo - pad, -0.5), min(hi + pad, levels - 0.5)
+
+
 def histogram_png(image: np.ndarray | None, mask: np.ndarray, models: dict, bands: tuple[str, ...],
-                  title: str, levels: int = 256) -> bytes:
-    """One panel per band: the measured histogram of each label (when the frame is known) and
-    its Johnson curve, as PNG bytes."""
+                  levels: int = 256) -> bytes:
+    """One panel per band over the levels its models cover: the measured histogram of each label
+    (when the frame is known) and its Johnson curve in the label's colour, as PNG bytes drawn at
+    the size the report shows them (`HIST_PANEL_PX` a panel)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(bands), figsize=(3.2 * len(bands), 2.4), squeeze=False)
+    w, h = HIST_PANEL_PX
+    width = w * len(bands)
+    fig, axes = plt.subplots(1, len(bands), figsize=(width / HIST_DPI, h / HIST_DPI), squeeze=False)
+    # margins in pixels (a layout engine would measure every tick label of every figure)
+    axis_w = (width - 72 - 40 * (len(bands) - 1)) / len(bands)
+    fig.subplots_adjust(left=64 / width, right=1 - 8 / width, bottom=38 / h, top=1 - 22 / h, wspace=40 / axis_w)
     edges = np.arange(257) - 0.5
+    labels = sorted({lab for lab, _ in models})
     for b, name in enumerate(bands):
         ax = axes[0][b]
-        for lab in sorted({lab for lab, _ in models}):
+        for k, lab in enumerate(labels):
+            colour = f"C{k % 10}"
             if image is not None and levels <= 256 and image.shape[:2] == mask.shape and (mask == lab).any():
-                h = np.bincount(image[..., b][mask == lab], minlength=256) / (mask == lab).sum()
+                hist = np.bincount(image[..., b][mask == lab], minlength=256) / (mask == lab).sum()
                 # one filled step artist: 256 bar patches per label made the report slow
-                ax.stairs(h, edges, fill=True, alpha=0.4, label=f"measured {lab}")
+                ax.stairs(hist, edges, fill=True, alpha=0.35, color=colour, label=f"measured {lab}")
             if (lab, b) in models:
-                ax.plot(*model_curve(models[(lab, b)], levels), lw=1, label=f"Johnson {lab}")
-        ax.set_title(f"{title} {name}", fontsize=8)
-        ax.tick_params(labelsize=6)
-    axes[0][0].legend(fontsize=5)
-    fig.subplots_adjust(left=0.05, right=0.98, bottom=0.12, top=0.88, wspace=0.25)
+                ax.plot(*model_curve(models[(lab, b)], levels), lw=1.3, color=colour, label=f"Johnson {lab}")
+        ax.set_xlim(*level_span(models, b, levels))
+        ax.set_ylim(bottom=0)
+        ax.set_title(f"band {name}", fontsize=9)
+        ax.set_xlabel("level", fontsize=8)
+        ax.tick_params(labelsize=8)
+    axes[0][0].set_ylabel("probability", fontsize=8)
+    axes[0][0].legend(fontsize=7, framealpha=0.7, handlelength=1.2, borderaxespad=0.3)
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
+    fig.savefig(buf, format="png", dpi=HIST_DPI)
     plt.close(fig)
     return buf.getvalue()
 
@@ -170,12 +198,12 @@ class Frames:
         return cls(hal if hal.body == "fake" else None)
 
     def __call__(self, cap: StoredCapture) -> np.ndarray | None:
-        if cap.robot.startswith(DATASET) and cap.source:
+        if cap.dataset is not None:
             try:
-                return read_image(Path(cap.robot[len(DATASET):]) / cap.source)
+                return read_image(cap.source_file) if cap.source_file else None
             except (ImageError, OSError):
                 return None
-        if self.fake is not None and cap.space == "rgb" and not cap.robot.startswith(DATASET):
+        if self.fake is not None and cap.space == "rgb":
             return self._render(cap)
         return None
 

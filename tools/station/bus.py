@@ -3,17 +3,17 @@ queue of the subscriber's own.
 
 A subscriber that falls behind (a slow control-socket client, a browser tab in the background)
 never slows the station or the other subscribers: when its queue is full the oldest event is
-dropped, and the next thing it reads is `{"kind": "lost", "count": n}`, n the events dropped
-since it last read, followed by the events that were kept. Everything here runs on the
+dropped, and the next thing it reads is a `LostEvent` (`tools.station.events`) of n, the events
+dropped since it last read, followed by the events that were kept. Everything here runs on the
 station's event loop (no locks).
 """
 from __future__ import annotations
 
 import asyncio
+import time
 from collections import deque
-from typing import Any
 
-Event = dict[str, Any]  # JSON-ready, shared by every subscriber: never modified once published
+from tools.station.events import Event, LostEvent  # shared by every subscriber: frozen
 DEFAULT_QUEUE = 256
 
 
@@ -43,7 +43,7 @@ class Subscription:
         """The next event, the lost notice first if events were dropped; None when empty."""
         if self._lost:
             n, self._lost = self._lost, 0
-            return {"kind": "lost", "count": n, "text": f"{n} events dropped: this subscriber fell behind"}
+            return LostEvent(time.time(), f"{n} events dropped: this subscriber fell behind", count=n)
         if self._queue:
             return self._queue.popleft()
         return None

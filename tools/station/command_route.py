@@ -47,8 +47,8 @@ def ask(args: argparse.Namespace, name: CommandName, cargs: dict, command_id: in
                 time.sleep(0.05)  # another cmd is becoming this database's station: ask it
                 continue
         if not path.exists():
-            raise CliError(f"no station serves {args.db or path}: start `btf-host station --port URL --db DB "
-                           "--key KEY`, or give cmd --port and --key to open the port itself")
+            raise CliError(f"no station serves {args.db or path}: start 'btf-host station --port URL --db DB "
+                           "--key KEY', or give cmd --port and --key to open the port itself")
         time.sleep(0.1)  # its socket is there: a station that is (re)starting
 
 
@@ -96,5 +96,6 @@ def _own_station(args: argparse.Namespace, name: CommandName, cargs: dict, cid: 
     if station.failure is not None:
         raise CliError(str(station.failure))
     if "answer" not in got:
-        raise CliError(f"no answer from the robot within {args.timeout:g} s")
+        said = f": {station.wrong_key}" if station.wrong_key else ""
+        raise CliError(f"no answer from the robot within {args.timeout:g} s{said}")
     return got["answer"]

@@ -141,7 +141,7 @@ class ControlServer:
         try:
             await send({"op": "subscribed", "snapshot": self.station.snapshot_json()})
             while True:
-                await send({"op": "event", "event": await sub.get()})
+                await send({"op": "event", "event": (await sub.get()).to_json()})
         finally:
             sub.close()
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Any, TextIO
+from typing import TextIO
 
-from tools.station.snapshot import iso
+from tools.station.events import Event, line
 
 # What a rejected frame most likely means (radio.frame.Reason values).
 LIKELY_CAUSE = {
@@ -38,24 +38,20 @@ def likely_cause(reason: str) -> str:
 
 
 class StationLog:
-    """Writes events (dicts with at least "kind" and "text") to a JSON-lines file and stderr."""
+    """Writes events (`tools.station.events`) to a JSON-lines file and stderr."""
 
     def __init__(self, path: Path | None, echo: TextIO | None = sys.stderr) -> None:
         self.path, self.echo = path, echo
         self._file = None if path is None else open(path, "a", encoding="utf-8", buffering=1)
 
-    def write(self, event: dict[str, Any]) -> None:
+    def write(self, event: Event) -> None:
+        js = event.to_json()
         if self._file is not None:
-            self._file.write(json.dumps(event, separators=(",", ":")) + "\n")
+            self._file.write(json.dumps(js, separators=(",", ":")) + "\n")
         if self.echo is not None:
-            print(f"{event['kind']}: {event['text']}", file=self.echo, flush=True)
+            print(line(js), file=self.echo, flush=True)
 
     def close(self) -> None:
         if self._file is not None:
             self._file.close()
             self._file = None
-
-
-def event(kind: str, text: str, wall: float, **fields: Any) -> dict[str, Any]:
-    """An event as the log, the bus and the control socket carry it."""
-    return {"kind": kind, "time": iso(wall), "t": round(wall, 3), "text": text, **fields}

@@ -8,6 +8,11 @@ incarnation is the robot state's id its link session named, so a robot whose sta
 wiped numbers from 1 again without its new captures being taken for old ones. A store that
 fails (a full disk, a damaged row) raises `StoreFailed` before anything is acknowledged.
 
+A packet the station cannot use (it does not decode: some field is out of the schema; or the
+store refuses a value) is refused: its raw bytes are kept in the database's rejected_packets for
+a person, and the Item says so (`refusal`); whoever owns the link then tells the robot with a
+NACK UNUSABLE naming the message (`refusal_body`), and the robot sets it aside.
+
 `HostSession` turns the link (`radio.pump.LinkPump` over any pyserial URL, a pty fd or the
 simulated radio): received payloads go to the Receiver, commands go out, and the robot's
 ACK/NACK answers are collected by command id.
@@ -19,6 +24,7 @@ import enum
 import os
 import secrets
 import sqlite3
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -67,6 +73,10 @@ class Item:
     text: str
     packet: Any = field(default=None, compare=False, repr=False)
     incarnation: str = ""  # the robot state that sent it ("" when its session named none)
+    msg_id: int | None = None  # the robot's message id (its outbox row)
+    refusal: str = ""  # why the station refuses it ("" when it does not)
+    size: int = 0  # bytes of the payload
+    rejected: int | None = None  # its row in rejected_packets, when refused and kept
 
     def to_json(self) -> dict:
         d: dict[str, Any] = {"kind": self.kind.value, "robot": self.robot, "seq": self.seq,
@@ -94,6 +104,10 @@ def _jsonable(v: Any) -> Any:
         return v.hex()
     if isinstance(v, enum.Enum):
         return v.name
+    if isinstance(v, pk.Kept):
+        return {"items": _jsonable(v.items), "left_out": v.left_out}
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):  # a typed record (a STATUS report)
+        return {f.name: _jsonable(getattr(v, f.name)) for f in dataclasses.fields(v) if getattr(v, f.name) is not None}
     if isinstance(v, dict):
         return {str(k): _jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
@@ -136,24 +150,47 @@ class Receiver:
         # A malformed PCA basis in the extras: the capture is stored without it. (Dependence is
         # part of the MODELS blob: a bad record makes the whole packet undecodable.)
         self.rejected_extras = 0
+        self.refused = 0  # messages refused (and kept in rejected_packets)
 
-    def handle(self, payload: bytes, incarnation: str = "") -> Item:
-        """What `payload` became, stored under `incarnation` (the sending robot state's id, hex).
-        StoreFailed when the database cannot take it (the caller must not acknowledge it)."""
+    def handle(self, payload: bytes, incarnation: str = "", msg_id: int | None = None,
+               sender: int | None = None) -> Item:
+        """What `payload` (message `msg_id` of node `sender`) became, stored under `incarnation`
+        (the sending robot state's id, hex). StoreFailed when the database cannot take it (the
+        caller must not acknowledge it)."""
         try:
             p = pk.decode(payload)
         except FrameError as exc:
-            return self._count(Item(ItemKind.BAD, None, None, False, f"undecodable packet: {exc}"))
+            return self.refuse(payload, incarnation, msg_id, sender, f"undecodable packet: {exc}")
         try:
-            item = self._file(p, incarnation)
+            item = self._stored(lambda: self._file(p, incarnation), f"{p.KIND.name} of robot {getattr(p, 'robot_id', '?')}")
+        except (ValueError, TypeError, OverflowError, ArithmeticError) as exc:  # a value the store refuses
+            return self.refuse(payload, incarnation, msg_id, sender, f"{p.KIND.name} not stored: {exc}", p)
+        return self._count(dataclasses.replace(item, incarnation=incarnation, msg_id=msg_id, size=len(payload)))
+
+    def refuse(self, payload: bytes, incarnation: str, msg_id: int | None, sender: int | None, reason: str,
+               packet: Any = None) -> Item:
+        """A message the station cannot use: its raw bytes kept for a person (when there is a
+        database), counted, and an Item whose `refusal` says why."""
+        row = None
+        if self.store is not None:
+            row = self._stored(lambda: self.store.add_rejected(time.time(), sender, incarnation, msg_id, reason,
+                                                               bytes(payload)), "a refused packet")
+        self.refused += 1
+        robot = getattr(packet, "robot_id", None)
+        return self._count(Item(ItemKind.BAD, robot, getattr(packet, "seq", None), False, reason, packet, incarnation,
+                                msg_id=msg_id, refusal=reason, size=len(payload), rejected=row))
+
+    def _stored(self, write: Any, what: str) -> Any:
+        """write(), or StoreFailed when the database cannot take it."""
+        try:
+            return write()
         except CorruptDatabase as exc:
             raise StoreFailed(f"{exc}: repair it or receive into another database", damaged=True) from None
         except sqlite3.Error as exc:
             name = getattr(exc, "sqlite_errorname", "") or ""
-            raise StoreFailed(f"database {self.store.path}: cannot store {p.KIND.name} of robot "
-                              f"{getattr(p, 'robot_id', '?')}: {exc} ({_free(self.store.path)} free on its disk)",
+            raise StoreFailed(f"database {self.store.path}: cannot store {what}: {exc} "
+                              f"({_free(self.store.path)} free on its disk)",
                               damaged=name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB"))) from None
-        return self._count(dataclasses.replace(item, incarnation=incarnation))
 
     def _file(self, p: Any, incarnation: str) -> Item:
         if self.store is None and isinstance(p, (pk.ModelsPacket, pk.UnchangedPacket, pk.MaskPacket)):
@@ -223,6 +260,11 @@ class Receiver:
                     f"unchanged at {p.measured[0]:.1f}°: models of capture {p.ref_seq}", p)
 
 
+def refusal_body(item: Item) -> bytes:
+    """The NACK that tells the robot its message `item.msg_id` is refused: it sets it aside."""
+    return pk.encode(pk.NackPacket(0, pk.Reason.UNUSABLE, item.refusal, msg_id=item.msg_id))
+
+
 class HostSession:
     """The host's end of the link: a `LinkPump` feeding a Receiver; commands go out and the
     robot's ACK/NACK answers are collected by command id. A packet the Receiver cannot store
@@ -241,7 +283,9 @@ class HostSession:
         items = []
         for ev in self.pump.read():
             if isinstance(ev, Delivered):
-                item = self.receiver.handle(ev.payload, ev.incarnation.hex())
+                item = self.receiver.handle(ev.payload, ev.incarnation.hex(), ev.msg_id, ev.sender)
+                if item.refusal and item.msg_id is not None:
+                    self.pump.send(refusal_body(item))
                 self.last_delivery = self.pump.clock()
                 if item.kind is ItemKind.ANSWER and item.seq is not None:
                     self.answers[item.seq] = item

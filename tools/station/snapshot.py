@@ -8,27 +8,21 @@ The sweep's plan becomes the grid of poses the operator's page draws (`tools.sta
 """
 from __future__ import annotations
 
-import json
-import re
 from collections import deque
 from dataclasses import asdict, dataclass, field
-from datetime import datetime, timezone
 from typing import Any
 
 from onboard.sweep.plan import SweepPlan
 from radio import packets as pk
 from radio.events import LinkStats
+from radio.packets.base import iso_time
 from tools.station import sweep_grid
 
 LATEST = 10  # captures the snapshot lists
 GOODPUT_S = 10.0  # the window of the goodput figure
 DEFAULT_FAILSAFE_S = 5.0  # the robot's [link] failsafe_s, until it reports its own
 SKIPPED_KEPT = 64
-_SKIPPED = re.compile(r"^(\d+)@(-?[\d.]+)/(-?[\d.]+): (.*)$")  # the robot's STATUS form of a skipped pose
-
-
-def iso(t: float | None) -> str | None:
-    return None if t is None else datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+FAILSAFE_KEPT = 8
 
 
 def ago(t: float | None, now: float) -> float | None:
@@ -68,6 +62,8 @@ class RobotView:
     disk_free: int | None = None  # bytes
     rejected: dict[str, int] = field(default_factory=dict)  # frames the robot's link refused, by reason
     failsafe_s: float | None = None  # silence from the base after which the robot holds the arm
+    left_out: dict[str, int] = field(default_factory=lambda: {"faults": 0, "errors": 0})  # older ones it cut
+    dead_letters: dict | None = None  # its messages this station refused: {"count", "latest"}
 
 
 @dataclass
@@ -78,7 +74,9 @@ class SweepView:
     poses: int | None = None
     active: bool | None = None
     measured: int = 0
-    skipped: list[dict] = field(default_factory=list)  # {"index", "elevation", "azimuth", "reason"}
+    skipped: list[dict] = field(default_factory=list)  # {"index", "elevation", "azimuth", "reason", "tries"}
+    missing: list[dict] | None = None  # the poses the robot could not measure, once the sweep ended
+    missing_left_out: int = 0  # more missing poses than its report lists
     layout: SweepPlan | None = None  # the poses, from the robot's STATUS or this station's SWEEP
     done: set[int] = field(default_factory=set)  # poses whose capture arrived before the robot's next report
 
@@ -106,76 +104,99 @@ class StationSnapshot:
         self.counts["stored" if item.stored else "duplicates"] += 1
         self.latest.appendleft({
             "robot": p.robot_id, "seq": p.seq, "kind": item.kind.value, "stored": item.stored,
-            "time": iso(p.time), "received": iso(wall), "elevation": round(float(p.measured[0]), 2),
+            "time": iso_time(p.time), "received": iso_time(wall), "elevation": round(float(p.measured[0]), 2),
             "azimuth": round(float(p.measured[1]), 2), "commanded": [float(a) for a in p.commanded],
             "regions": len(p.labels) if isinstance(p, pk.ModelsPacket) else None, "text": item.text})
         s = self.sweep
         if item.stored and s.active:  # captures stored since the sweep began
             s.measured += 1
             if s.layout is not None and p.commanded[0] is not None:
-                i = sweep_grid.index_of(s.layout, (float(p.commanded[0]), float(p.commanded[1])),
-                                        s.done | {k["index"] for k in s.skipped}, s.next_index or 0)
+                at = (float(p.commanded[0]), float(p.commanded[1]))
+                i = sweep_grid.index_of(s.layout, at, s.done | {k["index"] for k in s.skipped}, s.next_index or 0)
+                if i is None:  # a skipped pose measured again, after the plan
+                    i = next((k["index"] for k in s.skipped if k["index"] < s.layout.count
+                              and sweep_grid.same_pose(s.layout.pose(k["index"]), at)), None)
+                    s.skipped = [k for k in s.skipped if k["index"] != i]
                 if i is not None:
                     s.done.add(i)
 
     def note_status(self, p: pk.StatusPacket, wall: float) -> None:
+        """A STATUS: what its report says (`pk.StatusReport`, every field checked by the decoder)."""
         r = self.robot
         r.robot_id, r.state, r.outbox = p.robot_id, p.state.name.lower(), p.outbox_pending
         if r.pose is None and p.pose is not None:  # its last capture's: captures and GOTO say it first
-            r.pose = (float(p.pose[0]), float(p.pose[1]))
+            r.pose = (p.pose[0], p.pose[1])
         r.last_status, r.last_status_text = wall, p.text
-        x, s = dict(p.extras), self.sweep
-        if "mode" in x:
-            r.mode = str(x["mode"])
-        if "sweep" in x:
-            self._sweep_id(int(x["sweep"]))
-        if "skipped_index" in x:
-            self._skip(int(x["skipped_index"]), x.get("skipped_elevation"), x.get("skipped_azimuth"),
-                       p.text.removeprefix("skipped pose: "))
-        if p.text == "sweep done":
-            r.mode, s.active, s.next_index = "idle", False, s.poses
-            s.measured = int(x.get("measured", s.measured))
-        if "failsafe_since" in x:
-            r.failsafe = (r.failsafe + [f"{x['failsafe_since']} for {x.get('failsafe_s', '?')} s"])[-4:]
-        self._disk(x)
+        self._report(p.report, whole=False)
 
-    def note_status_answer(self, extras: dict, wall: float) -> None:
-        """The ACK of a STATUS command: the robot's whole report (`onboard.link.status.flat`)."""
-        r, s = self.robot, self.sweep
-        r.mode, r.outbox, r.paused = extras.get("mode", r.mode), extras.get("outbox", r.outbox), extras.get("paused", "")
-        r.faults, r.errors = list(extras.get("faults", ())), list(extras.get("errors", ()))
-        r.failsafe = list(extras.get("failsafe", ()))
-        if "torque" in extras:
-            r.torque = bool(extras["torque"])
-        if "failsafe_s" in extras:
-            r.failsafe_s = float(extras["failsafe_s"])
-        self._disk(extras)
-        r.rejected = dict(_counts(extras.get("rejected", ())))
-        r.last_status, r.last_status_text = wall, "status"
-        if "sweep_id" in extras:
-            self._sweep_id(int(extras["sweep_id"]))
-            s = self.sweep
-            s.next_index, s.poses = int(extras["next"]), int(extras["poses"])
-            s.done = {i for i in s.done if i >= s.next_index}
-            if "plan" in extras:
-                s.layout = sweep_grid.plan_of(_json(extras["plan"])) or s.layout
-            s.active = r.mode == "sweeping" or (s.next_index < s.poses and r.mode == "failsafe")
-            for text in extras.get("skipped", ()):
-                m = _SKIPPED.match(str(text))
-                if m:
-                    self._skip(int(m[1]), float(m[2]), float(m[3]), m[4])
+    def note_status_answer(self, report: pk.StatusReport, wall: float) -> None:
+        """The answer to a STATUS command: the robot's whole report."""
+        self._report(report, whole=True)
+        self.robot.last_status, self.robot.last_status_text = wall, "status"
 
-    def note_sweep_started(self, plan: dict, extras: dict) -> None:
+    def _report(self, x: pk.StatusReport, whole: bool) -> None:
+        """What a report says; `whole`: the answer to STATUS (its lists replace ours; a STATUS's
+        failsafe is one more hold)."""
+        r = self.robot
+        for name in ("mode", "outbox", "paused", "torque", "failsafe_s"):
+            if getattr(x, name) is not None:
+                setattr(r, name, getattr(x, name))
+        for name in ("faults", "errors"):
+            kept = getattr(x, name)
+            if kept is not None:
+                setattr(r, name, list(kept.items))
+                r.left_out[name] = kept.left_out
+        if x.failsafe is not None:
+            held = [_held(e) for e in x.failsafe.items]
+            r.failsafe = held if whole else (r.failsafe + held)[-FAILSAFE_KEPT:]
+        if x.disk is not None:
+            r.disk, r.disk_free = x.disk.state, x.disk.free
+        if x.rejected is not None:
+            r.rejected = {k.reason: k.count for k in x.rejected.items}
+        if x.dead_letters is not None:
+            d = x.dead_letters
+            r.dead_letters = {"count": d.count, "latest": [
+                {"msg_id": k.msg_id, "kind": None if k.kind is None else k.kind.name, "reason": k.reason,
+                 "time": iso_time(k.time)} for k in d.latest.items]}
+        if x.sweep is not None:
+            self._sweep(x.sweep, whole)
+
+    def _sweep(self, w: pk.SweepReport, whole: bool = False) -> None:
+        self._sweep_id(w.id)
+        s = self.sweep
+        if w.poses is not None:
+            s.poses = w.poses
+        if w.next is not None:
+            s.next_index = w.next
+            s.done = {i for i in s.done if i >= w.next}
+        if w.plan is not None:
+            s.layout = sweep_grid.plan_of(w.plan.to_record()) or s.layout
+        if w.active is not None:
+            s.active = w.active
+        if whole and w.skipped is not None and not w.skipped.left_out:  # every pose skipped now
+            s.skipped = []
+        for k in w.skipped or ():
+            self._skip(k)
+        if w.missing is not None:  # the sweep ended: these are the poses it could not measure
+            s.missing, s.missing_left_out = [_pose_dict(k) for k in w.missing.items], w.missing.left_out
+            s.skipped = []
+            for k in w.missing.items:
+                self._skip(k)
+        if w.measured is not None:  # the sweep is done
+            s.measured, s.next_index = w.measured, s.poses
+
+    def note_sweep_started(self, plan: dict, answer: dict) -> None:
         """The robot ACKed a SWEEP this station sent: a new sweep with a known plan."""
-        self.sweep = SweepView(int(extras["sweep"]), plan, 0, int(extras["poses"]), True,
+        self.sweep = SweepView(answer["sweep"], plan, 0, answer["poses"], True,
                                layout=sweep_grid.plan_of_command(plan))
         self.robot.mode = "sweeping"
 
-    def note_answer(self, name: pk.CommandName, extras: dict, args: dict | None = None) -> None:
-        """The robot ACKed `name` (sent with `args`, when this station sent it)."""
+    def note_answer(self, name: pk.CommandName, answer: dict, args: dict | None = None) -> None:
+        """The robot ACKed `name` (sent with `args`, when this station sent it): `answer` holds the
+        values the command table declares for it, checked by the decoder."""
         C = pk.CommandName
-        if name is C.GOTO and "elevation" in extras:
-            self.robot.pose = (float(extras["elevation"]), float(extras.get("azimuth", 0.0)))
+        if name is C.GOTO:
+            self.robot.pose = (answer["elevation"], answer["azimuth"])
             if args and "elevation" in args:
                 self.robot.commanded = (float(args["elevation"]), float(args.get("azimuth", 0.0)))
         if name in (C.ABORT, C.TORQUE_OFF):
@@ -203,61 +224,49 @@ class StationSnapshot:
         if sweep_id != self.sweep.sweep_id:
             self.sweep = SweepView(sweep_id)
 
-    def _disk(self, extras: dict) -> None:
-        r = self.robot
-        if "disk" in extras:
-            r.disk = str(extras["disk"])
-        if isinstance(extras.get("disk_free"), int):
-            r.disk_free = extras["disk_free"]
-
-    def _skip(self, index: int, elevation: Any, azimuth: Any, reason: str) -> None:
-        if any(k["index"] == index for k in self.sweep.skipped):
-            return
-        self.sweep.skipped = (self.sweep.skipped + [{
-            "index": index, "elevation": None if elevation is None else float(elevation),
-            "azimuth": None if azimuth is None else float(azimuth), "reason": reason}])[-SKIPPED_KEPT:]
+    def _skip(self, k: pk.SkippedPose) -> None:
+        """A pose skipped (again: its newest reason and tries replace the older)."""
+        kept = [x for x in self.sweep.skipped if x["index"] != k.index]
+        self.sweep.skipped = (kept + [_pose_dict(k)])[-SKIPPED_KEPT:]
 
     # -- the JSON form -----------------------------------------------------------------------
     def to_json(self, now: float) -> dict:
         ln, r, s = self.link, self.robot, self.sweep
         stats = asdict(ln.stats)
         return {
-            "station": {"port": self.port, "db": self.db, "started": iso(self.started),
+            "station": {"port": self.port, "db": self.db, "started": iso_time(self.started),
                         "clients": self.clients, "subscribers": self.subscribers,
                         "commands_pending": self.commands_pending},
-            "link": {"up": ln.up, "changed": iso(ln.changed), "last_heard": iso(ln.last_heard),
+            "link": {"up": ln.up, "changed": iso_time(ln.changed), "last_heard": iso_time(ln.last_heard),
                      "last_heard_s": ago(ln.last_heard, now), **stats, "delivered_bytes": ln.delivered_bytes,
                      "goodput_bps": round(ln.goodput(now), 1)},
             "robot": {"id": r.robot_id, "mode": r.mode, "state": r.state, "pose": _pose(r.pose),
                       "commanded": _pose(r.commanded),
                       "outbox": r.outbox, "paused": r.paused, "torque": r.torque, "faults": r.faults,
-                      "errors": r.errors, "failsafe": r.failsafe, "failsafe_s": r.failsafe_s,
+                      "errors": r.errors, "left_out": r.left_out, "dead_letters": r.dead_letters,
+                      "failsafe": r.failsafe, "failsafe_s": r.failsafe_s,
                       "failsafe_assumed": self.failsafe_assumed(now), "disk": r.disk, "disk_free": r.disk_free,
-                      "rejected": r.rejected, "last_status": iso(r.last_status),
+                      "rejected": r.rejected, "last_status": iso_time(r.last_status),
                       "last_status_s": ago(r.last_status, now), "last_status_text": r.last_status_text},
             "sweep": {"id": s.sweep_id, "plan": s.plan, "next": s.next_index, "poses": s.poses,
-                      "active": s.active, "measured": s.measured, "skipped": s.skipped,
+                      "active": s.active, "measured": s.measured, "skipped": s.skipped, "missing": s.missing,
+                      "missing_left_out": s.missing_left_out,
                       "grid": sweep_grid.grid_json(s.layout, s.next_index, s.done, s.skipped, s.active)},
             "captures": {**self.counts, "latest": list(self.latest)},
         }
+
+
+def _pose_dict(k: pk.SkippedPose) -> dict:
+    """A skipped or missing pose in the snapshot's JSON."""
+    return {"index": k.index, "elevation": k.elevation, "azimuth": k.azimuth, "reason": k.reason,
+            "tries": k.tries or 1}
 
 
 def _pose(pose: tuple[float, float] | None) -> dict | None:
     return None if pose is None else {"elevation": pose[0], "azimuth": pose[1]}
 
 
-def _json(text: Any) -> Any:
-    try:
-        return json.loads(text)
-    except (TypeError, ValueError):
-        return None
-
-
-def _counts(items: Any) -> list[tuple[str, int]]:
-    """The robot's `reason:n` strings (its link's rejections) as pairs; others are left out."""
-    out = []
-    for item in items if isinstance(items, (list, tuple)) else ():
-        reason, _, n = str(item).rpartition(":")
-        if reason and n.isdigit():
-            out.append((reason, int(n)))
-    return out
+def _held(e: pk.FailsafeEvent) -> str:
+    """A failsafe hold, for a person."""
+    return (f"{iso_time(e.since)} for {e.until - e.since:.1f} s" if e.until is not None
+            else f"{iso_time(e.since)}, ongoing")

@@ -12,7 +12,7 @@ import time
 from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, TextIO
+from typing import Awaitable, Callable, TextIO
 
 from onboard.cli.runner import CliError, RetryLater
 from radio.auth import FileCounterStore
@@ -21,7 +21,8 @@ from radio.link import Link
 from radio.ports import PortBusy, open_url
 from radio.pump import LinkPump
 from tools.station.control import ControlServer, check_path, socket_path
-from tools.station.log import StationLog, event
+from tools.station.events import StationEvent
+from tools.station.log import StationLog
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, Receiver
 from tools.station.station import Station
 from tools.store.database import CorruptDatabase, Store, StoreUnavailable
@@ -66,7 +67,7 @@ def take_lock(db: str | os.PathLike) -> int:
         held = os.read(fd, 32).decode(errors="replace").strip()
         os.close(fd)
         raise StationBusy(f"a station already runs on {db} (pid {held or '?'}); "
-                          f"`btf-host cmd --db {db} ...` talks to it") from None
+                          f"'btf-host cmd --db {db} ...' talks to it") from None
     try:  # the pid only tells a second station who holds the lock: a full disk may refuse it
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
@@ -100,7 +101,7 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
             port = open_url(port_url, baud, timeout=0.02, exclusive=True)
         except PortBusy:
             raise StationBusy(f"port {port_url} is held by another process (a station? "
-                              "`btf-host cmd --db ITS_DATABASE ...` talks to it)", port=True) from None
+                              "'btf-host cmd --db ITS_DATABASE ...' talks to it)", port=True) from None
         except Exception as exc:
             raise CliError(f"port {port_url}: cannot open: {exc}") from None
         undo.append(port.close)
@@ -116,7 +117,7 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
                           StationLog(Path(log) if log else Path(str(db) + ".log"), echo),
                           port=port_url, db=str(db), status_every=status_every, on_item=on_item)
         if counters.note:  # the counters file was lost (or this base's first run with a key not from keygen)
-            station.emit(event("station", counters.note, time.time()))
+            station.emit(StationEvent(time.time(), counters.note))
     except BaseException:
         for step in reversed(undo):
             step()
@@ -125,10 +126,11 @@ def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, s
 
 
 async def serve(parts: StationParts, until: Callable[[], bool] | None = None, page=None,
-                echo: TextIO | None = sys.stderr) -> None:
+                echo: TextIO | None = sys.stderr, beside: Callable[[Station], Awaitable[None]] | None = None) -> None:
     """Run the station and its control socket (and, given `page`, a `tools.page.server.PageOptions`,
     the operator's page) until stopped (SIGTERM, SIGINT, `until()`), or until it fails
-    (`parts.station.failure`). The page's address with its token goes to `echo` only."""
+    (`parts.station.failure`). The page's address with its token goes to `echo` only. `beside(station)`
+    runs alongside for as long as the station does (the demo's watch on its robot)."""
     station = parts.station
     server = ControlServer(station, parts.socket)
     try:
@@ -148,6 +150,7 @@ async def serve(parts: StationParts, until: Callable[[], bool] | None = None, pa
             loop.add_signal_handler(sig, station.stop)
             handled.append(sig)
     pump = asyncio.ensure_future(station.run())
+    companion = None if beside is None else asyncio.ensure_future(beside(station))
     try:
         while until is not None and not pump.done():
             if until():
@@ -156,6 +159,9 @@ async def serve(parts: StationParts, until: Callable[[], bool] | None = None, pa
             await asyncio.sleep(0.02)
         await pump
     finally:
+        if companion is not None:
+            companion.cancel()
+            await asyncio.gather(companion, return_exceptions=True)
         for sig in handled:
             loop.remove_signal_handler(sig)
         if web is not None:
@@ -167,24 +173,26 @@ async def _start_page(parts: StationParts, options, echo: TextIO | None):
     """The page server, started (None when its address cannot be had)."""
     from tools.page.server import PageServer  # aiohttp and the drawing code: only with --http
 
+    def announce(url: str) -> None:  # once it can draw: the station's radio runs meanwhile
+        who = "anyone who can reach it watches; commands need the token" if options.public else "it needs the token"
+        parts.station.emit(StationEvent(parts.station.wall(), f"page at {url} ({who})"))
+        if echo is not None:  # the token goes to the operator's terminal only, never to the log file
+            print(f"page: {url}?token={options.token}", file=echo, flush=True)
+
     web = PageServer(parts.station, parts.station.snapshot.db, options)
     try:
-        url = await web.start()
+        await web.start(on_ready=announce)
     except OSError:
         await web.close()
         return None
-    who = "anyone who can reach it watches; commands need the token" if options.public else "it needs the token"
-    parts.station.emit(event("station", f"page at {url} ({who})", parts.station.wall()))
-    if echo is not None:  # the token goes to the operator's terminal only, never to the log file
-        print(f"page: {url}?token={options.token}", file=echo, flush=True)
     return web
 
 
-def serve_to_exit(parts: StationParts, page=None) -> int:
+def serve_to_exit(parts: StationParts, page=None, beside=None) -> int:
     """Serve until stopped, close, and turn how the station ended into the CLI's exit status
     (a failure that needs the setup fixed is a CliError: one line, exit 2)."""
     try:
-        asyncio.run(serve(parts, page=page))
+        asyncio.run(serve(parts, page=page, beside=beside))
     finally:
         parts.close()
     failure = parts.station.failure

@@ -10,7 +10,8 @@ One asyncio event loop runs it all. The link pump (`run`) turns a `radio.pump.Li
 port on a thread of its own, so the loop never waits on the port: `LinkPump.transfer` (write
 what is due, read what arrived) runs there; on the loop, what arrived is fed to the link and
 every delivered packet is stored (`LinkPump.feed`), and only then is the next write taken
-(`LinkPump.due`): an acknowledgement never leaves before its packet is in the database. The
+(`LinkPump.due`): an acknowledgement never leaves before its packet is on stable storage (the
+turn's packets in one transaction, its commit fsync'd: synchronous=FULL, one fsync a turn). The
 `Link`, the `Store`, the snapshot and the bus are touched on the loop only.
 
 The interface for code inside the station (the control socket, the operator's page):
@@ -20,53 +21,70 @@ The interface for code inside the station (the control socket, the operator's pa
   `link` (up, changed, last_heard, last_heard_s, and `radio.events.LinkStats`: frames_sent,
   frames_accepted, retransmissions, delivered, duplicates, rejected {reason: n}, ...;
   delivered_bytes, goodput_bps), `robot` (id, mode, state, pose, commanded, outbox, paused,
-  torque, faults, errors, failsafe, failsafe_s, failsafe_assumed, disk, disk_free, rejected,
-  last_status), `sweep` (id, plan, next, poses, active, measured, skipped [{index, elevation,
-  azimuth, reason}], grid: `tools.station.sweep_grid.grid_json`) and `captures` (stored, duplicates,
-  masks, bad, latest [...]).
+  torque, faults, errors, left_out (how many older faults and errors the robot's report left
+  out), dead_letters (its messages this station refused: count, latest), failsafe, failsafe_s,
+  failsafe_assumed, disk, disk_free, rejected, last_status), `sweep` (id, plan, next, poses,
+  active, measured, skipped [{index, elevation, azimuth, reason}], grid:
+  `tools.station.sweep_grid.grid_json`) and `captures` (stored, duplicates, masks, bad: the
+  messages refused, latest [...]).
 - `sub = station.bus.subscribe(maxsize)`, then `await sub.get()`: every event in order; a
   subscriber that falls behind loses the oldest and is told how many (`tools.station.bus`).
   `sub.close()` when done.
 - `cid, answer = station.submit(name, args, command_id)`: the command goes to the robot at
   the next turn; `await answer` gives its ACK or NACK as a dict (`{"command_id", "ok",
-  "type": "ACK"|"NACK", "text", "reason"?, "extras"?}`), once, however often the robot says it.
+  "type": "ACK"|"NACK", "text", "reason"?, "extras"?, "status"?}`), once, however often the robot
+  says it.
   A command id the robot saw before is answered from its memory, never run twice, so a client
   that lost its station re-submits the same id to the next one.
 - `station.stop()` ends `run` after the current turn; `station.failure` says why it ended on
-  its own (`StationFailure`: a wrong key, a store that cannot be written, a port that failed).
+  its own (`StationFailure`: a store that cannot be written, a port that failed; never a frame
+  or a client: those are counted, said and refused). `station.wrong_key` is the one line
+  saying the key is likely wrong, while it is.
 
-Every event is a dict `{"kind", "time" (ISO 8601, UTC), "t" (epoch s), "text", ...}` with kind
-one of: capture, unchanged, mask (`robot`, `seq`, `stored`, and `capture`: where it was filed),
-status, log, bad, other (a packet: `robot`, `seq`, `stored`, `packet` as
-`tools.station.receiver.packet_json`; a status event is also the answer to the station's own STATUS
-request, published every `status_every` seconds and not logged), failsafe (the robot's report of
-one), command (sent:
-`command_id`, `name`, `args`), answer (`command_id`, `ok`, `answer`), link (`up`), rejected
-(`reason`, `count`, `total`, the likely `cause`), station (started, stopping, failed); the
-subscriber's own `lost` (`count`). The log (`tools.station.log`) writes each one.
+Every event is a typed record, one declaration per kind (`tools.station.events`: capture,
+unchanged, mask, status, failsafe, log, other, bad, command, answer, link, rejected, station,
+lost), published on the bus, written by the log (`tools.station.log`) and rendered by `watch`
+and the page from its declaration.
+
+No packet ends the station: every field of a delivered packet is checked as it is decoded, and
+one the station cannot use (undecodable, refused by the store, or one whose handling failed) is
+kept raw in the database's rejected_packets, counted, logged as a `bad` event, and refused to
+the robot with a NACK UNUSABLE naming the message, which the robot sets aside for good. No frame
+ends it either (`tools.station.rejected_frames`): refused frames are `rejected` events with
+their likely cause, a likely wrong key in one line of its own, and the robot's frames of its
+session with the previous station, right after a start, the re-sync the first link-up says.
 """
 from __future__ import annotations
 
 import asyncio
 import secrets
+import sqlite3
 import time
 from collections import deque
+from contextlib import contextmanager
 from concurrent.futures import ThreadPoolExecutor
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 from radio import packets as pk
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale
 from radio.packets.commands import CommandName, check_args
 from radio.pump import LinkPump
+from radio.link import QueueFull
+from tools.station import events as ev_
 from tools.station.bus import EventBus
-from tools.station.log import StationLog, event, likely_cause
-from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json
+from tools.station.log import StationLog
+from tools.station.receiver import Item, ItemKind, Receiver, StoreFailed, packet_json, refusal_body
+from tools.station.rejected_frames import RejectedFrames
 from tools.station.snapshot import StationSnapshot
+from tools.store.database import disk_free
 
-WRONG_KEY_FRAMES = 8  # frames failing authentication, none passing: the key is wrong
-REJECTED_EVERY_S = 1.0  # rejected-frame events, per reason, at most this often
 SENT_KEPT = 1024  # commands remembered until answered (for the snapshot)
 POLLS_KEPT = 16  # the station's own STATUS requests it recognises the answers of
+
+
+def empty(value: Any) -> bool:
+    """An answer's value not worth a word: '', None, an empty list or mapping."""
+    return value is None or (isinstance(value, (str, list, tuple, dict)) and not value)
 
 
 class StationFailure(Exception):
@@ -93,10 +111,13 @@ class Station:
         self._sent: dict[int, tuple[CommandName, dict]] = {}
         self._poll: tuple[int, float] | None = None  # the STATUS this station asked for, and when
         self._polls: deque[int] = deque(maxlen=POLLS_KEPT)  # its earlier ones: answered late, still its own
-        self._rejected: dict[str, int] = {}  # counts already reported
-        self._rejected_at: dict[str, float] = {}
+        self.rejected_frames = RejectedFrames(wall())  # what the link refused, said
+        self._held: list[tuple[ev_.Event, bool]] | None = None  # events said once the turn's commit is done
+        self._told_wrong_key = False
         self._accepted = 0
         self._polled_at = -1e9
+        self.refused = 0  # the robot's messages this station refused (and told it so)
+        self.faults = 0  # of them, those whose handling failed here (a fault of the station's own)
 
     # -- the interface -------------------------------------------------------------------------
     def snapshot_json(self) -> dict:
@@ -121,16 +142,20 @@ class Station:
             del self._sent[next(iter(self._sent))]
         fut.add_done_callback(lambda f, cid=cid: self._forget(cid, f))
         said = " ".join(f"{k}={v}" for k, v in args.items())
-        self.emit(event("command", f"{name.name} {said}".strip() + f" sent (command {cid})", self.wall(),
-                        command_id=cid, name=name.name, args=packet_json_args(args)))
+        self.emit(ev_.CommandEvent(self.wall(), f"{name.name} {said}".strip() + f" sent (command {cid})",
+                                   command_id=cid, name=name.name, args=packet_json_args(args)))
         return cid, fut
 
     def stop(self) -> None:
         self._stop = True
 
-    def emit(self, ev: dict) -> None:
-        """Log an event and publish it to every subscriber."""
-        self.log.write(ev)
+    def emit(self, ev: ev_.Event, logged: bool = True) -> None:
+        """Log an event and publish it to every subscriber (inside a turn's commit: once it is done)."""
+        if self._held is not None:
+            self._held.append((ev, logged))
+            return
+        if logged:
+            self.log.write(ev)
         self.bus.publish(ev)
 
     # -- the pump ------------------------------------------------------------------------------
@@ -139,7 +164,7 @@ class Station:
         is ever acknowledged: a failed store ends the turn before its write)."""
         loop = asyncio.get_running_loop()
         io = ThreadPoolExecutor(1, thread_name_prefix="station-port")
-        self.emit(event("station", f"started: port {self.snapshot.port}, database {self.snapshot.db}", self.wall()))
+        self.emit(ev_.StationEvent(self.wall(), f"started: port {self.snapshot.port}, database {self.snapshot.db}"))
         out = b""
         try:
             while not self._stop:
@@ -167,29 +192,73 @@ class Station:
             await loop.run_in_executor(io, self.pump.close)
             io.shutdown()
             text = f"failed: {self.failure}" if self.failure else "stopped"
-            self.emit(event("station", text, self.wall()))
+            self.emit(ev_.StationEvent(self.wall(), text, failed=self.failure is not None))
 
     def _turn(self, data: bytes, room: int) -> bytes:
         """Feed the link what arrived, store and route what it delivered; what to write next."""
         now, wall = self.clock(), self.wall()
-        for ev in self.pump.feed(data, now):
-            if isinstance(ev, Delivered):
-                self.last_delivery = now
-                self.snapshot.note_delivered(len(ev.payload), wall)
-                self._delivered(self.receiver.handle(ev.payload, ev.incarnation.hex()), wall)
-            elif isinstance(ev, (LinkUp, LinkDown)):
-                up = isinstance(ev, LinkUp)
-                self.snapshot.note_link(up, wall)
-                self.emit(event("link", "up: the robot is heard" if up else
-                                f"down: nothing heard from the robot for {self.pump.link.link_timeout:g} s",
-                                wall, up=up))
-            elif isinstance(ev, PeerStale):  # the robot's counters are behind: said once, with the remedy
-                self.emit(event("link", ev.text, wall, up=self.pump.up))
-                if self.on_item is not None:
-                    self.on_item(Item(ItemKind.LINK, ev.sender, None, False, ev.text))
+        events = self.pump.feed(data, now)
+        with self._one_commit(any(isinstance(ev, Delivered) for ev in events)):
+            self._route(events, now, wall)
         self._watch_link(wall)
         self._ask_status(now)
         return self.pump.due(room, now)
+
+    @contextmanager
+    def _one_commit(self, storing: bool) -> Iterator[None]:
+        """The turn's writes in one transaction: one commit, one fsync (synchronous=FULL), however
+        many packets it delivered, before `due` lets their acknowledgements out; its events are said
+        once the commit is on disk (none when it fails: StoreFailed, nothing of the turn kept)."""
+        store = self.receiver.store
+        if not storing or store is None:
+            yield
+            return
+        self._held = []
+        try:
+            with store.batch():
+                yield
+        except sqlite3.Error as exc:  # the commit itself: no room for the WAL, an I/O error
+            name = getattr(exc, "sqlite_errorname", "") or ""
+            raise StoreFailed(f"database {store.path}: cannot commit this turn's packets: {exc} "
+                              f"({disk_free(store.path)} free on its disk)",
+                              damaged=name.startswith(("SQLITE_CORRUPT", "SQLITE_NOTADB"))) from None
+        finally:
+            held, self._held = self._held, None
+        for ev, logged in held:
+            self.emit(ev, logged)
+
+    def _route(self, events: list, now: float, wall: float) -> None:
+        """Each of the link's events of this turn: a delivery stored and routed, the link's state said."""
+        for ev in events:
+            if isinstance(ev, Delivered):
+                self.last_delivery = now
+                self.snapshot.note_delivered(len(ev.payload), wall)
+                self._handle(ev, wall)
+            elif isinstance(ev, (LinkUp, LinkDown)):
+                up = isinstance(ev, LinkUp)
+                self.snapshot.note_link(up, wall)
+                resync = self.rejected_frames.link_up(self.pump.stats(), wall) if up else ""
+                self.emit(ev_.LinkEvent(wall, f"up: the robot is heard{resync}" if up else
+                                        f"down: nothing heard from the robot for {self.pump.link.link_timeout:g} s",
+                                        up=up))
+            elif isinstance(ev, PeerStale):  # the robot's counters are behind: said once, with the remedy
+                self.emit(ev_.LinkEvent(wall, ev.text, up=self.pump.up, stale=True))
+                if self.on_item is not None:
+                    self.on_item(Item(ItemKind.LINK, ev.sender, None, False, ev.text))
+
+    def _handle(self, ev: Delivered, wall: float) -> None:
+        """Store and route one delivered message; one the station cannot use is refused (StoreFailed
+        alone ends the turn: nothing of it is acknowledged)."""
+        item = self.receiver.handle(ev.payload, ev.incarnation.hex(), ev.msg_id, ev.sender)
+        try:
+            self._delivered(item, wall)
+        except (StoreFailed, StationFailure):
+            raise
+        except Exception as exc:  # a packet that passed every check still failed here: refuse it
+            self.faults += 1
+            item = self.receiver.refuse(ev.payload, ev.incarnation.hex(), ev.msg_id, ev.sender,
+                                        f"the station could not handle {item.kind.value}: {type(exc).__name__}: {exc}")
+            self._delivered(item, wall)
 
     def _delivered(self, item: Item, wall: float) -> None:
         if self.on_item is not None:
@@ -197,39 +266,58 @@ class Station:
         if item.kind is ItemKind.ANSWER:
             self._answer(item.packet, wall)
             return
-        kind = item.kind.value
         s = self.snapshot
-        if item.kind in (ItemKind.CAPTURE, ItemKind.UNCHANGED):
-            s.note_capture(item, wall)
-        elif item.kind is ItemKind.MASK:
-            s.counts["masks"] += 1
-        elif item.kind is ItemKind.BAD:
+        if item.kind is ItemKind.BAD:
             s.counts["bad"] += 1
-        elif item.kind is ItemKind.STATUS:
-            s.note_status(item.packet, wall)
-            if item.packet.text.startswith("failsafe"):
-                kind = "failsafe"
+            self.emit(self._refuse(item, wall))
+            return
+        base = dict(robot=item.robot, seq=item.seq, stored=item.stored)
         if item.kind in (ItemKind.CAPTURE, ItemKind.UNCHANGED, ItemKind.MASK):
             # the models stay in the database: the event says what was filed where
-            fields = {"capture": s.latest[0]} if item.kind is not ItemKind.MASK else {}
             text = f"robot {item.robot} seq {item.seq}: {item.text}" + ("" if item.stored else " (already stored)")
+            if item.kind is ItemKind.MASK:
+                s.counts["masks"] += 1
+                self.emit(ev_.MaskEvent(wall, text, **base))
+                return
+            s.note_capture(item, wall)
+            kind = ev_.CaptureEvent if item.kind is ItemKind.CAPTURE else ev_.UnchangedEvent
+            self.emit(kind(wall, text, **base, capture=s.latest[0]))
+            return
+        packet = None if item.packet is None else packet_json(item.packet)
+        if item.kind is ItemKind.STATUS:
+            s.note_status(item.packet, wall)
+            failsafe = item.packet.report.failsafe is not None and item.packet.text.startswith("failsafe")
+            self.emit((ev_.FailsafeReport if failsafe else ev_.StatusEvent)(wall, item.text, **base, packet=packet))
         else:
-            fields = {"packet": None if item.packet is None else packet_json(item.packet)}
-            text = item.text
-        self.emit(event(kind, text, wall, robot=item.robot, seq=item.seq, stored=item.stored, **fields))
+            self.emit((ev_.LogEvent if item.kind is ItemKind.LOG else ev_.OtherEvent)(
+                wall, item.text, **base, packet=packet))
+
+    def _refuse(self, item: Item, wall: float) -> ev_.RefusedEvent:
+        """Tell the robot its message `item.msg_id` is refused (it sets it aside); the event saying so."""
+        told = False
+        self.refused += 1
+        if item.msg_id is not None:
+            try:
+                self.pump.send(refusal_body(item))
+                told = True
+            except (QueueFull, ValueError):  # the link holds too much: the robot deletes it on the ACK alone
+                pass
+        said = f"message {item.msg_id} of robot {item.robot if item.robot is not None else '?'} refused: {item.text}"
+        return ev_.RefusedEvent(wall, said + ("" if told else " (the robot was not told)"), robot=item.robot,
+                                seq=item.seq, msg_id=item.msg_id, reason=item.refusal, size=item.size,
+                                rejected=item.rejected, told=told)
 
     def _answer(self, p: Any, wall: float) -> None:
         cid, ok = p.command_id, isinstance(p, pk.AckPacket)
         answer = {"command_id": cid, "ok": ok, **packet_json(p)}
         name, args = self._sent.pop(cid, (None, {}))
-        if name is None and ok and p.text in CommandName.__members__:
-            name = CommandName[p.text]  # a command an earlier station sent
-        if ok and name is not None:
-            self.snapshot.note_answer(name, dict(p.extras), args)
-            if name is CommandName.SWEEP and "sweep" in p.extras:
+        if ok and (name is None or p.name is name) and p.name is not None:
+            # the answer's values are those the command table declares for the command it names
+            self.snapshot.note_answer(p.name, dict(p.extras), args if name is not None else None)
+            if p.name is CommandName.SWEEP:
                 self.snapshot.note_sweep_started(packet_json_args(args), dict(p.extras))
-            elif name is CommandName.STATUS:
-                self.snapshot.note_status_answer(dict(p.extras), wall)
+            elif p.name is CommandName.STATUS and p.status is not None:
+                self.snapshot.note_status_answer(p.status, wall)
         futures = self._waiting.pop(cid, [])
         for f in futures:
             if not f.done():
@@ -237,16 +325,17 @@ class Station:
         if cid in self._polls:
             if self._poll is not None and cid == self._poll[0]:
                 self._poll = None
-            self.bus.publish(event("status", "the robot's report", wall, robot=None, seq=None, stored=False,
-                                   packet=answer))
+            self.emit(ev_.StatusEvent(wall, "the robot's report", packet=answer, poll=True), logged=False)
             return
-        said = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items())
+        said = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items()
+                        if not empty(v))  # "paused=" says nothing: a field left empty is left out
         said = said if len(said) <= 160 else said[:157] + "..."
         verdict = f"ACK {said}".strip() if ok else f"NACK {p.reason.name}: {p.text}"
-        label = name.name if name is not None else f"command {cid}"
-        self.emit(event("answer", f"{label} (command {cid}): {verdict}"
-                        + ("" if futures else " (no client waits for it)"), wall,
-                        command_id=cid, ok=ok, answer=answer))
+        named = name or (p.name if ok else None)
+        label = named.name if named is not None else f"command {cid}"
+        self.emit(ev_.AnswerEvent(wall, f"{label} (command {cid}): {verdict}"
+                                  + ("" if futures else " (no client waits for it)"),
+                                  command_id=cid, ok=ok, answer=answer))
 
     def _forget(self, cid: int, fut: asyncio.Future) -> None:
         futs = self._waiting.get(cid)
@@ -255,25 +344,24 @@ class Station:
             if not futs:
                 del self._waiting[cid]
 
+    @property
+    def wrong_key(self) -> str:
+        """The line saying the key is likely wrong, while frames fail authentication and none
+        passed ('' otherwise). Never a reason to stop: anyone on the radio can send such frames."""
+        return self.rejected_frames.wrong_key(self.pump.stats())
+
     def _watch_link(self, wall: float) -> None:
-        """Quality counters from the link; rejected frames with their likely cause; a key
-        that authenticates nothing ends the station."""
+        """Quality counters from the link; refused frames with their likely cause (a wrong key
+        in one line, the re-sync after a start as such): counted, said, never the end."""
         st = self.pump.stats()
-        self.snapshot.link.stats = st
+        self.snapshot.link.stats = self.rejected_frames.view(st)
         if st.frames_accepted > self._accepted:
             self._accepted, self.snapshot.link.last_heard = st.frames_accepted, wall
-        for reason, total in st.rejected.items():
-            new = total - self._rejected.get(reason, 0)
-            if new and wall - self._rejected_at.get(reason, -1e9) >= REJECTED_EVERY_S:
-                self._rejected[reason], self._rejected_at[reason] = total, wall
-                self.emit(event("rejected", f"{new} frame{'s' * (new > 1)} refused: {likely_cause(reason)}",
-                                wall, reason=reason, count=new, total=total, cause=likely_cause(reason)))
-        tags = st.rejected.get("tag", 0)
-        if tags >= WRONG_KEY_FRAMES and st.frames_accepted == 0:
-            self._stop = True
-            self.failure = StationFailure(
-                f"{tags} frames failed authentication and none passed: wrong key? --key must hold the "
-                "same key as the robot's link.key_file", status=2)
+        for text, fields in self.rejected_frames.update(st, wall):
+            self.emit(ev_.RejectedEvent(wall, text, **fields))
+            if fields.get("wrong_key") and not self._told_wrong_key and self.on_item is not None:
+                self._told_wrong_key = True  # the foreground's reader is told once, the log each time
+                self.on_item(Item(ItemKind.LINK, None, None, False, text))
 
     def _ask_status(self, now: float) -> None:
         """A STATUS every `status_every` seconds while the link is up, for the snapshot."""

@@ -41,14 +41,16 @@ def plan_of_command(args: dict) -> SweepPlan | None:
 
 def index_of(plan: SweepPlan, commanded: tuple[float, float], taken: set[int], after: int) -> int | None:
     """The first pose of the plan from `after` on, not in `taken`, at the commanded angles."""
-    el, az = commanded
     for i in range(max(0, after), plan.count):
-        if i in taken:
-            continue
-        pose = plan.pose(i)
-        if abs(pose.elevation - el) <= MATCH_DEG and abs((pose.azimuth - az + 180.0) % 360.0 - 180.0) <= MATCH_DEG:
+        if i not in taken and same_pose(plan.pose(i), commanded):
             return i
     return None
+
+
+def same_pose(pose: Any, commanded: tuple[float, float]) -> bool:
+    """Whether a plan's pose is at the commanded (elevation, azimuth), to the wire's centidegree."""
+    el, az = commanded
+    return abs(pose.elevation - el) <= MATCH_DEG and abs((pose.azimuth - az + 180.0) % 360.0 - 180.0) <= MATCH_DEG
 
 
 def grid_json(plan: SweepPlan | None, next_index: int | None, done: set[int], skipped: list[dict],

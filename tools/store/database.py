@@ -10,6 +10,7 @@ the file; `tools.store.rows` checks every row read back).
 from __future__ import annotations
 
 import json
+import os
 import sqlite3
 from contextlib import contextmanager
 from pathlib import Path
@@ -24,10 +25,31 @@ from btf.fit.png import decode_png, encode_png
 from btf.johnson import Johnson
 from btf.record import FittedModel
 from tools.analysis.radiometry import sweep_models
-from tools.store.rows import CAMERA_COLUMNS, StoredCapture, capture_from_row, mask_png, model_from_row
+from tools.store.rows import (
+    CAMERA_COLUMNS,
+    RejectedPacket,
+    StoredCapture,
+    capture_from_row,
+    mask_png,
+    model_from_row,
+    rejected_from_row,
+)
 from tools.store.schema import SCHEMA_VERSION, CorruptDatabase, StoreUnavailable, connect
 
-__all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "SCHEMA_VERSION"]
+__all__ = ["Store", "CorruptDatabase", "StoreUnavailable", "StoredCapture", "RejectedPacket", "SCHEMA_VERSION",
+           "disk_free"]
+
+REJECTED_KEPT = 1000  # rejected packets kept for a person; older ones are deleted
+
+
+def disk_free(path: str | Path) -> str:
+    """The room left on the disk holding `path`, for a line saying why a write failed."""
+    try:
+        st = os.statvfs(os.path.dirname(os.path.abspath(path)))
+    except OSError:
+        return "unknown bytes"
+    return f"{st.f_bavail * st.f_frsize} bytes"
+
 
 class _Undo(Exception):
     """Drops the current write (e.g. a capture that was already stored)."""
@@ -188,10 +210,10 @@ class Store:
     def _add_camera(self, cid: int, s: CaptureSettings) -> None:
         red, blue = s.white_balance_gains or (None, None)
         self._conn.execute(
-            f"INSERT INTO capture_camera (capture, {', '.join(CAMERA_COLUMNS)}) VALUES (?,?,?,?,?,?,?,?,?,?,?,?)",
+            f"INSERT INTO capture_camera (capture, {', '.join(CAMERA_COLUMNS)}) VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?)",
             (cid, s.exposure_us, s.gain, s.white_balance_kelvin, red, blue, s.sensor_temperature_c, int(s.unlocked),
              None if s.reference is None else json.dumps(list(s.reference)), float(s.reference_clipped),
-             json.dumps(list(s.brackets)), json.dumps({str(k): v for k, v in sorted(s.bracketed.items())})))
+             json.dumps(list(s.brackets)), json.dumps({str(k): v for k, v in sorted(s.bracketed.items())}), s.source))
 
     def next_sequence(self, robot_id: str) -> int:
         row = self._conn.execute("SELECT MAX(sequence) FROM captures WHERE robot = ?", (robot_id,)).fetchone()
@@ -207,6 +229,26 @@ class Store:
             (robot_id, key, int(lab.shape[0]), int(lab.shape[1]), "png", encode_png(lab.astype(np.uint8, copy=False))),
         )
         return cur.rowcount == 1
+
+    def add_rejected(self, received: float, sender: int | None, incarnation: str, msg_id: int | None,
+                     reason: str, body: bytes) -> int:
+        """Keep a packet the station could not use, raw, for a person (the newest REJECTED_KEPT);
+        its row id."""
+        with self._write():
+            cur = self._conn.execute(
+                "INSERT INTO rejected_packets (received, sender, incarnation, msg_id, reason, body)"
+                " VALUES (?,?,?,?,?,?)", (float(received), sender, str(incarnation),
+                                           msg_id if msg_id is None or msg_id <= 2**63 - 1 else None,
+                                           str(reason), bytes(body)))
+            rid = int(cur.lastrowid)
+            self._conn.execute("DELETE FROM rejected_packets WHERE id <= ?", (rid - REJECTED_KEPT,))
+        return rid
+
+    def rejected(self, limit: int = 100) -> list[RejectedPacket]:
+        """The newest rejected packets, newest first."""
+        rows = self._conn.execute("SELECT id, received, sender, incarnation, msg_id, reason, body"
+                                  " FROM rejected_packets ORDER BY id DESC LIMIT ?", (int(limit),)).fetchall()
+        return [self._checked(rejected_from_row, r, f"rejected packet {r[0]!r}") for r in rows]
 
     def mask(self, key: str, robot_id: str = "") -> np.ndarray | None:
         row = self._conn.execute(
@@ -246,7 +288,7 @@ class Store:
         camera = ", ".join(f"k.{c}" for c in CAMERA_COLUMNS)
         rows = self._conn.execute(
             "SELECT id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth,"
-            " space, bands, scene, light_elevation, light_azimuth, source, levels, incarnation, " + camera
+            " space, bands, scene, light_elevation, light_azimuth, captures.source, levels, incarnation, " + camera
             + " FROM captures LEFT JOIN capture_camera k ON k.capture = captures.id"
             + where + " ORDER BY elevation, id", args
         ).fetchall()

@@ -19,6 +19,9 @@ from btf.record import FittedModel
 from radio.packets.base import MAX_BANDS, MAX_FRAME_SIDE, MAX_LABELS
 
 MAX_ROW_INT = 2**63 - 1
+# A dataset's captures are stored under the robot id `dataset:<its absolute folder>`, each with
+# its file name inside that folder as `source` (tools.data.ingest).
+DATASET_PREFIX = "dataset:"
 
 
 @dataclass(frozen=True, slots=True)
@@ -44,6 +47,18 @@ class StoredCapture:
     def elevation(self) -> float:
         return self.measured[0]
 
+    @property
+    def dataset(self) -> str | None:
+        """The folder of the dataset an ingest fitted this capture from (None: not a dataset's)."""
+        return self.robot[len(DATASET_PREFIX):] if self.robot.startswith(DATASET_PREFIX) else None
+
+    @property
+    def source_file(self) -> str | None:
+        """The image file this capture was fitted from, where the database says (a dataset's item)."""
+        if self.source is None:
+            return None
+        return f"{self.dataset.rstrip('/')}/{self.source}" if self.dataset else self.source
+
 
 def capture_from_row(r: tuple) -> StoredCapture:
     """(id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space,
@@ -61,7 +76,7 @@ def capture_from_row(r: tuple) -> StoredCapture:
 
 
 CAMERA_COLUMNS = ("exposure_us", "gain", "wb_kelvin", "wb_red", "wb_blue", "sensor_c", "unlocked", "reference",
-                  "reference_clipped", "brackets", "bracketed")
+                  "reference_clipped", "brackets", "bracketed", "source")
 
 
 def camera_from_row(r: tuple) -> CaptureSettings | None:
@@ -87,7 +102,8 @@ def camera_from_row(r: tuple) -> CaptureSettings | None:
             number(r[8], "camera reference_clipped"),
             tuple(number(v, "camera bracket exposure") for v in brackets),
             {integer(int(k) if str(k).isdigit() else k, "bracketed label", 0, MAX_LABELS - 1):
-             integer(v, "bracket index", 1, MAX_BRACKETS) for k, v in bracketed.items()})
+             integer(v, "bracket index", 1, MAX_BRACKETS) for k, v in bracketed.items()},
+            None if r[11] is None else text(r[11], "camera source"))
     except ValueError as exc:
         raise ValueError(f"camera settings: {exc}") from None
 
@@ -169,3 +185,28 @@ def johnson(family: Any, gamma: Any, delta: Any, xi: Any, lam: Any) -> Johnson:
 def _shown(v: Any) -> str:
     s = repr(v)
     return s if len(s) <= 40 else s[:37] + "..."
+
+
+@dataclass(frozen=True, slots=True)
+class RejectedPacket:
+    """A packet the station could not use, as it arrived (`Store.add_rejected`)."""
+
+    id: int
+    received: float
+    sender: int | None
+    incarnation: str
+    msg_id: int | None
+    reason: str
+    body: bytes
+
+
+def rejected_from_row(row: tuple) -> RejectedPacket:
+    rid, received, sender, incarnation, msg_id, reason, body = row
+    for name, v in (("id", rid), ("sender", sender), ("msg_id", msg_id)):
+        if v is not None and type(v) is not int:
+            raise ValueError(f"{name} is {v!r}, not an integer")
+    if type(received) not in (int, float) or not math.isfinite(received):
+        raise ValueError(f"received is {received!r}, not a time")
+    if type(reason) is not str or type(incarnation) is not str or type(body) is not bytes:
+        raise ValueError("reason, incarnation or body of the wrong type")
+    return RejectedPacket(rid, float(received), sender, incarnation, msg_id, reason, body)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-SCHEMA_VERSION = 9
+SCHEMA_VERSION = 11
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -51,6 +51,8 @@ CREATE TABLE IF NOT EXISTS capture_camera (
     brackets TEXT NOT NULL DEFAULT '[]', bracketed TEXT NOT NULL DEFAULT '{}'
 );
 """
+# The file a replaying camera read the frame from (btf.capture_settings.CaptureSettings.source).
+_CAMERA_SOURCE = "ALTER TABLE capture_camera ADD COLUMN source TEXT;"
 # A capture is one robot state's (incarnation's) numbered view: a robot whose state was wiped
 # numbers its captures from 1 again under a new incarnation ('' for robots older than them).
 _CAPTURES = """
@@ -69,6 +71,19 @@ CREATE TABLE {name} (
     levels INTEGER NOT NULL DEFAULT 256,
     incarnation TEXT NOT NULL DEFAULT '',
     UNIQUE (robot, incarnation, sequence)
+);
+"""
+# Packets the station could not use (undecodable, or refused by the store), raw, for a person
+# to look at: the robot was told (a NACK UNUSABLE) and set them aside.
+_REJECTED = """
+CREATE TABLE IF NOT EXISTS rejected_packets (
+    id INTEGER PRIMARY KEY,
+    received REAL NOT NULL,
+    sender INTEGER,
+    incarnation TEXT NOT NULL DEFAULT '',
+    msg_id INTEGER,
+    reason TEXT NOT NULL,
+    body BLOB NOT NULL
 );
 """
 _BEFORE_INCARNATIONS = ("id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space, bands,"
@@ -98,7 +113,7 @@ CREATE TABLE masks (
     data BLOB NOT NULL,
     UNIQUE (robot, key)
 );
-""" + _DEPENDENCE + _PCA + _CAMERA
+""" + _DEPENDENCE + _PCA + _CAMERA + _CAMERA_SOURCE + _REJECTED
 _TABLES = {"captures", "models", "masks"}
 # Upgrades from the keyed version to the next; each keeps every existing row.
 _MIGRATIONS: dict[int, str] = {
@@ -126,8 +141,12 @@ _MIGRATIONS: dict[int, str] = {
        + f"INSERT INTO captures_new ({_BEFORE_INCARNATIONS}) SELECT {_BEFORE_INCARNATIONS} FROM captures;"
        "DROP TABLE captures; ALTER TABLE captures_new RENAME TO captures;"
        "CREATE INDEX captures_by_source ON captures (robot, source);",
+    # the packets the station could not use, kept raw
+    8: _REJECTED,
+    # the file a replayed frame came from
+    9: _CAMERA_SOURCE,
     # a region's observed levels and its grain on the 2-D window; the older rows kept as they are
-    8: f"CREATE TABLE dependence_new ({_DEPENDENCE_COLUMNS});"
+    10: f"CREATE TABLE dependence_new ({_DEPENDENCE_COLUMNS});"
        "INSERT INTO dependence_new (capture, label, corr, dx, dy) SELECT capture, label, corr, dx, dy FROM dependence;"
        "DROP TABLE dependence; ALTER TABLE dependence_new RENAME TO dependence;",
 }
@@ -163,7 +182,11 @@ def connect(p: Path, create: bool = True) -> sqlite3.Connection:
         if magic != _SQLITE_MAGIC:
             raise CorruptDatabase(f"database {p}: not an SQLite file; left untouched")
     elif not create:
-        raise CorruptDatabase(f"database {p}: no such database")
+        if p.exists():  # a 0-byte file: what a failed copy, or a typo in a redirection, leaves
+            raise CorruptDatabase(f"database {p}: an empty file, not a btfscout database; give the one station, "
+                                  "listen, fit, ingest or demo wrote")
+        raise CorruptDatabase(f"database {p}: no such database; give the one station, listen, fit, ingest or "
+                              "demo wrote")
     if not p.parent.exists():
         raise CorruptDatabase(f"database {p}: directory {p.parent} does not exist")
     try:
@@ -199,13 +222,13 @@ def connect(p: Path, create: bool = True) -> sqlite3.Connection:
     except CorruptDatabase:
         conn.close()
         raise
-    # Only once the file is known to be ours. The host is not the durable side: the
-    # robot keeps every packet in its outbox until it is acknowledged, and a capture is
-    # acknowledged only after its commit, so a power cut that loses the last WAL
-    # commits makes the robot send them again. NORMAL skips an fsync per commit.
+    # Only once the file is known to be ours. A capture is acknowledged once its commit
+    # returns and the robot then deletes its copy, so a commit must be on stable storage:
+    # FULL fsyncs the WAL at every commit (NORMAL only at checkpoints, and a power cut
+    # would lose what was acknowledged). The station groups a turn's packets in one commit.
     try:
         conn.execute("PRAGMA journal_mode = WAL")
-        conn.execute("PRAGMA synchronous = NORMAL")
+        conn.execute("PRAGMA synchronous = FULL")
     except sqlite3.DatabaseError as exc:
         conn.close()
         raise _failure(p, exc, "open for writing") from None

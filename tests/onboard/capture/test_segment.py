@@ -16,7 +16,7 @@ from onboard.capture.palette import Palette
 from onboard.capture.segmentation import Segmenter, SegmentMethod
 from onboard.config import SegmentConfig
 from radio import packets as pk
-from radio.packets.mask import downsample_labels
+from radio.packets.mask import downsample_labels, pool_labels
 
 COLOURS = np.array([[40, 40, 40], [200, 60, 60], [60, 200, 60], [60, 60, 200]], np.uint8)
 
@@ -260,3 +260,40 @@ def test_a_mask_stretched_back_covers_each_cell_with_exactly_the_pixels_it_was_p
     small = np.random.default_rng(h * w).integers(0, 6, (h, w)).astype(np.uint8)
     frame = small[cell_of(full_h, h)[:, None], cell_of(full_w, w)[None, :]]
     assert np.array_equal(mask_packet(frame, robot_id=1, seq=1).full_size(), frame)
+
+
+@settings(max_examples=40, deadline=None)
+@given(arrays(np.uint8, st.tuples(st.integers(1, 150), st.integers(1, 150)), elements=st.integers(0, 255)),
+       st.integers(1, 64))
+def test_pooling_counts_every_label_it_pools(lab, side):
+    small, counts = pool_labels(lab, side)
+    np.testing.assert_array_equal(small, downsample_labels(lab, side))
+    np.testing.assert_array_equal(counts, np.bincount(lab.ravel(), minlength=256))
+
+
+def test_the_segmenter_hands_on_the_map_it_pooled_and_the_mask_packet_carries_it(tmp_path):
+    lab = _labels(480, 640)
+    seg = Segmenter(SegmentMethod.ISODATA, n_labels=8)
+    seg.note(lab)
+    out = seg.segmented(lab)
+    assert out.changed and out.labels is lab
+    np.testing.assert_array_equal(out.counts[:8], np.bincount(lab.ravel(), minlength=8))
+    assert pk.encode_mask(lab, robot_id=1, seq=3, pooled=out.small) == pk.encode_mask(lab, robot_id=1, seq=3)
+    coarse = Segmenter(SegmentMethod.ISODATA, n_labels=8, mask_side=16)
+    coarse.note(lab)
+    assert coarse.segmented(lab).small is None  # not the map a MASK packet carries
+
+
+def test_centres_are_refitted_when_the_scene_changes_not_when_the_view_is_brighter():
+    seg = Segmenter(SegmentMethod.ISODATA, isodata=IsodataParams(k=4), palette_threshold=30)
+    truth, spec = _labels(), FeatureSpec(FeatureSpace.RGB)
+    base = _scene(truth, 1).astype(float)
+    seg.labels_for(compute(base.astype(np.uint8), spec))
+    assert seg.refits == 1
+    for gain in (0.7, 0.85, 1.15, 1.25):  # the same clutter seen from views that catch more or less light
+        seg.labels_for(compute(np.clip(base * gain, 0, 255).astype(np.uint8), spec))
+    assert seg.refits == 1
+    other = np.array([[120, 30, 160], [20, 120, 120], [230, 200, 40], [90, 90, 10]], np.uint8)  # other clutter
+    seg.labels_for(compute(np.clip(np.random.default_rng(5).normal(other[truth].astype(float), 6), 0, 255)
+                           .astype(np.uint8), spec))
+    assert seg.refits == 2

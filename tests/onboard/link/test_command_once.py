@@ -134,7 +134,7 @@ def test_the_robot_remembers_only_the_last_replies(tmp_path):
     with Outbox(tmp_path / "o.sqlite") as box:
         total = REMEMBERED_REPLIES + 4
         for cid in range(total):
-            box.commit(reply=Reply(cid, int(pk.Kind.ACK), pk.encode(pk.AckPacket(cid, "PING"))))
+            box.commit(reply=Reply(cid, int(pk.Kind.ACK), pk.encode(pk.AckPacket(cid, "PING", {"time": 1.0}))))
         kept = [cid for cid in range(total) if box.remembered(cid) is not None]
         assert kept == list(range(4, total))
         last = box.remembered(total - 1)

@@ -1,6 +1,7 @@
 """Interpolation over view and light directions: barycentric weights and quantile blending."""
 from __future__ import annotations
 
+import functools
 import warnings
 
 import numpy as np
@@ -30,6 +31,12 @@ GRID4 = [Direction(el, az, lel, laz) for el in (30.0, 60.0, 90.0) for az in (0.0
          for lel in (30.0, 70.0) for laz in (0.0, 180.0)]
 
 
+@functools.cache
+def interpolator(grid: tuple[Direction, ...]) -> DirectionInterpolator:
+    """One interpolator per grid, shared by a property's examples (its triangulation is built once)."""
+    return DirectionInterpolator(list(grid))
+
+
 def _position(d: Direction) -> np.ndarray:
     return _plane(np.array([d.angles()]))[0]
 
@@ -38,7 +45,7 @@ def _position(d: Direction) -> np.ndarray:
 @given(el=st.floats(26.0, 90.0), az=st.floats(0.0, 360.0))
 def test_view_weights_are_convex_and_reproduce_the_direction(el, az):
     q = Direction(el, az)
-    interp = DirectionInterpolator(GRID)
+    interp = interpolator(tuple(GRID))
     with warnings.catch_warnings():
         warnings.simplefilter("error", ExtrapolationWarning)  # inside the octagon of the 20-degree ring: never warns
         w = interp.weights(q)
@@ -54,7 +61,7 @@ def test_four_angle_weights_reproduce_view_and_light(el, az, lel, laz):
     q = Direction(el, az, lel, laz)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", ExtrapolationWarning)  # the triangle of azimuths leaves corners out
-        w = DirectionInterpolator(GRID4).weights(q)
+        w = interpolator(tuple(GRID4)).weights(q)
     assert all(v > 0 for _, v in w) and sum(v for _, v in w) == pytest.approx(1.0)
     assert len(w) <= 5
     assert all(np.isfinite(v) for _, v in w)

@@ -78,5 +78,5 @@ def test_every_error_is_one_line_and_status_2(host, two_sweeps, tmp_path):
     assert "PNG" in _one_line_error(host, "btf", "--db", two_sweeps, "--robot", "7", "--plot", tmp_path / "p.svg")
     (tmp_path / "old.png").write_bytes(b"x")
     assert "--force" in _one_line_error(host, "btf", "--db", two_sweeps, "--robot", "7", "--plot", tmp_path / "old.png")
-    assert "feature space" in _one_line_error(host, "btf", "--db", two_sweeps, "--space", "cmyk")
+    assert "--space: invalid choice" in _one_line_error(host, "btf", "--db", two_sweeps, "--space", "cmyk")
     assert "no captures in feature space hsv" in _one_line_error(host, "btf", "--db", two_sweeps, "--space", "hsv")

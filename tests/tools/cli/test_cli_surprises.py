@@ -235,14 +235,22 @@ def test_report_filters_by_robot_and_scene_and_says_what_holds_none(run, tmp_pat
     assert code == 2 and "robot 1 scene dark" in one_line(err)
 
 
-def test_report_shows_progress_and_notes_empty_sections(run, tmp_path):
-    db = _two_scene_db(tmp_path / "two.db")  # no masks: nothing to synthesize
+def test_report_shows_progress_draws_one_region_whole_and_notes_captures_it_cannot_draw(run, tmp_path):
+    db = _two_scene_db(tmp_path / "two.db")  # one region each, no masks: drawn over the whole image
+    with Store.open(db) as s:  # two regions and no label map: nothing says where each lies
+        labels = np.zeros((30, 40), np.int64)
+        labels[:, 20:] = 1
+        f = FrameFitter(2, 3)
+        f.add(np.random.default_rng(5).integers(0, 256, (30, 40, 3), dtype=np.uint8), labels)
+        s.add_capture("3", 0, 1.0, None, (45.0, 0.0), "rgb", ("R", "G", "B"), f.fit(), scene="halves")
     code, _, err = run("report", "--db", db, "--out", tmp_path / "r")
     assert code == 0
-    assert "4/4" in err  # the progress bar over the captures
+    assert "5/5" in err  # the progress bar over the captures
     page = (tmp_path / "r" / "index.html").read_text()
     section = page[page.index("<h2>Synthetic beside measured</h2>"):]
-    assert "no capture has a label mask" in section
+    assert section.count("the whole image is region 0") == 4
+    assert len(list((tmp_path / "r").glob("*_synthetic.png"))) == 4
+    assert "1 capture(s) without a label mask are not shown" in section
 
 
 # --- start-up ----------------------------------------------------------------------------------

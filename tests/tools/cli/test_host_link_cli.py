@@ -168,7 +168,7 @@ def test_cmd_against_a_running_robot_gets_its_answers(robot_port, capsys):
     port, key = robot_port
     code, ans = _cmd(port, key, capsys, "status")
     assert code == 0 and ans["type"] == "ACK" and ans["ok"] and ans["text"] == "STATUS"
-    assert ans["extras"]["mode"] == "idle" and ans["extras"]["faults"] == []
+    assert ans["status"]["mode"] == "idle" and ans["status"]["faults"]["items"] == []
     code, ans = _cmd(port, key, capsys, "goto", "--elevation", "50", "--azimuth", "0")
     assert code == 0 and ans["type"] == "ACK"
     assert abs(ans["extras"]["elevation"] - 50.0) < 2.0  # the measured angle, not the commanded one
@@ -195,3 +195,18 @@ def test_ping_and_reboot_servo_have_command_line_forms_the_robot_answers(robot_p
     assert code == 0 and ans["type"] == "ACK" and ans["text"] == "PING" and ans["extras"]["time"] > 0
     code, ans = _cmd(port, key, capsys, "reboot-servo", "--servo-id", "1")
     assert code == 0 and ans["type"] == "ACK" and ans["extras"]["rebooted"] == 1
+
+
+def test_cmd_prints_an_answer_without_the_fields_left_empty(monkeypatch, capsys, tmp_path):
+    import tools.cli.cmd as cmd_cli
+
+    answer = {"command_id": 5, "ok": True, "type": "ACK", "text": "STATUS", "extras": {},
+              "status": {"mode": "idle", "paused": "", "outbox": 0, "disk": {"state": "ok", "note": ""},
+                         "faults": {"items": [], "left_out": 0}}}
+    monkeypatch.setattr(cmd_cli, "ask", lambda *a: answer)
+    assert main(["cmd", "--db", str(tmp_path / "s.db"), "status"]) == 0
+    assert capsys.readouterr().out.splitlines() == ["ACK: STATUS", "  mode: idle", "  outbox: 0",
+                                                    "  disk: {state=ok}", "  faults: none"]
+    answer.update(text="SET", status=None, extras={"set": "skip.min_pixels", "camera": ""})
+    assert main(["cmd", "--db", str(tmp_path / "s.db"), "set", "skip.min_pixels", "50"]) == 0
+    assert capsys.readouterr().out == "ACK: SET (set=skip.min_pixels)\n"

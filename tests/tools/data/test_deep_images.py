@@ -166,7 +166,8 @@ def test_a_schema_5_database_is_upgraded_with_8_bit_levels(tmp_path):
     with Store.open(db) as store:
         store.add_capture("bot", 1, 0.0, None, (60.0, 0.0), "gray", ("Y",), {})
     con = sqlite3.connect(db)
-    con.executescript("ALTER TABLE captures DROP COLUMN levels; PRAGMA user_version = 5;")
+    con.executescript("ALTER TABLE captures DROP COLUMN levels; DROP TABLE capture_camera; DROP TABLE rejected_packets;"
+                      " PRAGMA user_version = 5;")  # the tables schema 5 did not have yet
     con.close()
     with Store.open(db) as store:
         assert [c.levels for c in store.captures()] == [256]

@@ -152,7 +152,7 @@ def test_out_is_replaced_only_with_force_and_errors_are_one_line(host, db, tmp_p
     assert host("export", "--db", db, "--out", other, "--force")[0] == 0
     assert not (other / "notes.txt").exists() and len(list(other.rglob("*.parquet"))) == 2
     assert "not a csv export" in error("export", "--db", db, "--out", other, "--format", "csv")
-    assert "expected parquet or csv" in error("export", "--db", db, "--out", tmp_path / "y", "--format", "xlsx")
+    assert "choose from 'parquet', 'csv'" in error("export", "--db", db, "--out", tmp_path / "y", "--format", "xlsx")
     assert "no such database" in error("export", "--db", tmp_path / "none.db", "--out", tmp_path / "y")
     with Store.open(tmp_path / "empty.db"):
         pass

@@ -153,10 +153,10 @@ def test_cli_ingest_and_its_errors(utia, tmp_path, capsys):
     assert "0 image(s) stored, 12 already there" in capsys.readouterr().out
     bad = [
         (["ingest", str(tmp_path / "nope"), "--layout", "utia"], "no such directory"),
-        (["ingest", str(utia), "--layout", "bonn"], "layout 'bonn'"),
+        (["ingest", str(utia), "--layout", "bonn"], "--layout: invalid choice: 'bonn'"),
         (["ingest", str(utia), "--layout", "curet"], "angles.txt: no such file"),
         (["ingest", str(utia), "--layout", "utia", "--workers", "-1"], "--workers"),
-        (["ingest", str(utia), "--layout", "utia", "--space", "lab"], "feature space 'lab'"),
+        (["ingest", str(utia), "--layout", "utia", "--space", "lab"], "--space: invalid choice: 'lab'"),
     ]
     (tmp_path / "odd").mkdir()
     (tmp_path / "odd" / "photo.png").write_bytes((utia / "masks" / next(iter(

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from tests.support.btf_sweeps import curved_su, linear_normal, write_sweep
-from tests.tools.page.test_page_server import request, rig, served  # noqa: F401  (the station fixture)
+from tests.support.station_rig import request, served
 from tools.page.btf_panel import panel
 from tools.page.data import btf_query as parse_query
 

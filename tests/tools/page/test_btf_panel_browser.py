@@ -7,11 +7,9 @@ import shutil
 
 import pytest
 
-from tests.support.browser import chromium, need_chromium, page_address
-from tests.support.station_rig import ROBOT, Rig
-from tests.tools.page.test_page_browser import answer_of
+from tests.support.browser import answer_of, chromium, need_chromium, page_address
+from tests.support.station_rig import Rig
 
-CONFIG = ROBOT + "[sweep]\nautostart = false\n"
 PLAN = "90,10,80,20,70,30"  # long moves between poses: a capture about every half second
 
 # Every point count the panel's title shows, in order.
@@ -28,7 +26,7 @@ WATCH = """() => {
 @pytest.fixture
 def rig(tmp_path):
     need_chromium()
-    r = Rig(tmp_path, CONFIG)
+    r = Rig(tmp_path)
     yield r
     r.close()
 

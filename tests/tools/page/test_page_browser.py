@@ -3,17 +3,30 @@ and the station with its page on a real pty cable. The sweep advances pose by po
 "capture" is answered inline and its capture appears; the cable cut shows "link down", then the
 failsafe; restored, the robot is heard again and reports the failsafe it went through."""
 import os
+import re
 import shutil
 
 import pytest
 
-from tests.support.browser import chromium, need_chromium, page_address
+from tests.support.browser import answer_of, chromium, need_chromium, page_address
 from tests.support.robots import IDLE
 from tests.support.station_rig import Rig
 
 # The robot holds the arm after 1.5 s without the base (the station calls the link down after 5 s).
 QUICK_FAILSAFE = {"link": {"failsafe_s": 1.5}}
 PLAN = "90,70,50,30,10"  # 20° apart (a sixth of a second for the fake servos), at azimuths 0 and 90
+
+# What the capture detail said as the page built itself: (cards on the page, its text) at each change.
+DETAIL_SEEN = """
+window.detailSeen = [];
+new MutationObserver(() => {
+  const d = document.getElementById("detail");
+  if (!d) return;
+  const t = d.textContent.trim().slice(0, 60), cards = document.querySelectorAll("#cards .card").length;
+  const last = window.detailSeen[window.detailSeen.length - 1];
+  if (!last || last[0] !== cards || last[1] !== t) window.detailSeen.push([cards, t]);
+}).observe(document, {childList: true, subtree: true, characterData: true});
+"""
 
 # Every value the progress text and the link and mode badges take, in order (the page's DOM).
 WATCH = """() => {
@@ -34,13 +47,6 @@ def rig(tmp_path):
     r = Rig(tmp_path, QUICK_FAILSAFE, IDLE)
     yield r
     r.close()
-
-
-def answer_of(page, command):
-    out = page.locator(f"form[data-command={command}] output.answer")
-    page.wait_for_function(f"() => /^(ACK|NACK)/.test(document.querySelector("
-                           f"'form[data-command={command}] output.answer').textContent)", timeout=60_000)
-    return out.text_content()
 
 
 def test_the_page_follows_a_sweep_commands_the_robot_and_shows_the_link_lost_and_recovered(rig, tmp_path):
@@ -75,6 +81,22 @@ def test_the_page_follows_a_sweep_commands_the_robot_and_shows_the_link_lost_and
             page.wait_for_selector(f"#detail figcaption:has-text('{what}')", timeout=60_000)
         assert page.locator("#detail table.models tr").count() > 1
         assert "exposure us" in page.locator("#detail table.camera").text_content()
+        # opened again with captures stored: the chosen capture is never "No capture yet.", and
+        # every card's picture loads once the chosen capture's have
+        page.add_init_script(DETAIL_SEEN)
+        page.reload()
+        page.wait_for_selector(f"#detail h3:has-text('(seq {seq})')", timeout=60_000)
+        page.wait_for_function("() => [...document.querySelectorAll('#cards img')].every("
+                               "(i) => i.complete && i.naturalWidth > 0)", timeout=60_000)
+        seen = page.evaluate("window.detailSeen")
+        assert not [t for cards, t in seen if cards and "No capture yet" in t], seen
+        assert "360.0°" not in page.locator("#cards").text_content()
+        # a STATUS answer says no empty field ("paused=")
+        page.click("form[data-command=STATUS] button")
+        said = answer_of(page, "STATUS")
+        assert said.startswith("ACK") and not re.search(r"=(\s|,|$)", said), said
+        page.wait_for_function("() => document.getElementById('link-badge').textContent === 'link up'")
+        page.evaluate(WATCH)
         # the cable cut: link down, and the robot's failsafe
         rig.cable.cut()
         page.wait_for_function("() => document.getElementById('link-badge').textContent === 'link down'",

@@ -1,7 +1,6 @@
 """The page's server without a browser: the token guards viewing (unless --http-public) and
 every command, a cross-site request is refused, forms come from the command table and a bad
 form is one line; the station's page options are checked at start."""
-import http.client
 import json
 import subprocess
 from urllib.parse import urlsplit
@@ -10,33 +9,9 @@ import pytest
 
 from radio.packets.commands import COMMANDS, CommandName
 from tests.support.browser import page_address
-from tests.support.station_rig import ROOT, Rig, python
+from tests.support.station_rig import ROOT, python, request, served
 from tools.page.forms import forms_html, parse_form
 from tools.page.server import parse_http
-
-
-@pytest.fixture
-def rig(tmp_path):
-    r = Rig(tmp_path)  # no robot on the cable: commands wait, the page still serves
-    yield r
-    r.close()
-
-
-def served(rig, *argv):
-    station = rig.station("--http", "127.0.0.1:0", *argv)
-    url = urlsplit(page_address(rig.where / f"station-{rig.stations}.err"))
-    token = url.query.removeprefix("token=")
-    return station, url.hostname, url.port, token
-
-
-def request(host, port, method, path, body=None, headers=None):
-    conn = http.client.HTTPConnection(host, port, timeout=30)
-    try:
-        conn.request(method, path, body=body, headers=headers or {})
-        resp = conn.getresponse()
-        return resp.status, dict(resp.getheaders()), resp.read()
-    finally:
-        conn.close()
 
 
 def command(host, port, headers, name="PING", fields=None):
@@ -106,6 +81,8 @@ def test_page_options_are_checked_before_the_station_starts(rig, tmp_path):
     for argv, words in ((["--http", "localhost:http"], "expected PORT or ADDR:PORT"),
                         (["--http", "70000"], "outside 0..65535"),
                         (["--http-public"], "give --http"),
+                        (["--http-host", "station.local"], "give --http"),
+                        (["--http", "0", "--http-host", "station.local:80"], "expected a host name"),
                         (["--http", "0", "--robot-config", str(not_fake)], "not a fake robot's"),
                         (["--http", "0", "--robot-config", str(tmp_path / "none.toml")], "not found")):
         code, err = station(*argv)

@@ -1,5 +1,6 @@
 """The station's parts in one process, over a simulated cable: the event bus, the store before
-the acknowledgement, the wrong key, the snapshot, and a command answered once."""
+the acknowledgement, a wrong key and another key's frames (said, never the end), the snapshot,
+and a command answered once."""
 import asyncio
 import time
 
@@ -7,18 +8,11 @@ import pytest
 
 from radio import packets as pk
 from radio.auth import MemoryCounterStore
-from radio.channel import ChannelConfig
-from radio.channel_port import Cable
-from radio.link import Acked, Link
-from radio.pump import LinkPump
+from radio.link import Link
 from tests.support.packets import models_body
+from tests.support.station_cable import drive, station_log, station_on_cable
 from tools.station.bus import EventBus
-from tools.station.log import StationLog
-from tools.station.receiver import Receiver
-from tools.station.station import Station
 from tools.store.database import Store
-
-KEY = bytes(range(32))
 
 
 def test_a_slow_subscriber_loses_the_oldest_events_and_is_told_how_many():
@@ -38,47 +32,8 @@ def test_a_slow_subscriber_loses_the_oldest_events_and_is_told_how_many():
 
     got_fast, lost, got_slow, subscribers, last = asyncio.run(go())
     assert got_fast == list(range(10)) and last["i"] == 10
-    assert lost["kind"] == "lost" and lost["count"] == 7 and got_slow == [7, 8, 9]
+    assert lost.KIND == "lost" and lost.count == 7 and got_slow == [7, 8, 9]
     assert subscribers == 1
-
-
-class Robot:
-    """The robot's end of the cable: a link that sends packets and answers commands."""
-
-    def __init__(self, end, key=KEY):
-        self.pump = LinkPump(Link(1, 2, 1, key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), end)
-        self.acked: set[int] = set()
-        self.commands: list[pk.CommandPacket] = []
-
-    def turn(self):
-        for ev in self.pump.step():
-            if isinstance(ev, Acked):
-                self.acked.add(ev.msg_id)
-            elif hasattr(ev, "payload"):
-                cmd = pk.decode(ev.payload)
-                self.commands.append(cmd)
-                if [c.command_id for c in self.commands].count(cmd.command_id) == 1:  # as the robot: once
-                    self.pump.send(pk.encode(pk.AckPacket(cmd.command_id, cmd.name.name, {"n": len(self.commands)})))
-
-
-def station_on_cable(tmp_path, store=None, host_key=KEY, robot_key=KEY):
-    cable = Cable(ChannelConfig(latency=0.0, bandwidth=1e7, buffer=1 << 20))
-    store = store or Store.open(tmp_path / "host.db")
-    pump = LinkPump(Link(2, 1, 1, host_key, MemoryCounterStore(), heartbeat=0.1, link_timeout=5.0), cable.ends[1])
-    station = Station(pump, Receiver(store), StationLog(tmp_path / "host.db.log", echo=None),
-                      port="sim", db=str(tmp_path / "host.db"), status_every=0)
-    return station, Robot(cable.ends[0], robot_key), store
-
-
-async def drive(station, robot, until, limit_s=20.0):
-    """Run the station, turning the robot beside it, until `until()`."""
-    task = asyncio.ensure_future(station.run())
-    end = time.monotonic() + limit_s
-    while not until() and not task.done() and time.monotonic() < end:
-        robot.turn()
-        await asyncio.sleep(0.002)
-    station.stop()
-    await task
 
 
 def test_a_packet_is_acknowledged_only_once_it_is_stored(tmp_path):
@@ -88,11 +43,6 @@ def test_a_packet_is_acknowledged_only_once_it_is_stored(tmp_path):
     assert mid in robot.acked and [c.sequence for c in store.captures()] == [7]
     events = [e for e in station_log(tmp_path) if e["kind"] == "capture"]
     assert events[0]["stored"] and events[0]["seq"] == 7 and events[0]["capture"]["regions"] == 2
-
-
-def station_log(tmp_path):
-    import json
-    return [json.loads(line) for line in (tmp_path / "host.db.log").read_text().splitlines()]
 
 
 def test_a_store_that_fails_ends_the_station_and_nothing_is_acknowledged(tmp_path):
@@ -111,20 +61,66 @@ def test_a_store_that_fails_ends_the_station_and_nothing_is_acknowledged(tmp_pat
     assert mid not in robot.acked and robot.pump.link.queued_bytes > 0  # still the robot's to send
 
 
-def test_a_wrong_key_ends_the_station_saying_so(tmp_path):
+def test_a_wrong_key_is_said_in_one_line_and_the_station_goes_on_listening(tmp_path):
     station, robot, _ = station_on_cable(tmp_path, robot_key=bytes(32))
-    asyncio.run(drive(station, robot, lambda: False, limit_s=20.0))
-    assert station.failure is not None and station.failure.status == 2
-    assert "wrong key?" in str(station.failure)
+    asyncio.run(drive(station, robot, lambda: station.pump.stats().rejected.get("tag", 0) >= 40, limit_s=20.0))
+    assert station.failure is None and station.pump.stats().rejected["tag"] >= 40  # stopped by the test
+    assert station.wrong_key.startswith("wrong key?") and "--key must hold" in station.wrong_key
     rejected = [e for e in station_log(tmp_path) if e["kind"] == "rejected"]
-    assert rejected and rejected[0]["reason"] == "tag" and "tag mismatch: wrong key?" in rejected[0]["cause"]
+    assert rejected and all(e["reason"] == "tag" for e in rejected)
+    said = [e for e in rejected if e.get("wrong_key")]
+    assert said and said[0]["text"].startswith("wrong key?") and "still listening" in said[0]["text"]
+
+
+class Forger:
+    """A transmitter with another key on the robot's side of the cable: it only writes."""
+
+    def __init__(self, end):
+        self.link, self.end = Link(1, 2, 1, bytes(32), MemoryCounterStore(), heartbeat=0.01), end
+
+    def turn(self):
+        self.end.write(self.link.poll(time.monotonic()))
+
+
+def test_the_station_survives_frames_of_another_key_before_and_after_hearing_its_robot(tmp_path):
+    station, robot, store = station_on_cable(tmp_path)
+    forger = Forger(robot.pump.port)
+    tags = lambda: station.pump.stats().rejected.get("tag", 0)  # noqa: E731
+
+    async def go():
+        task = asyncio.ensure_future(station.run())
+
+        async def until(done, *ends):
+            end = time.monotonic() + 20.0
+            while not done() and not task.done() and time.monotonic() < end:
+                for e in ends:
+                    e.turn()
+                await asyncio.sleep(0.002)
+
+        await until(lambda: station.wrong_key, forger)  # before the robot is heard
+        first = robot.pump.send(models_body(7)[0], msg_id=41)
+        await until(lambda: first in robot.acked, robot, forger)
+        before = tags()
+        said = lambda: any("another transmitter" in e["text"] for e in station_log(tmp_path))  # noqa: E731
+        await until(lambda: tags() >= before + 40 and said(), robot, forger)  # after
+        second = robot.pump.send(models_body(8)[0], msg_id=42)
+        await until(lambda: second in robot.acked, robot, forger)
+        station.stop()
+        await task
+        return first, second, before
+
+    first, second, before = asyncio.run(go())
+    assert station.failure is None and {first, second} <= robot.acked
+    assert [c.sequence for c in store.captures()] == [7, 8] and tags() >= before + 40 >= 48
+    texts = [e["text"] for e in station_log(tmp_path) if e["kind"] == "rejected"]
+    assert any(t.startswith("wrong key?") for t in texts) and any("another transmitter" in t for t in texts)
 
 
 def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path):
     station, robot, _ = station_on_cable(tmp_path)
     status = pk.StatusPacket(1, 1_700_000_000.0, pk.RobotState.SWEEPING, (60.0, 0.0), 3, 900, 6,
-                             "skipped pose: settle failed", {"sweep": 2, "skipped_index": 4,
-                                                             "skipped_elevation": 50.0, "skipped_azimuth": 0.0})
+                             "skipped pose: settle failed", report=pk.StatusReport(sweep=pk.SweepReport(
+                                 2, skipped=pk.Kept((pk.SkippedPose(4, 50.0, 0.0, "settle failed"),)))))
     robot.pump.send(pk.encode(status))
     answers = []
 
@@ -137,7 +133,7 @@ def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path)
         await drive_task
         kinds = []
         while (e := sub.get_nowait()) is not None:
-            kinds.append(e["kind"])
+            kinds.append(e.KIND)
         return kinds
 
     kinds = asyncio.run(go())
@@ -149,4 +145,18 @@ def test_a_command_is_answered_once_and_the_snapshot_follows_the_robot(tmp_path)
     assert snap["link"]["up"] and snap["link"]["frames_accepted"] > 0 and snap["link"]["last_heard"]
     assert snap["robot"]["state"] == "sweeping" and snap["robot"]["pose"] == {"elevation": 60.0, "azimuth": 0.0}
     assert snap["sweep"]["id"] == 2 and snap["sweep"]["skipped"] == [
-        {"index": 4, "elevation": 50.0, "azimuth": 0.0, "reason": "settle failed"}]
+        {"index": 4, "elevation": 50.0, "azimuth": 0.0, "reason": "settle failed", "tries": 1}]
+
+
+def test_an_answer_is_logged_without_the_fields_the_robot_left_empty(tmp_path):
+    station, robot, _ = station_on_cable(tmp_path)
+    robot.extras = {"set": "skip.min_pixels", "camera": ""}
+
+    async def go():
+        _, fut = station.submit(pk.CommandName.SET, {"key": "skip.min_pixels", "value": 50}, command_id=78)
+        await drive(station, robot, fut.done)
+        return await fut
+
+    assert asyncio.run(go())["extras"]["camera"] == ""  # the answer itself as the robot sent it
+    said = [e["text"] for e in station_log(tmp_path) if e["kind"] == "answer"]
+    assert said == ["SET (command 78): ACK set=skip.min_pixels"], said

@@ -169,3 +169,29 @@ def test_a_record_reads_back_as_it_was_stored_its_read_included(tmp_path):
         back = s.models(s.captures()[0].id)
     assert back == records
     assert all(rebuild(r) == r.model for r in back.values())
+
+
+def test_rejected_packets_are_kept_raw_newest_first_and_bounded(tmp_path, monkeypatch):
+    from tools.store import database
+
+    monkeypatch.setattr(database, "REJECTED_KEPT", 3)
+    with Store.open(tmp_path / "x.db") as s:
+        for i in range(5):
+            s.add_rejected(100.0 + i, 1, "ab12", i, f"undecodable packet: {i}", bytes([i]) * 3)
+        s.add_rejected(200.0, None, "", 2**63 + 5, "an automatic id past SQLite's integers", b"\x93")
+        kept = s.rejected()
+    assert [r.msg_id for r in kept] == [None, 4, 3] and kept[1].body == b"\x04" * 3
+    assert kept[1].reason == "undecodable packet: 4" and kept[1].sender == 1 and kept[1].incarnation == "ab12"
+
+
+def test_a_database_from_before_rejected_packets_gains_the_table(tmp_path):
+    db = tmp_path / "old.db"
+    with Store.open(db) as s:
+        s.add_capture("1", 1, 1.0, (90.0, 0.0), (90.0, 0.0), "rgb", ("R", "G", "B"), {})
+    con = sqlite3.connect(db)
+    con.executescript("DROP TABLE rejected_packets; ALTER TABLE capture_camera DROP COLUMN source; PRAGMA user_version = 8;")
+    con.close()
+    with Store.open(db) as s:
+        assert len(s.captures()) == 1 and s.rejected() == []
+        s.add_rejected(1.0, 1, "", 7, "refused", b"x")
+        assert [r.msg_id for r in s.rejected()] == [7]

@@ -2,8 +2,10 @@
 damaged masks) are one line naming the row and exit status 2, never a traceback."""
 import sqlite3
 
+import numpy as np
 import pytest
 
+from btf.fit.png import encode_png
 from tests.support.packets import filled_database
 from tools.cli import main
 from tools.station.receiver import mask_key
@@ -45,6 +47,20 @@ def test_report_on_a_bad_row_is_one_line_and_status_2(tmp_path, capsys, reason):
     assert len(err) == 1, err
     assert reason in err[0] and str(db) in err[0] and "Traceback" not in err[0]
     assert db.read_bytes() == before  # left untouched
+
+
+@pytest.mark.parametrize("reason", ["gamma is 'NaN', not a number", "lam is inf, not a finite number",
+                                    "bands is 'R,G,B', not a JSON list", "time is inf"])
+def test_synth_on_a_bad_row_is_one_line_and_status_2_as_report_is(tmp_path, capsys, reason):
+    db = _spoiled(tmp_path, BAD_ROWS[reason])
+    mask = tmp_path / "mask.png"
+    mask.write_bytes(encode_png(np.full((20, 30), 1, np.uint8)))
+    before = db.read_bytes()
+    code = main(["synth", "--db", str(db), "--mask", str(mask), "--angle", "50", "--out", str(tmp_path / "o.png")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert reason in err[0] and str(db) in err[0] and "Traceback" not in err[0]
+    assert db.read_bytes() == before and not (tmp_path / "o.png").exists()
 
 
 def test_the_store_names_the_capture_and_model_of_a_nan_row(tmp_path):

@@ -5,14 +5,18 @@
 
 const $ = (id) => document.getElementById(id);
 const state = {snap: null, cards: new Map(), rev: 0, authorized: false, token: "", selected: null,
-  follow: true, received: 0, answers: new Map(), waiting: new Map(), newest: null};
+  follow: true, received: 0, answers: new Map(), waiting: new Map(), newest: null, thumbsHeld: true,
+  asked: null};  // asked: the chosen capture's request, aborted when another is chosen
+const THUMBS_HELD_MS = 2000;  // the cards' pictures wait at most this long for the chosen capture's
 window.btfPage = {shown: {}, hello: 0};  // when each capture ("robot:seq") was first drawn (benchmarks)
 
 function esc(s) {
   return String(s ?? "").replace(/[&<>"']/g, (c) => ({"&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;", "'": "&#39;"}[c]));
 }
 const deg = (v) => (v === null || v === undefined ? "?" : `${Number(v).toFixed(1)}°`);
-const pose = (p) => (p ? `${deg(p.elevation)} / ${deg(p.azimuth)}` : "unknown");
+// an azimuth in [0, 360) as shown: 359.96 is 0.0°, never 360.0°
+const azDeg = (v) => (v === null || v === undefined ? "?" : deg(((Math.round(Number(v) * 10) / 10) % 360 + 360) % 360));
+const pose = (p) => (p ? `${deg(p.elevation)} / ${azDeg(p.azimuth)}` : "unknown");
 function ago(s) {
   if (s === null || s === undefined) return "never";
   return s < 60 ? `${s.toFixed(1)} s ago` : s < 3600 ? `${Math.floor(s / 60)} min ${Math.round(s % 60)} s ago` : `${(s / 3600).toFixed(1)} h ago`;
@@ -109,7 +113,8 @@ function drawSweep(s) {
   const pct = total ? (100 * (done + skipped)) / total : 0;
   $("progress-bar").style.width = `${pct}%`;
   $("progress-text").textContent = total ? `sweep ${w.id ?? "?"}: ${done + skipped} of ${total} poses` +
-    (skipped ? ` (${skipped} skipped)` : "") : "no sweep";
+    (skipped ? ` (${skipped} ${w.missing ? "missing" : "skipped"})` : "") : "no sweep";
+  drawMissing(w);
   if (!g) return;
   const key = JSON.stringify([g.elevations, g.azimuths]);
   const box = $("grid");
@@ -129,6 +134,15 @@ function drawSweep(s) {
   });
 }
 
+// The poses an ended sweep could not measure, each with why (after its tries).
+function drawMissing(w) {
+  const m = w.missing || [], more = w.missing_left_out || 0, box = $("missing");
+  box.hidden = !(m.length || more);
+  box.innerHTML = box.hidden ? "" : `<h3>Missing: ${m.length + more} pose${m.length + more === 1 ? "" : "s"} not measured</h3><ul>` +
+    m.map((k) => `<li>${deg(k.elevation)} / ${deg(k.azimuth)}${k.tries > 1 ? ` (${k.tries} tries)` : ""}: ${esc(k.reason)}</li>`).join("") +
+    (more ? `<li>… and ${more} more</li>` : "") + "</ul>";
+}
+
 // -- captures ------------------------------------------------------------------------------
 function selectedPose() {
   const c = state.cards.get(state.selected);
@@ -137,7 +151,25 @@ function selectedPose() {
 
 function cardHtml(c) {
   const src = `capture/${c.id}/thumb.png?r=${state.rev}`;
-  return `<img loading=lazy src="${src}" alt="capture ${c.seq}">${deg(c.elevation)} / ${deg(c.azimuth)}<br>seq ${c.seq}`;
+  return `<img loading=lazy ${state.thumbsHeld ? "data-src" : "src"}="${src}" alt="capture ${c.seq}">` +
+    `${deg(c.elevation)} / ${azDeg(c.azimuth)}<br>seq ${c.seq}`;
+}
+
+// The browser asks a station for few pictures at a time: the chosen capture's go first, the
+// cards' once those have loaded (or THUMBS_HELD_MS passed).
+function releaseThumbs() {
+  if (!state.thumbsHeld) return;
+  state.thumbsHeld = false;
+  document.querySelectorAll("#cards img[data-src]").forEach((img) => { img.src = img.dataset.src; img.removeAttribute("data-src"); });
+  afterPictures($("cards"), () => once("btf-card-pictures"));
+}
+function once(mark) {  // the first time something was on the page, for the benchmarks
+  if (!performance.getEntriesByName(mark).length) performance.mark(mark);
+}
+function afterPictures(box, then, which = "img") {
+  const waits = [...box.querySelectorAll(which)].filter((i) => !i.complete)
+    .map((i) => new Promise((done) => { i.addEventListener("load", done); i.addEventListener("error", done); }));
+  Promise.all(waits).then(then);
 }
 
 function drawCards(list, fresh) {
@@ -181,15 +213,26 @@ async function select(key, following) {
   const c = state.cards.get(key);
   if (!c) return;
   const want = `${c.id}:${state.rev}`;
+  if (!($("detail").dataset.want || "").startsWith(`${c.id}:`)) {  // another capture: say so until it is drawn
+    $("detail").innerHTML = `<p class=note>${esc(c.scene || "robot " + c.robot)} seq ${c.seq}: drawing…</p>`;
+  }
   $("detail").dataset.want = want;
+  if (state.asked) state.asked.abort();  // the capture chosen before: the station need not draw it now
+  const asked = state.asked = new AbortController();
   try {
-    const resp = await fetch(`capture/${c.id}/section?r=${state.rev}`);
+    const resp = await fetch(`capture/${c.id}/section?r=${state.rev}`, {signal: asked.signal});
     const text = await resp.text();
     if ($("detail").dataset.want !== want) return;  // another capture was chosen meanwhile
     $("detail").innerHTML = resp.ok ? text : `<p class=note>capture ${c.seq}: ${esc(text)}</p>`;
   } catch (e) {
+    if (e.name === "AbortError") return;  // another capture was chosen
     $("detail").innerHTML = `<p class=bad>capture ${c.seq}: ${esc(e)}</p>`;
   }
+  if ($("detail").querySelector("img.view")) afterPictures($("detail"), () => once("btf-selected-views"), "img.view");
+  afterPictures($("detail"), () => {
+    if ($("detail").querySelector("img")) once("btf-selected-pictures");
+    releaseThumbs();
+  });
 }
 
 $("grid").addEventListener("click", (ev) => {
@@ -313,12 +356,9 @@ $("btf-stat").onchange = (e) => { btf.stat = e.target.value; if (btf.data && !bt
 // -- events --------------------------------------------------------------------------------
 const LOG_KEPT = 80;
 function logEvent(ev) {
-  if (ev.kind === "status" && !ev.stored && ev.text === "the robot's report") return;  // the station's own poll
-  const bad = (ev.kind === "link" && !ev.up) || ev.kind === "failsafe" || ev.kind === "rejected" ||
-    (ev.kind === "answer" && !ev.ok) || (ev.kind === "station" && /failed/.test(ev.text));
-  const good = (ev.kind === "link" && ev.up) || (ev.kind === "answer" && ev.ok);
+  if (ev.shown === false) return;  // e.g. the station's own STATUS poll (tools/station/events.py)
   const li = document.createElement("li");
-  li.className = bad ? "bad" : good ? "ok" : "";
+  li.className = ev.tone || "";
   li.innerHTML = `<span class=t>${clock(ev.time)}</span> ${esc(ev.kind)}: ${esc(ev.text)}`;
   $("log").prepend(li);
   while ($("log").children.length > LOG_KEPT) $("log").lastChild.remove();
@@ -329,7 +369,8 @@ function answerText(a) {
   if (a.ok) {
     const shown = (k, v) => (k === "time" && typeof v === "number" && v > 1e9 ? new Date(v * 1000).toISOString().slice(0, 19) + "Z"
       : typeof v === "number" ? +v.toFixed(3) : v);  // the robot's clock as a time, not epoch seconds
-    const said = Object.entries(a.extras || {}).map(([k, v]) => `${k}=${shown(k, v)}`).join(" ");
+    const empty = (v) => v === "" || v === null || (typeof v === "object" && !Object.keys(v).length);  // "paused=" says nothing
+    const said = Object.entries(a.extras || {}).filter(([, v]) => !empty(v)).map(([k, v]) => `${k}=${shown(k, v)}`).join(" ");
     return [`ACK${said ? ": " + said : ""}`, "ok"];
   }
   return [`NACK ${a.reason}: ${a.text}`, "bad"];
@@ -398,12 +439,14 @@ function connect() {
     document.title = `btfscout: ${h.db}`;
     drawAll();
     drawCards(h.cards, false);
+    if (!h.cards.length) releaseThumbs();
+    setTimeout(releaseThumbs, THUMBS_HELD_MS);
     drawAuth();
     $("log").innerHTML = "";
     h.events.forEach(logEvent);
     $("conn").textContent = "live";
     $("conn").className = "note ok";
-    if (!window.btfPage.hello) { window.btfPage.hello = Date.now(); performance.mark("btf-first-data"); }
+    if (!window.btfPage.hello) { window.btfPage.hello = Date.now(); once("btf-first-data"); }
     fetchBtf();
   });
   es.addEventListener("snapshot", (m) => { state.snap = JSON.parse(m.data).snapshot; state.received = Date.now(); drawAll(); });
@@ -411,7 +454,10 @@ function connect() {
   es.addEventListener("event", (m) => logEvent(JSON.parse(m.data).event));
   es.addEventListener("rev", (m) => {
     state.rev = JSON.parse(m.data).rev;
-    document.querySelectorAll("#cards .card").forEach((el) => { el.innerHTML = cardHtml(state.cards.get(el.dataset.key)); });
+    // new drawings replace the old in place: the old picture stays until the new one has loaded
+    document.querySelectorAll("#cards .card img").forEach((img) => {
+      img.src = img.getAttribute("src").replace(/\?r=\d+$/, `?r=${state.rev}`);
+    });
     if (state.selected) select(state.selected, state.follow);
   });
   es.onerror = () => { $("conn").textContent = "station unreachable: retrying"; $("conn").className = "note bad"; };

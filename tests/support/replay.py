@@ -1,0 +1,66 @@
+"""A robot whose camera replays image files (hal.replay): small RGB frames, a config, a sweep."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from radio import packets as pk
+from tests.support.robots import robot_toml
+
+H, W = 24, 32
+ELEVATIONS = [90, 80, 70, 60, 50, 40, 30]  # the default sweep
+
+
+def rgb_frame(seed: int) -> np.ndarray:
+    """Two regions of distinct colour with grain, so the robot finds something to fit."""
+    rng = np.random.default_rng(seed)
+    img = np.empty((H, W, 3), np.float64)
+    img[:, : W // 2] = (200, 120, 40)
+    img[:, W // 2:] = (40, 90, 180)
+    return np.clip(img + rng.normal(0, 6, img.shape), 0, 255).astype(np.uint8)
+
+
+def write_rgb(path: Path, rgb: np.ndarray) -> Path:
+    assert cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+    return path
+
+
+def robot_text(camera: str, loop: bool, body: str = "fake", *changes: dict) -> str:
+    """A robot on the `body` HAL whose camera plays files, segmenting by ISODATA into 2 classes."""
+    replay = {"body": body, "size": [H, W], "scene": None, "camera": camera, "replay_loop": loop}
+    return robot_toml({"hal": replay, "segment": {"method": None, "k": 2}}, *changes)
+
+
+def run_sweep(fake_robot, text: str) -> tuple[list, dict[float, str]]:
+    """A whole sweep: the decoded packets, and the file each capture's frame came from, by elevation."""
+    rt, tr = fake_robot(text)
+    sources: dict[float, str] = {}
+    process = rt.pipeline.process
+
+    def noting(frame, commanded, measured, settings=None):
+        sources[commanded.elevation] = Path(settings.source).name  # the settings read with the frame
+        return process(frame, commanded, measured, settings)
+
+    rt.pipeline.process = noting
+    try:
+        rt.run(lambda r: r.progress is not None and r.idle())
+    finally:
+        rt.outbox.close()
+        rt.hal.close()  # the emulated body's servo chain runs in a thread of its own
+    return [pk.decode(body) for _, body in tr.sent], sources
+
+
+def models(packets: list) -> list:
+    return [p for p in packets if isinstance(p, pk.ModelsPacket)]
+
+
+def write_shots(folder: Path) -> Path:
+    """shot_1.png, shot_2.jpg, shot_10.png: 8-bit RGB; a text file the camera leaves alone."""
+    folder.mkdir()
+    for i in (10, 1):
+        write_rgb(folder / f"shot_{i}.png", rgb_frame(i))
+    write_rgb(folder / "shot_2.jpg", rgb_frame(2))
+    (folder / "notes.txt").write_text("taken on the test plate")
+    return folder

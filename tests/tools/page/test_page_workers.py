@@ -1,0 +1,31 @@
+"""The page's worker processes end with their station, even one killed before they were ready."""
+import os
+from pathlib import Path
+
+from benchmarks.hostile_clients import until
+from tests.support.browser import page_address
+from tests.support.station_rig import Rig, kill9
+
+
+def children(pid: int) -> list[int]:
+    out = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:  # ended meanwhile
+            continue
+        if int(fields[1]) == pid:
+            out.append(int(stat.parent.name))
+    return out
+
+
+def test_the_pages_workers_end_with_a_station_killed_before_they_were_ready(tmp_path):
+    rig = Rig(tmp_path)
+    try:
+        station = rig.station("--http", "127.0.0.1:0")
+        page_address(tmp_path / f"station-{rig.stations}.err")  # its workers are starting now
+        workers = children(station.pid)
+        kill9(station)
+        assert workers and until(lambda: not any(os.path.exists(f"/proc/{p}") for p in workers), 60), workers
+    finally:
+        rig.close()
