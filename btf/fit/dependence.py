@@ -12,14 +12,15 @@ partner exists). Each anchor's whole window of partners is read at once as a str
 the frame; a pair counts only when both pixels carry the anchor's label, so a mask edge never
 mixes regions. Values are centred on the region's median (from its models) before the float32
 products, which keeps 8-bit products exact and 16-bit ones accurate. Per region, lag and band
-the pass keeps the pair count and the sums of a, b, a^2, b^2 and a b (anchor a, partner b),
-each an one-hot matrix product per chunk; the Pearson correlation of the pairs follows. The
-lags (0, dx) are read on both sides of the anchor, doubling their pairs.
+the pass keeps the pair count and the sums of a, b, a^2, b^2 and a b (anchor a, partner b):
+per window row, the partners' planes (bands apart) masked to the anchor's label, then one-hot
+matrix products small enough for one BLAS thread; the Pearson correlation of the pairs
+follows. The lags (0, dx) are read on both sides of the anchor, doubling their pairs.
 
 These are plain Pearson correlations of the pixels, what an image comparison measures; the
 host turns them into the correlations of normal scores that reproduce them through the
 models (tools.analysis.latent). Memory is fixed: the accumulators (regions x window x bands)
-and, per chunk of anchors, chunk x bands x (R+1)(2R+1) float32 values; the frame itself is
+and, per chunk of anchors, a few chunk x bands x (2R+1) float32 planes; the frame itself is
 only viewed.
 """
 from __future__ import annotations
@@ -32,9 +33,11 @@ import numpy as np
 from btf.dependence import RADIUS, Dependence, check_radius
 from btf.johnson import Family, Johnson
 
-# 16,384 anchors were no more accurate than 8,192 at twice the time (benchmarks: "dependence").
-MAX_ANCHORS = 8192
+# The most anchors whose pass stays within the fit's time at 1 MP on replayed photographs
+# (benchmarks: "dependence", "pose"); the error against every pixel pair is in RESULTS.md.
+MAX_ANCHORS = 6144
 CHUNK = 2048  # anchors per chunk: about 1 MB of temporaries
+PRODUCT_LIMIT = 400_000  # regions x anchors x positions of one product: OpenBLAS keeps it on one thread
 MIN_PAIRS = 32  # fewer pairs than this: the correlation is reported as 0 (independent)
 CORR_ANCHORS = MAX_ANCHORS  # points of the band correlations' own lattice, over the whole frame
 
@@ -78,46 +81,38 @@ def _lattice(h: int, w: int, radius: int, max_anchors: int) -> list[tuple[np.nda
 
 class _Sums:
     """Per region, window position and band: the pair count and the pairs' sums of a, a^2
-    (anchor side), b, a b and b^2 (partner side); and the anchors' own moments for the band
-    correlation."""
+    (anchor side), b, a b and b^2 (partner side)."""
 
     def __init__(self, n_regions: int, n_bands: int, positions: int) -> None:
-        self.k, self.b = n_regions, n_bands
+        self.b = n_bands
         self.anchor_side = np.zeros((1 + 2 * n_bands, n_regions, positions))  # n, sum a, sum a^2
         self.partner = np.zeros((3, n_bands, n_regions, positions))  # sum b, sum a b, sum b^2
 
-    def anchors(self, onehot: np.ndarray, anchor: np.ndarray) -> np.ndarray:
-        """Starts a chunk: the rows (n, sum a, sum a^2 per band) to weigh each window position's
-        pairs with, and the chunk's own accumulators (its regions only). anchor (n, B)."""
-        n, kk = onehot.shape[1], onehot.shape[0]
-        weighted = onehot[None] * anchor.T[:, None, :]  # (B, K', n)
-        self._side = np.zeros((1 + 2 * self.b, kk, self.anchor_side.shape[2]))
-        self._partner = np.zeros((3, self.b, kk, self.anchor_side.shape[2]))
-        self._weighted = weighted.reshape(-1, n)  # sum a b: each band's block of the product is kept
-        left = np.concatenate([onehot, self._weighted, (weighted * anchor.T[:, None, :]).reshape(-1, n)])
-        self._whole = left.sum(axis=1)  # what every window position would get were all partners inside
-        return left
+    def anchors(self, onehot: np.ndarray, anchor: np.ndarray, width: int) -> None:
+        """Starts a chunk: onehot (K', n) its anchors' regions, anchor (B, n) their centred values."""
+        n = anchor.shape[1]
+        own = np.concatenate([np.ones((1, n), np.float32), anchor, anchor * anchor])
+        self._onehot = onehot
+        self._left = onehot[None] * own[:, None, :]  # (1 + 2B, K', n)
+        self._repeated = np.repeat(anchor[:, :, None], width, axis=2)  # (B, n, 2R+1): each partner's anchor
+        self._stack = np.empty((3,) + self._repeated.shape, np.float32)  # b, a b, b^2 of the kept pairs
+        kk, positions = onehot.shape[0], self.anchor_side.shape[2]
+        self._side = np.zeros((1 + 2 * self.b, kk, positions))
+        self._partner = np.zeros((3, self.b, kk, positions))
 
-    def pairs(self, cols: slice, left: np.ndarray, off: np.ndarray, edge: np.ndarray, values: np.ndarray) -> None:
-        """One row of window positions (`cols`): values (n, (2R+1) B) the partners' centred
-        values, position-major; `edge` the anchors with a partner off their region, `off`
-        (edge x 2R+1) 1 there. Most anchors have every partner inside their region: the sums
-        take all partners, then take back the few off it (not a mask over every value)."""
-        kk, b = self._side.shape[1], self.b
-        side = np.repeat(self._whole[:, None], off.shape[1], axis=1)
-        onehot = left[:kk]
-        total, products, squares = onehot @ values, self._weighted @ values, onehot @ (values * values)
-        if edge.size:
-            side -= left[:, edge] @ off
-            stray = values[edge] * np.repeat(off, b, axis=1)
-            total -= onehot[:, edge] @ stray
-            products -= self._weighted[:, edge] @ stray
-            squares -= onehot[:, edge] @ (stray * stray)
-        self._side[:, :, cols] += side.reshape(1 + 2 * b, kk, -1)
-        for band in range(b):
-            self._partner[0, band, :, cols] += total[:, band::b]
-            self._partner[1, band, :, cols] += products[band * kk:(band + 1) * kk, band::b]
-            self._partner[2, band, :, cols] += squares[:, band::b]
+    def pairs(self, cols: slice, values: np.ndarray, inside: np.ndarray) -> None:
+        """One row of window positions (`cols`): values (B, n, 2R+1) the partners' centred
+        values; inside (n, 2R+1) 1 where the partner carries its anchor's label, else 0 (most
+        anchors of a segmented frame have some partner off their region, so every value is
+        masked, not a few taken back). Each product is (regions x anchors) by (anchors x
+        positions), the chunk sized so that BLAS keeps it on one thread: the pass runs beside
+        the link on one core, where more BLAS threads only spin and wait their turn."""
+        stack = self._stack
+        np.multiply(values, inside, out=stack[0])  # planar bands: the mask broadcasts over whole planes
+        np.multiply(stack[0], self._repeated, out=stack[1])
+        np.multiply(stack[0], values, out=stack[2])
+        self._partner[:, :, :, cols] += self._onehot @ stack  # one product per quantity and band
+        self._side[:, :, cols] += self._left @ inside
 
     def flush(self, present: np.ndarray) -> None:
         """Ends a chunk: its regions' sums into the totals."""
@@ -161,6 +156,8 @@ def measure(
     centre = np.array([[_median(models[(lab, b)], levels) for b in range(n_bands)] for lab in regions],
                       dtype=np.float32)
     sums = _Sums(len(regions), n_bands, (radius + 1) * (2 * radius + 1))
+    # anchors per chunk: at most `chunk`, fewer with many regions (see _Sums.pairs)
+    chunk = max(1, min(chunk, PRODUCT_LIMIT // (len(regions) * (2 * radius + 1))))
     for rows, col, nx in _lattice(h, w, radius, max_anchors):
         per = max(1, chunk // nx)
         for start in range(0, len(rows), per):
@@ -182,37 +179,35 @@ def measure(
 def _chunk(sums: _Sums, data: np.ndarray, labels: np.ndarray, rows: np.ndarray, col: int, nx: int,
            index: np.ndarray, centre: np.ndarray, radius: int) -> None:
     """One block of anchor rows: per window row dy, the frame's rows below the anchors, read as
-    planes (anchors x 2R+1 columns) per band."""
+    planes (bands x anchors x 2R+1 columns)."""
     width = 2 * radius + 1
     span, step = nx * width, int(rows[1] - rows[0]) if len(rows) > 1 else 1
     r0, r1 = int(rows[0]), int(rows[-1]) + 1
     n_bands = data.shape[2]
     anchor_labels = labels[r0:r1:step, col + radius:col + span:width]  # (ny, nx)
-    n = anchor_labels.size
+    ny, n = len(anchor_labels), anchor_labels.size
     region = index[np.where(anchor_labels < 0, -1, anchor_labels)].reshape(n)
-    inside = region >= 0
-    present, local = np.unique(region[inside], return_inverse=True)
+    measured = region >= 0
+    present = np.flatnonzero(np.bincount(region[measured], minlength=len(centre)))
     if not present.size:
         return
+    local = np.zeros(len(centre), np.intp)
+    local[present] = np.arange(len(present))
     onehot = np.zeros((len(present), n), dtype=np.float32)
-    onehot[local, np.flatnonzero(inside)] = 1.0
+    onehot[local[region[measured]], np.flatnonzero(measured)] = 1.0
     wide_labels = np.repeat(anchor_labels, width, axis=1)
-    centres = np.repeat(centre[np.where(inside, region, 0)].reshape(anchor_labels.shape + (1, n_bands)), width, axis=2)
-    values = np.empty((len(anchor_labels), nx, width, n_bands), dtype=np.float32)
-    off = np.empty(wide_labels.shape, dtype=bool)
-    all_inside = bool(inside.all())
-    left = None
+    # every operand full-sized: a broadcast over a short inner axis runs far slower
+    centres = np.repeat(centre[np.where(measured, region, 0)].T[:, :, None], width, axis=2)  # (B, n, 2R+1)
+    values = np.empty((n_bands, ny, span), dtype=np.float32)
+    inside = np.empty(wide_labels.shape, dtype=np.float32)
     for dy in range(radius + 1):
-        np.not_equal(labels[r0 + dy:r1 + dy:step, col:col + span], wide_labels, out=off)
-        np.subtract(data[r0 + dy:r1 + dy:step, col:col + span].reshape(values.shape), centres, out=values,
-                    casting="unsafe")
-        if left is None:  # the first window row holds the anchors themselves
-            left = sums.anchors(onehot, values[:, :, radius].reshape(n, n_bands))
-        rows_off = off.reshape(n, width)
-        stray = rows_off.any(axis=1)
-        edge = np.flatnonzero(stray if all_inside else stray & inside)
-        sums.pairs(slice(dy * width, (dy + 1) * width), left, rows_off[edge].astype(np.float32), edge,
-                   values.reshape(n, width * n_bands))
+        np.equal(labels[r0 + dy:r1 + dy:step, col:col + span], wide_labels, out=inside, casting="unsafe")
+        np.copyto(values, data[r0 + dy:r1 + dy:step, col:col + span].transpose(2, 0, 1), casting="unsafe")
+        planes = values.reshape(n_bands, n, width)
+        planes -= centres
+        if dy == 0:  # the first window row holds the anchors themselves
+            sums.anchors(onehot, planes[:, :, radius].copy(), width)
+        sums.pairs(slice(dy * width, (dy + 1) * width), planes, inside.reshape(n, width))
     sums.flush(present)
 
 
@@ -241,9 +236,8 @@ def _band_correlations(data: np.ndarray, labels: np.ndarray, index: np.ndarray, 
         columns[:, 1:1 + n_bands] = x
         for q, (b, c) in enumerate(pairs):
             np.multiply(x[:, b], x[:, c], out=columns[:, 1 + n_bands + q])
-        onehot = np.zeros((k, len(region)), np.float32)
-        onehot[region, np.arange(len(region))] = 1.0
-        sums += onehot @ columns
+        for j in range(sums.shape[1]):  # per column one bincount: no matrix product, no BLAS threads
+            sums[:, j] += np.bincount(region, columns[:, j], minlength=k)
     out = []
     for j in range(k):
         s2 = np.zeros((n_bands, n_bands))
@@ -263,7 +257,21 @@ def _window(r: np.ndarray, radius: int) -> np.ndarray:
 
 
 def _median(model: Johnson, levels: int) -> float:
-    return float(np.clip(model.x_of_z(0.0), 0, levels - 1))
+    """The model's median within the levels, in scalar arithmetic (x_of_z's arrays cost more than
+    the rest of a small pass); the centre only keeps the float32 sums accurate."""
+    g, d, xi, lam = model.gamma, model.delta, model.xi, model.lam
+    w = min(max(-g / d, -700.0), 700.0)
+    if model.family is Family.CONST:
+        x = xi
+    elif model.family is Family.SN:
+        x = xi + lam * w
+    elif model.family is Family.SU:
+        x = xi + lam * math.sinh(w)
+    elif model.family is Family.SB:
+        x = xi + lam / (1.0 + math.exp(-w))
+    else:
+        x = xi + lam * math.exp(w if lam > 0 else -w)
+    return min(max(x, 0.0), levels - 1.0) if math.isfinite(x) else (levels - 1.0 if x > 0 else 0.0)
 
 
 def _pearson_matrix(n: float, s1: np.ndarray, s2: np.ndarray) -> np.ndarray:
