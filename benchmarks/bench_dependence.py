@@ -17,7 +17,7 @@ from hal.scene import render
 from radio.packets import encode_models
 from tools.analysis.grain_metrics import acf2d
 
-ANCHORS = (2048, 4096, 8192, 16384, 65536)
+ANCHORS = (2048, 4096, 6144, 8192, 16384, 65536)
 
 
 def _grid_mask(h: int, w: int, side: int) -> np.ndarray:

@@ -39,7 +39,7 @@ MAX_ANCHORS = 6144
 CHUNK = 2048  # anchors per chunk: about 1 MB of temporaries
 PRODUCT_LIMIT = 400_000  # regions x anchors x positions of one product: OpenBLAS keeps it on one thread
 MIN_PAIRS = 32  # fewer pairs than this: the correlation is reported as 0 (independent)
-CORR_ANCHORS = MAX_ANCHORS  # points of the band correlations' own lattice, over the whole frame
+CORR_ANCHORS = 2 * MAX_ANCHORS  # points of the band correlations' own lattice over the whole frame (cheap: no window)
 
 
 def observed(counts: np.ndarray, centre0: float = 0.0, bin_width: float = 1.0,
