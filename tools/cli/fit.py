@@ -84,7 +84,7 @@ def _fit(args: argparse.Namespace, store: Store | None) -> int:
     feats, pca, results = fitted.feats, fitted.pca, fitted.results
     doc = models_document(feats.space.value, feats.band_names, feats.levels, args.angle, results,
                           pca=None if pca is None else pca.to_record(), image=str(args.image),
-                          dependence=None if args.independent_only else fitted.dependence)
+                          dependence=fitted.dependence)  # levels only with --independent-only
     if store is not None:
         seq = _store(store, args, fitted)
         doc["stored"] = {"db": str(args.db), "robot": args.robot, "scene": args.scene or "", "sequence": seq}
