@@ -234,11 +234,12 @@ def tradeoff_plot(cases, errors, seconds, dep: dict[int, tuple[float, float, flo
     ts = [dep[a][0] * 1e3 for a in ANCHORS]
     es = [dep[a][1] for a in ANCHORS]
     ax.plot(ts, es, "o-")
-    for a, t, e in zip(ANCHORS, ts, es):
+    for i, (a, t, e) in enumerate(zip(ANCHORS, ts, es)):
         last = a == ANCHORS[-1]  # the rightmost label ends at its point, inside the axes
-        ax.annotate(f"{a} anchors" + (" (default)" if a == dependence.MAX_ANCHORS else ""), (t, e),
-                    textcoords="offset points", xytext=(-4, 6) if last else (5, 4), fontsize=8,
-                    ha="right" if last else "left")
+        below = i % 2 == 1  # neighbours alternate above and below, so close points keep apart
+        ax.annotate(f"{a} anchors" + (" (the robot's)" if a == dependence.MAX_ANCHORS else ""), (t, e),
+                    textcoords="offset points", xytext=(-4, 6) if last else (6, -12) if below else (5, 4),
+                    fontsize=8, ha="right" if last else "left")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.xaxis.set_minor_formatter(NullFormatter())  # log-axis minor labels would overlap

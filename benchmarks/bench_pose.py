@@ -30,7 +30,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from benchmarks.common import Context, Section
+from benchmarks.common import Context, Section, verdict
 from benchmarks.photo_cases import load
 from btf.fit.fitter import FrameFitter
 from hal.factory import build_hal
@@ -44,6 +44,9 @@ from radio.keys import write_key
 PHOTOS = ("rocket", "chelsea", "astronaut", "motorcycle", "grace_hopper")
 SIZES = {"640x480": (480, 640), "1 MP": (1000, 1000), "5 MP": (1944, 2592)}
 VIEWS = 7  # a sweep's poses over one scene
+# (frame, figure, limit): the whole pose and add + fit against the floor, dependence against the fit
+TARGETS = (("1 MP", "pose", 6.0), ("5 MP", "pose", 3.5), ("1 MP", "dependence / fit", 1.0),
+           ("1 MP", "add+fit", 1.25), ("640x480", "add+fit", 1.8))
 STEPS = PoseTiming.STEPS
 
 
@@ -260,6 +263,9 @@ def _summary(ratios, runs, refit_s, kept_s, sweep_size, process) -> list[str]:
            "|---|---:|---:|---:|---:|"]
     out += [f"| {n} | {r['pose']:.2f}x | {r['pose without dependence']:.2f}x | {r['add+fit']:.2f}x | "
             f"{r['dependence / fit']:.2f}x |" for n, r in ratios.items()]
+    names = {"pose": "whole pose / floor", "add+fit": "add + fit / floor", "dependence / fit": "dependence / fit"}
+    out += [""] + [f"**{names[key]} at {frame}: {ratios[frame][key]:.2f}x** (target <= {limit}x: "
+                   f"{verdict(ratios[frame][key], limit)})  " for frame, key, limit in TARGETS if frame in ratios]
     fits = sum(r.count("R") for r in runs)
     poses = sum(len(r) for r in runs)
     out += ["", f"**ISODATA refits on a sweep of replayed views** ({sweep_size[1]}x{sweep_size[0]}; "
