@@ -76,7 +76,7 @@ def accuracy(ctx: Context) -> list[str]:
     lines = [f"| anchors | worst window error (per band) | worst band-correlation error | pass, {side}x{side} RGB "
              "scene (4 regions) / the fit | 4x4 grid (16 regions) / the fit |", "|---:|---:|---:|---:|---:|"]
     chosen = None
-    for anchors in ctx.pick(ANCHORS, (2048, 8192)):
+    for anchors in ctx.pick(ANCHORS, (2048, MAX_ANCHORS)):
         acf_err, corr_err = _errors(cases, anchors)
         ratios = []
         for name, labels in (("scene", scene), ("grid", grid)):

@@ -115,9 +115,11 @@ class _Sums:
         self._side[:, :, cols] += self._left @ inside
 
     def flush(self, present: np.ndarray) -> None:
-        """Ends a chunk: its regions' sums into the totals."""
+        """Ends a chunk: its regions' sums into the totals, its buffers let go (memory stays one
+        chunk's, however many chunks the frame takes)."""
         self.anchor_side[:, present] += self._side
         self.partner[:, :, present] += self._partner
+        self._onehot = self._left = self._repeated = self._stack = self._side = self._partner = None
 
     def pearson(self, region: int) -> np.ndarray:
         """Per band and window position, the Pearson correlation of one region's pairs."""
@@ -221,7 +223,7 @@ def _band_correlations(data: np.ndarray, labels: np.ndarray, index: np.ndarray, 
     pairs = [(b, c) for b in range(n_bands) for c in range(b + 1)]
     sums = np.zeros((k, 1 + n_bands + len(pairs)))  # n, sum x_b, sum x_b x_c
     cols = np.arange((w - 1) % step // 2, w, step)
-    per = max(1, 8 * chunk // len(cols))
+    per = max(1, 2 * chunk // len(cols))  # rows of points per block: blocks of about 2 chunks
     for r0 in range(((h - 1) % step) // 2, h, step * per):
         lab = labels[r0:r0 + step * per:step, cols[0]::step].reshape(-1)
         region = index[np.where(lab < 0, -1, lab)]
