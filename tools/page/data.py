@@ -151,7 +151,7 @@ def _warm() -> None:
     first figure costs a second)."""
     with warnings.catch_warnings():  # an empty plot's "no artists for the legend"
         warnings.simplefilter("ignore")
-        histogram_png(None, np.zeros((2, 2), np.uint8), {}, ("Y",), "")
+        histogram_png(None, np.zeros((2, 2), np.uint8), {}, ("Y",))
 
 
 def btf_query(query: Mapping[str, str]) -> dict:
