@@ -301,6 +301,23 @@ class Store:
         except ValueError as exc:  # ImageError too
             raise CorruptDatabase(f"database {self.path}: {what}: {exc}; left untouched") from None
 
+    def add_space_choice(self, robot: str, sequence: int, reason: str, incarnation: str = "") -> None:
+        """Records that capture (robot, incarnation, sequence) resolved its feature space
+        automatically, and why."""
+        self._conn.execute("INSERT OR REPLACE INTO space_choices (capture, reason) SELECT id, ? FROM captures"
+                           " WHERE robot = ? AND incarnation = ? AND sequence = ?",
+                           (reason, robot, incarnation, int(sequence)))
+
+    def space_choice(self, capture: int) -> str | None:
+        """Why a capture's feature space was chosen automatically: the choice it or an earlier
+        capture of its robot (same incarnation and space) recorded; None when it was configured."""
+        row = self._conn.execute(
+            "SELECT s.reason FROM space_choices s JOIN captures c ON c.id = s.capture"
+            " JOIN captures me ON me.id = ? WHERE c.robot = me.robot AND c.incarnation = me.incarnation"
+            " AND c.space = me.space AND c.sequence <= me.sequence ORDER BY c.sequence DESC LIMIT 1",
+            (capture,)).fetchone()
+        return None if row is None else str(row[0])
+
     def capture_by_seq(self, robot: str, sequence: int, incarnation: str = "") -> StoredCapture | None:
         """The capture (robot, incarnation, sequence), or None when it is not stored."""
         sql, args = self._capture_filter(robot, None, None)
