@@ -91,7 +91,7 @@ _BEFORE_INCARNATIONS = ("id, robot, sequence, time, cmd_elevation, cmd_azimuth, 
 # A feature space chosen automatically (btf.fit.space_choice): the capture it was resolved at,
 # and the criterion's reason; the robot's later captures of the scene keep it.
 _SPACE_CHOICES = """
-CREATE TABLE space_choices (
+CREATE TABLE IF NOT EXISTS space_choices (
     capture INTEGER PRIMARY KEY REFERENCES captures(id) ON DELETE CASCADE,
     reason TEXT NOT NULL
 );
