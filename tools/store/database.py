@@ -309,12 +309,14 @@ class Store:
                            (reason, robot, incarnation, int(sequence)))
 
     def space_choice(self, capture: int) -> str | None:
-        """Why a capture's feature space was chosen automatically: the choice it or an earlier
-        capture of its robot (same incarnation and space) recorded; None when it was configured."""
+        """Why a capture's feature space was chosen automatically: the choice it recorded, or for
+        a robot's capture (one with a commanded pose) the one an earlier capture of its scene
+        recorded (same incarnation and space); None when the space was configured."""
         row = self._conn.execute(
             "SELECT s.reason FROM space_choices s JOIN captures c ON c.id = s.capture"
-            " JOIN captures me ON me.id = ? WHERE c.robot = me.robot AND c.incarnation = me.incarnation"
-            " AND c.space = me.space AND c.sequence <= me.sequence ORDER BY c.sequence DESC LIMIT 1",
+            " JOIN captures me ON me.id = ? WHERE c.id = me.id OR (me.cmd_elevation IS NOT NULL"
+            " AND c.robot = me.robot AND c.incarnation = me.incarnation AND c.scene = me.scene"
+            " AND c.space = me.space AND c.sequence <= me.sequence) ORDER BY c.sequence DESC LIMIT 1",
             (capture,)).fetchone()
         return None if row is None else str(row[0])
 
