@@ -30,6 +30,7 @@ MIN_PIXELS = 256  # regions smaller than this do not count towards the band corr
 MARGIN = 0.05  # the band correlation another space must save before RGB is given up
 SCORED_BINS = 256  # a deep band's Table-2 error is taken over at most this many bins
 BASELINE = "rgb"
+EXTRA_KEY = "space_auto"  # the MODELS extra in which a robot says why it chose its space
 
 
 @dataclass(frozen=True)
