@@ -56,26 +56,24 @@ def mask_specs(text: str) -> list[tuple[str, str, int]]:
     return out
 
 
-def space_list(text: str | None, offered: tuple[str, ...], what: str) -> tuple[str, ...]:
+def space_names(text: str | None) -> tuple[str, ...] | None:
+    """The spaces --spaces names (None: every space the photograph offers)."""
     if text is None:
-        return offered
+        return None
     asked = tuple(t.strip() for t in text.split(","))
     bad = [s for s in asked if s not in FEATURE_SPACES]
     if bad:
         raise CliError(f"--spaces {text}: {', '.join(bad)} is not a feature space; choose from {', '.join(FEATURE_SPACES)}")
     if len(set(asked)) != len(asked):
         raise CliError(f"--spaces {text}: a space named twice")
-    missing = [s for s in asked if s not in offered]
-    if missing:
-        raise CliError(f"--spaces {text}: {what} offers only {', '.join(offered)}; drop {', '.join(missing)}")
     return asked
 
 
 def run(args: argparse.Namespace) -> int:
     if args.picture:
         check_out(args.picture, (args.image, args.mask), args.force, suffixes=(".png",), option="--picture")
-    if args.masks is not None:
-        mask_specs(args.masks)  # said before any work
+    masks = mask_specs(args.masks or DEFAULT_MASKS)  # said before any work
+    spaces = space_names(args.spaces)
     from tools.cli.spaces_run import execute  # heavy (OpenCV, scipy): loaded to run, not for --help
 
-    return execute(args)
+    return execute(args, masks, spaces)

@@ -12,7 +12,6 @@ import numpy as np
 
 from tools.analysis.spaces import Judgement, SpaceRow, judge, spaces_of
 from tools.cli.options import CliError
-from tools.cli.spaces import DEFAULT_MASKS, mask_specs, space_list
 from tools.data.images import (
     ImageError,
     read_image,
@@ -146,7 +145,8 @@ def photo(args: argparse.Namespace) -> tuple[np.ndarray, str, np.ndarray | None]
     return image, said, stored
 
 
-def masks_of(args: argparse.Namespace, image: np.ndarray, stored: np.ndarray | None) -> dict[str, np.ndarray]:
+def masks_of(args: argparse.Namespace, specs: list[tuple[str, str, int]], image: np.ndarray,
+             stored: np.ndarray | None) -> dict[str, np.ndarray]:
     """--mask, a stored capture's own mask (unless --masks), or the segmentations --masks names."""
     if args.mask:
         return {"mask": stored}
@@ -154,17 +154,22 @@ def masks_of(args: argparse.Namespace, image: np.ndarray, stored: np.ndarray | N
         return {"stored": stored}
     view = three_bands(stretched_8bit(image))  # what `btf-host mask` segments
     out = {}
-    for name, method, k in mask_specs(args.masks or DEFAULT_MASKS):
+    for name, method, k in specs:
         if image.shape[0] * image.shape[1] < k:
             raise CliError(f"--masks {name}: the photograph has fewer pixels than {k} classes")
         out[name] = segment(view, method, k, args.seed)
     return out
 
 
-def execute(args: argparse.Namespace) -> int:
+def execute(args: argparse.Namespace, specs: list[tuple[str, str, int]], asked: tuple[str, ...] | None) -> int:
+    """The command on the masks `specs` names and the spaces `asked` (None: all the photograph offers)."""
     image, said, stored = photo(args)
-    spaces = space_list(args.spaces, spaces_of(image), said)
-    masks = masks_of(args, image, stored)
+    offered = spaces_of(image)
+    spaces = offered if asked is None else asked
+    missing = [s for s in spaces if s not in offered]
+    if missing:
+        raise CliError(f"--spaces {args.spaces}: {said} offers only {', '.join(offered)}; drop {', '.join(missing)}")
+    masks = masks_of(args, specs, image, stored)
     levels = 256 if image.dtype == np.uint8 else 65536
     progress = None if args.json else (lambda what: print(f"judging {what} ...", file=sys.stderr, flush=True))
     result = judge(image, masks, spaces, args.seed, progress)

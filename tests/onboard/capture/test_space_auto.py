@@ -13,12 +13,23 @@ from onboard import config
 from onboard.capture import space_auto
 from onboard.config import ConfigError
 from radio import packets as pk
-from tests.onboard.test_runtime_integration import command, decoded, robot
 from tests.support.images import public_photos
+from tests.support.robots import IDLE, robot_toml
+from tests.support.runtime import decoded
 from tools.station.receiver import Receiver
 from tools.store.database import Store
 
 AUTO = {"features": {"space": "auto"}}
+
+
+def robot(scene: str, *changes: dict) -> str:
+    """A fake robot on `scene` at 60 x 80, waiting for commands."""
+    return robot_toml({"hal": {"scene": scene, "size": [60, 80]}, "skip": None}, *changes, IDLE)
+
+
+def command(rt, tr, cid, name, **args):
+    tr.receive(pk.encode(pk.CommandPacket(cid, name, args)))
+    rt.step()
 
 
 def test_a_colour_frame_is_judged_in_rgb_hsv_and_pca_and_a_one_band_or_deep_frame_is_not():

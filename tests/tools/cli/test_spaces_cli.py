@@ -9,7 +9,7 @@ import pytest
 
 from btf.fit.fitter import FrameFitter
 from tests.support.images import plate, public_photos
-from tests.tools.analysis.test_spaces import bands_of, table2
+from tests.support.spaces import bands_of, table2
 from tools.cli import main
 from tools.data.images import read_image, stretched_8bit, three_bands, write_image, write_mask
 from tools.data.masks import segment
