@@ -3,7 +3,7 @@ camera frame and processing run in a worker while the link is serviced (now), ag
 the link serviced only between the steps (before). Trials on a real link over a pty
 (`benchmarks/failsafe_trials.py`); failsafe_s = 1 s.
 
-The bar (issue 18): held within failsafe_s + 0.1 s in 20 of 20 trials at 960x1280
+The bar: held within failsafe_s + 0.1 s in 20 of 20 trials at 960x1280
 (`tests/test_failsafe_deadline.py`, run by `make stress`).
 """
 from __future__ import annotations

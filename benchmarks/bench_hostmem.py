@@ -1,4 +1,4 @@
-"""Peak memory of the host's image commands on large images (issue 18's bar: a 20000 x 20000
+"""Peak memory of the host's image commands on large images (the bar: a 20000 x 20000
 image through compare and synth under 64 bytes per pixel of peak RSS, input included).
 
 Each command runs in a fresh `btf-host` process (benchmarks.host_memory): first on a 64 x 64

@@ -195,8 +195,8 @@ def dependence_tradeoff(ctx: Context) -> dict[int, tuple[float, float]]:
         truth = dependence.measure(img, labels, models, max_anchors=labels.size)
         for a in ANCHORS:
             got = dependence.measure(img, labels, models, max_anchors=a)
-            err = np.mean([abs(u - v) for lab in truth for f in ("corr", "dx", "dy")
-                           for u, v in zip(getattr(truth[lab], f), getattr(got[lab], f))])
+            err = np.mean([abs(u - v) for lab in truth for f in ("corr", "acf")
+                           for u, v in zip(np.ravel(getattr(truth[lab], f)), np.ravel(getattr(got[lab], f)))])
             out[a].append((best_time(lambda: dependence.measure(img, labels, models, max_anchors=a),
                                      ctx.pick(3, 1)), float(err)))
     return {a: (float(np.mean([t for t, _ in v])), float(np.mean([e for _, e in v]))) for a, v in out.items()}

@@ -16,7 +16,7 @@ from benchmarks.stability_score import METHODS, Cause, Diagnosis, Size, Truth, d
 TITLES = {"percentile": "percentile fit (censoring on, the product)",
           "uncensored": "percentile fit with censor=False",
           "moments": "method of moments (AS 99)"}
-L1_BAR, QUANTILE_BAR = 0.06, 2.0  # issue 10's bars: histogram L1 to 40% censored, quantiles to 10%
+L1_BAR, QUANTILE_BAR = 0.06, 2.0  # the bars: histogram L1 to 40% censored, quantiles to 10%
 
 
 def run(ctx: Context) -> list[Section]:

@@ -8,9 +8,9 @@ WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 $BIN/python -c "import skimage.data, skimage.io; skimage.io.imsave('$WORK/gravel.png', skimage.data.gravel())"
 $BIN/btf-host mask "$WORK/gravel.png" --method kmeans --k 3 --out "$WORK/mask.png"
-$BIN/btf-host fit "$WORK/gravel.png" --mask "$WORK/mask.png" --space gray --json > "$WORK/models.json"
-$BIN/btf-host synth --model "$WORK/models.json" --mask "$WORK/mask.png" --angle 90 --out "$WORK/synth.png"
-$BIN/btf-host compare "$WORK/gravel.png" "$WORK/synth.png" --mask "$WORK/mask.png" --space gray
+$BIN/btf-host fit "$WORK/gravel.png" --mask "$WORK/mask.png" --json > "$WORK/models.json"
+$BIN/btf-host synth --model "$WORK/models.json" --mask "$WORK/mask.png" --out "$WORK/synth.png"
+$BIN/btf-host compare "$WORK/gravel.png" "$WORK/synth.png" --mask "$WORK/mask.png"
 $BIN/python - "$WORK" <<'EOF'
 import sys
 

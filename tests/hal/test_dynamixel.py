@@ -16,6 +16,9 @@ from hal.fakes import Faults
 from hal.interfaces import DeviceGone, DeviceTimeout, HalError, LimitError, ServoBus, ServoRecovery
 
 TICK_DEG = 360.0 / 4096
+# The SDK's own USB latency: a reply's timeout of 34 ms, which a loaded machine's emulator thread meets
+# (at 4 ms a busy scheduler made a present servo look silent).
+LATENCY_MS = 16.0
 
 
 def test_the_control_table_is_the_datasheets():
@@ -37,7 +40,7 @@ def emu():
 
 @pytest.fixture
 def bus(emu):
-    b = DynamixelServoBus(emu.port, latency_ms=4.0, retries=3)
+    b = DynamixelServoBus(emu.port, latency_ms=LATENCY_MS, retries=3)
     yield b
     b.close()
 
@@ -102,16 +105,18 @@ def test_move_sync_writes_goals_and_positions_follow(bus, emu):
 
 
 def test_slow_profile_velocity_reports_moving_on_the_way(emu):
-    bus = DynamixelServoBus(emu.port, latency_ms=4.0, profile_velocity=5)  # about 6.9 deg/s
+    bus = DynamixelServoBus(emu.port, latency_ms=LATENCY_MS, profile_velocity=5)  # about 6.9 deg/s
     try:
         bus.set_torque([1], True)
         bus.move({1: 20.0})
         assert bus.is_moving([1])
         first = bus.positions([1])[1]
         time.sleep(0.1)
+        before = emu.position_deg(1)
         second = bus.positions([1])[1]
+        after = emu.position_deg(1)
         assert 0.0 <= first < second < 20.0 and bus.is_moving([1])
-        assert second == pytest.approx(emu.position_deg(1), abs=0.5)
+        assert before - TICK_DEG <= second <= after + TICK_DEG  # what the servo was at as it answered
     finally:
         bus.close()
 
@@ -170,7 +175,7 @@ def test_alert_bit_reads_the_error_reboots_and_reinitialises(bus, emu):
 
 
 def test_random_faults_give_a_retry_or_a_clear_error_never_a_wrong_value(emu):
-    bus = DynamixelServoBus(emu.port, latency_ms=4.0, retries=3)
+    bus = DynamixelServoBus(emu.port, latency_ms=LATENCY_MS, retries=3)
     emu.faults = Faults(rate=0.15, seed=7, kinds=frozenset({"drop", "corrupt"}))
     try:
         truth = {1: emu.position_deg(1), 2: emu.position_deg(2)}
@@ -226,7 +231,7 @@ def test_alerted_servo_refusing_torque_is_recovered_not_reported_as_refused(bus,
 
 
 def test_unplugged_or_closed_port_is_a_clear_error_never_a_traceback(emu):
-    bus = DynamixelServoBus(emu.port, latency_ms=4.0)
+    bus = DynamixelServoBus(emu.port, latency_ms=LATENCY_MS)
     bus.set_torque([1], True)
     emu.close()  # the adapter is gone: the pty reports I/O errors, then its node is gone
     with pytest.raises(DeviceGone, match=rf"on {emu.port}: .*port failed .*unplugged\?"):

@@ -19,7 +19,7 @@ from radio.packets.base import (
 )
 from radio.packets.models import LabelModels, ModelsPacket
 
-# Issue 18's MASK body, a 1 x 1 label map of a 65535 x 65535 frame, was schema 2; the same
+# A MASK body once accepted, a 1 x 1 label map of a 65535 x 65535 frame, was schema 2; the same
 # 20 bytes at the current schema version are what an authentic robot could send now.
 ISSUE_MASK = bytes.fromhex("9a02020107cdffffcdffff0101c40101c4020001")
 

@@ -1,13 +1,13 @@
 """The largest capture a robot can make: 256 regions of 16 bands of a 16-bit sensor, every model
-read another way than its region's (so each carries its full record), with the grain and band
-correlation of every region and a camera section with a reference and brackets."""
+read another way than its region's (so each carries its full record), with the observed levels,
+grain and band correlation of every region and a camera section with a reference and brackets."""
 from __future__ import annotations
 
 import numpy as np
 
 from btf.capture_settings import CaptureSettings
 from btf.codec import Z_LADDER
-from btf.dependence import LAGS, Dependence
+from btf.dependence import RADIUS, Dependence, window_size
 from btf.record import FittedModel
 from hal.interfaces import ViewAngles
 from onboard.capture.pipeline import FittedView
@@ -27,7 +27,9 @@ def worst_view() -> FittedView:
             results[(label, band)] = FittedModel.solve(pct, Z_LADDER[(label + band) % len(Z_LADDER)], 100 + label,
                                                        shift=3 / 32, censored_low=0.01, censored_high=0.02)
     corr = tuple([0.1] * (BANDS * (BANDS - 1) // 2))
-    dependence = {label: Dependence(corr, tuple([0.5] * len(LAGS)), tuple([0.4] * len(LAGS))) for label in range(LABELS)}
+    acf = (tuple([0.5] * window_size(RADIUS)),)  # the robot's window, one row shared by the bands
+    dependence = {label: Dependence(corr, acf, RADIUS, tuple(range(BANDS)), tuple(LEVELS - 1 - b for b in range(BANDS)))
+                  for label in range(LABELS)}
     camera = CaptureSettings(exposure_us=8000.0, gain=2.0, white_balance_kelvin=5500.0, sensor_temperature_c=40.0,
                              reference=tuple([300.0] * BANDS), reference_clipped=0.1, brackets=(4000.0, 2000.0),
                              bracketed={label: 1 + label % 2 for label in range(0, LABELS, 3)})

@@ -1,4 +1,4 @@
-"""What an operator met on the robot side (issue 15, items 2-5, 7 and 9): torque that could not
+"""What an operator met on the robot side: torque that could not
 come back, errors after a clean boot, a settable key that could not be set, send-mask's seq,
 a state dir that cannot be used, and a robot that said nothing."""
 import re

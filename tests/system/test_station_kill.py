@@ -1,5 +1,5 @@
 """`kill -9` the station at random instants during a sweep, again and again, restarting it each
-time (issue 15's bar): the host ends with every capture of the sweep exactly once, and a `cmd`
+time: the host ends with every capture of the sweep exactly once, and a `cmd`
 client that lost its station mid-command gets one answer from the next.
 
 A kill lands anywhere: between storing a packet and acknowledging it (the robot sends it

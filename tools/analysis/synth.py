@@ -164,7 +164,10 @@ def _independent(m: LevelMap, rng: np.random.Generator, levels: int) -> Callable
 def _drawn_corr(fields: list[np.ndarray], tables: list[np.ndarray], inside: np.ndarray | None) -> np.ndarray:
     """The band correlation of a draw's pixels, on a lattice of about CHECKED of them."""
     h, w = fields[0].shape
-    step = max(1, int(np.sqrt(h * w / CHECKED)))
+    # about CHECKED of the region's own pixels: a lattice over the box would thin out a region
+    # that fills a third of it, and check every pixel of a small box that it fills
+    count = h * w if inside is None else int(np.count_nonzero(inside))
+    step = max(1, round(np.sqrt(count / CHECKED)))
     keep = None if inside is None else inside[::step, ::step]
     cols = []
     for f, table in zip(fields, tables):

@@ -21,7 +21,7 @@ COMMANDS: tuple[Subcommand, ...] = (
     Subcommand("mask", "segment an image into K clutter classes",
                "mask photo.png --method kmeans --k 4 --out mask.png"),
     Subcommand("synth", "synthesize an image from models inside a mask",
-               "synth --model models.json --mask mask.png --angle 60 --out synth.png"),
+               "synth --model models.json --mask mask.png --out synth.png"),
     Subcommand("compare", "correlation, histogram difference, chi2, KS and W1 between two images",
                "compare photo.png synth.png --mask mask.png"),
     Subcommand("pdfs", "the paper's Table 2: histogram error of Johnson against its peers per region",

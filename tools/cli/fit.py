@@ -102,7 +102,7 @@ def _fit(args: argparse.Namespace, store: Store | None) -> int:
     feats, pca, results = fitted.feats, fitted.pca, fitted.results
     doc = models_document(feats.space.value, feats.band_names, feats.levels, args.angle, results,
                           pca=None if pca is None else pca.to_record(), image=str(args.image),
-                          dependence=None if args.independent_only else fitted.dependence)
+                          dependence=fitted.dependence)  # levels only with --independent-only
     if choice is not None:
         doc["space_choice"] = {"automatic": True, "reason": choice.reason}
     if store is not None:

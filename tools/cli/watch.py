@@ -74,7 +74,7 @@ def summary(s: dict) -> str:
         if len(missing) > MISSING_SHOWN or sw.get("missing_left_out"):
             lines.append(f"  ... and {max(0, len(missing) - MISSING_SHOWN) + sw.get('missing_left_out', 0)} more")
     elif sw["id"] is not None:
-        lines.append(f"sweep {sw['id']}: pose {sw['next']} of {sw['poses']}, {len(sw['skipped'])} skipped"
+        lines.append(f"sweep {sw['id']}: {sw['next']} of {sw['poses']} poses done, {len(sw['skipped'])} skipped"
                      + ("" if sw["active"] else " (not running)"))
     c = s["captures"]
     lines.append(f"captures stored {c['stored']}, duplicates {c['duplicates']}, masks {c['masks']}"

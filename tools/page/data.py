@@ -115,8 +115,7 @@ def _histograms(store: Store, cap: Any, fake: Any) -> dict:
     if mask is None or not models:
         return {"missing": f"capture {cap.id} has no histograms"}
     real = Frames(fake)(cap) if cap.space == "rgb" else None
-    return {"png": histogram_png(real, mask, models, cap.band_names, f"{cap.scene} {cap.elevation:.0f}°",
-                                 cap.levels)}
+    return {"png": histogram_png(real, mask, models, cap.band_names, cap.levels)}
 
 
 def end_with_parent(parent: int | None = None) -> None:

@@ -115,6 +115,12 @@ def test_the_page_follows_a_sweep_commands_the_robot_and_shows_the_link_lost_and
         modes = page.evaluate("window.seen.mode")
         assert "failsafe" in modes and modes[-1].startswith("idle"), modes
         assert "for" in page.locator("#robot-table").text_content()  # the failsafe's duration, as reported
+        # the chosen capture's histograms arrive after its pictures, and are shown at the size drawn
+        page.wait_for_function("() => [...document.querySelectorAll('#detail img.hist')].some("
+                               "(i) => i.complete && i.naturalWidth > 0)", timeout=60_000)
+        shown, drawn, room = page.evaluate("() => { const i = document.querySelector('#detail img.hist'); "
+                                           "return [i.width, i.naturalWidth, document.getElementById('detail').clientWidth]; }")
+        assert shown >= min(drawn, room - 40), (shown, drawn, room)  # not squeezed below what fits
         page.screenshot(path=str(tmp_path / "page.png"), full_page=True)
     if os.environ.get("BTF_PAGE_SCREENSHOT"):  # the README's picture: docs/page.png
         shutil.copy(tmp_path / "page.png", os.environ["BTF_PAGE_SCREENSHOT"])

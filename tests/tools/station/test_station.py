@@ -1,4 +1,4 @@
-"""The station owns the radio (issue 15's bars, on a real pty cable): a robot, a station and
+"""The station owns the radio (on a real pty cable): a robot, a station and
 three concurrent `cmd` clients through a 60-pose sweep; TORQUE_OFF -> TORQUE_ON -> SWEEP; and
 what an operator meets around them (the socket, a second station, a wrong key)."""
 import json
@@ -109,7 +109,7 @@ def test_torque_off_torque_on_sweep_completes_through_the_station(rig):
     assert code == 1 and nack["reason"] == "TORQUE_OFF"
     code, (ack,), _ = rig.cmd("torque-on")
     assert code == 0 and ack["extras"]["torque"] is True
-    code, (ack,), _ = rig.cmd("reboot-servo", "--servo-id", "1")  # issue 15, item 6: from the CLI
+    code, (ack,), _ = rig.cmd("reboot-servo", "--servo-id", "1")  # from the CLI
     assert code == 0 and ack["extras"]["rebooted"] == 1
     code, (ack,), _ = rig.cmd("sweep", "--elevations", "80,60,40")
     assert code == 0 and ack["extras"]["poses"] == 3
@@ -134,7 +134,7 @@ def test_the_control_socket_is_private_and_one_station_holds_a_database_and_a_po
 
 
 def test_a_wrong_key_is_said_in_one_line_and_the_station_goes_on_listening(rig, tmp_path):
-    """Issue 15, item 9: listen with the wrong key exited 0 printing `rejected {'tag': 20}`. The
+    """Listening with the wrong key once exited 0 printing `rejected {'tag': 20}`. The
     person is told in one line, on stderr, in the log, in `watch` and on the page; frames anyone
     on the radio can send never end the station, and listen ends only when told to."""
     from radio.keys import write_key
@@ -201,7 +201,7 @@ def restarted(log: list[dict]) -> int:
 
 
 def test_cmd_without_a_station_stores_what_arrives_and_acknowledges_nothing_it_drops(rig):
-    """Issue 15, item 1: `cmd capture` used to ACK the robot's captures and discard them."""
+    """`cmd capture` once used to ACK the robot's captures and discard them."""
     autonomous = {"sweep": {"start": 90, "stop": 60, "step": 10}}
     (rig.where / "robot.toml").write_text(robot_toml(*ROBOT, autonomous))
     robot = rig.robot("--exit-when-idle")
