@@ -26,7 +26,7 @@ import numpy as np
 from radio.packets.base import iso_time
 from tools.analysis.radiometry import adjusted, describe
 from tools.page.btf_panel import panel
-from tools.report.capture_views import Frames, capture_mask, histogram_png, png, views
+from tools.report.capture_views import Frames, capture_mask, histogram_png, png, shown, views
 from tools.report.look import azimuth_shown, capture_section
 from tools.store.database import Store
 
@@ -114,7 +114,8 @@ def _histograms(store: Store, cap: Any, fake: Any) -> dict:
     mask = capture_mask(store, cap)
     if mask is None or not models:
         return {"missing": f"capture {cap.id} has no histograms"}
-    real = Frames(fake)(cap) if cap.space == "rgb" else None
+    frame = Frames(fake)(cap)  # measured bars wherever the report draws them (rgb, and gray)
+    real = frame if frame is not None and shown(cap, frame) else None
     return {"png": histogram_png(real, mask, models, cap.band_names, cap.levels)}
 
 

@@ -1,8 +1,11 @@
 """What the page draws, without a browser: the sweep's grid from the robot's own STATUS answer,
 advanced by captures between reports; the failsafe assumed while the link is silent; the robot's
 disk and rejections; goodput; the latest capture per pose; azimuths in [0, 360); what watch says
-of a robot not heard yet."""
+of a robot not heard yet; a one-band photograph's histograms with its measured levels."""
 import dataclasses
+
+import numpy as np
+from skimage import data as skdata
 
 from hal.interfaces import ViewAngles
 from onboard.link.status import sweep_report
@@ -10,7 +13,9 @@ from onboard.sweep.plan import SkippedPose, SweepPlan, SweepProgress
 from radio import packets as pk
 from tests.support.packets import models_body
 from tools.cli.watch import summary
-from tools.page.data import CaptureIndex
+from tools.data.images import read_image, write_image, write_mask
+from tools.page.data import CaptureIndex, render
+from tools.report.capture_views import capture_mask, histogram_png
 from tools.report.look import capture_title
 from tools.station.receiver import Item, ItemKind, Receiver
 from tools.station.snapshot import StationSnapshot
@@ -213,3 +218,23 @@ def test_a_pose_measured_again_after_the_plan_is_done_and_the_sweeps_missing_pos
     lines = summary(snap.to_json(12.0)).splitlines()
     assert "sweep 4 done: 2 measured, 1 missing" in lines
     assert "  missing 60.0°/0.0° after 3 tries: settle failed: servos [1, 2] still moving after 10.0 s" in lines
+
+
+def test_a_gray_photographs_histograms_carry_its_measured_levels(host, tmp_path):
+    """An ingested one-band photograph: the page draws its measured histogram under the curves,
+    as the report does (once only rgb captures had one)."""
+    folder, masks = tmp_path / "photos", tmp_path / "masks"
+    folder.mkdir(), masks.mkdir()
+    image = skdata.text()
+    write_image(folder / "text.png", image)
+    write_mask(masks / "text.png", (image > 100).astype(np.uint8))
+    db = tmp_path / "g.db"
+    assert host("ingest", folder, "--layout", "folder", "--mask", masks, "--db", db, "--workers", 0, "--quiet")[0] == 0
+    with Store.open(db) as store:
+        (cap,) = store.captures()
+        mask = capture_mask(store, cap)
+        models = {k: m.model for k, m in store.models(cap.id).items()}
+    assert cap.space == "gray" and cap.band_names == ("Y",)
+    drawn = render(str(db), cap.id, None, "histograms", 0)["png"]
+    assert drawn == histogram_png(read_image(folder / "text.png"), mask, models, cap.band_names, cap.levels)
+    assert drawn != histogram_png(None, mask, models, cap.band_names, cap.levels)
