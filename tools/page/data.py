@@ -65,7 +65,9 @@ class CaptureIndex:
         changed = {}
         for c in sorted(self.store.captures_after(self.last_id), key=lambda c: c.id):
             self.last_id, self.count = c.id, self.count + 1
-            changed[pose_key(c)] = self.latest[pose_key(c)] = card(c)
+            shown = card(c)
+            shown["space_auto"] = self.store.space_choice(c.id)  # None: the space was configured
+            changed[pose_key(c)] = self.latest[pose_key(c)] = shown
         return list(changed.values())
 
     def close(self) -> None:
