@@ -85,7 +85,7 @@ class SweepConfig:
 
 @dataclass(frozen=True, slots=True)
 class FeatureConfig:
-    space: str = "rgb"  # rgb | hsv | gray | pca | raw
+    space: str = "rgb"  # rgb | hsv | gray | pca | raw | auto (resolved per scene: onboard.capture.space_auto)
     bands: tuple[str, ...] = ()  # empty: every band of the space
     bins_16bit: int = 4096  # histogram bins over 0..65535 for 16-bit sensors (memory: labels x bands x bins)
     # also send grain and band correlation per region (btf.fit.dependence): on, it costs no more
@@ -196,7 +196,7 @@ def keys() -> dict[str, Any]:
 
 
 CHOICES = {"hal.body": ("", "fake", "emulated", "real"), "hal.scene": ("black", "white", "mixed", "field"),
-           "features.space": ("rgb", "hsv", "gray", "pca", "raw"), "segment.method": ("isodata", "mask", "scene"),
+           "features.space": ("rgb", "hsv", "gray", "pca", "raw", "auto"), "segment.method": ("isodata", "mask", "scene"),
            "link.clock": ("rtc", "none")}
 # The numbers a key may hold, both ends included (each item of a list key): what the robot, its
 # packets and its devices can use. A value outside is refused as the file is read.
@@ -365,6 +365,9 @@ def check(cfg: Config) -> None:
     if sg.method == "scene" and cfg.hal.camera.startswith("replay:"):
         raise ConfigError("segment.method = 'scene' needs the fake scene camera; a replay camera has no "
                           "ground truth (use isodata or mask)")
+    if cfg.features.space == "auto" and cfg.features.bands:
+        raise ConfigError("features.bands names bands of one space; with features.space = 'auto' leave it empty "
+                          "(every band of the space chosen)")
     check_camera(cfg)
 
 

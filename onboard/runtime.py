@@ -18,7 +18,7 @@ from typing import Callable
 from hal.controls import describe
 from hal.devices import Hal
 from hal.interfaces import DeviceGone
-from onboard.capture.filing import PCA_KEY, Captures, read_pca
+from onboard.capture.filing import PCA_KEY, SPACE_KEY, Captures, read_pca, read_space
 from onboard.capture.pipeline import Pipeline, PoseSkipped
 from onboard.capture.segmentation import Segmentation
 from onboard.config import Config
@@ -91,6 +91,8 @@ class Runtime:
         self.pipeline = Pipeline(lambda: self.state.cfg, hal, segmenter, pump=self._pump, sleep=sleep,
                                  resend_mask=segmenter.force_send)
         self.pipeline.pca = read_pca(self.outbox.state(PCA_KEY), cfg.state_dir / "pca.json")
+        if cfg.features.space == "auto":
+            self.pipeline.keep_space(read_space(self.outbox.state(SPACE_KEY)))
         self.link = LinkService(transport, self.outbox, self.state, on_ack=self._room_freed)
         self.captures = Captures(self.state, self.outbox, wall)
         self.failsafe = Failsafe(self.state, hal.arm, wall, lambda text, report: self.status.send(text, report))

@@ -23,6 +23,7 @@ from radio import packets as pk
 
 log = logging.getLogger("btf.robot")
 PCA_KEY = "pca"  # the scene's basis, in the outbox state with the packet that carries it
+SPACE_KEY = "space_auto"  # the space `features.space = "auto"` chose, kept the same way
 
 
 class Captures:
@@ -45,6 +46,8 @@ class Captures:
         state = self.seq.entry(seq)
         if cap.pca is not None:  # the scene's basis survives restarts with the packet carrying it
             state[PCA_KEY] = json.dumps(cap.pca.to_record())
+        if cap.space_choice is not None:  # and the scene's automatic space, so a restart keeps it
+            state[SPACE_KEY] = json.dumps({"space": cap.space, "reason": cap.space_choice})
         t0 = time.perf_counter()
         packets = []
         if cap.mask_changed:
@@ -53,7 +56,8 @@ class Captures:
         if cap.unchanged and ref is not None:
             packets.append(wire.unchanged_body(cfg.robot_id, seq, ref, self.wall(), cap))
         else:
-            body, left_out = wire.fitting_models_body(cfg.robot_id, seq, self.wall(), cfg.features.space, cap)
+            body, left_out = wire.fitting_models_body(cfg.robot_id, seq, self.wall(), cap.space or cfg.features.space,
+                                                     cap)
             packets.append(body)
             if left_out:
                 self._left_out(seq, cap, left_out)
@@ -97,4 +101,15 @@ def read_pca(text: str | None, legacy: Path) -> Any:
             text = legacy.read_text()  # where the basis lived before it moved into the outbox
         return None if text is None else PcaBasis.from_record(json.loads(text))
     except (OSError, ValueError, TypeError, AttributeError, KeyError):
+        return None
+
+
+def read_space(text: str | None) -> tuple[str, str] | None:
+    """(space, reason) the scene chose automatically before a restart (None: choose again)."""
+    try:
+        record = json.loads(text) if text is not None else None
+        if record is None or record["space"] not in ("rgb", "hsv", "gray", "pca"):
+            return None
+        return str(record["space"]), str(record["reason"])
+    except (ValueError, TypeError, KeyError):
         return None

@@ -33,7 +33,7 @@ from btf.fit.fitter import FrameFitter
 from btf.record import FittedModel
 from hal.devices import Hal
 from hal.interfaces import CameraSettings, DeviceGone, DeviceSpent, HalError, ViewAngles, view_from_orientation
-from onboard.capture import skip
+from onboard.capture import skip, space_auto
 from onboard.capture.camera_lock import CameraLock, reference_level
 from onboard.config import Config
 from radio.packets.schema import Recent
@@ -106,10 +106,15 @@ class FittedView:
     camera: CaptureSettings | None = None  # what it was taken with (None: a frame from elsewhere)
     small: np.ndarray | None = field(default=None, repr=False)  # `labels` as MASK pools them, when known
     timing: PoseTiming = PoseTiming()  # its compute by step (encode: filled where it is encoded)
+    space: str = ""  # the feature space fitted ("": the configured one)
+    space_choice: str | None = None  # why, on the first capture of a scene that chose it automatically
 
 
-def feature_spec(cfg: Config) -> FeatureSpec:
-    """Only the bands the config asks for are ever computed."""
+def feature_spec(cfg: Config) -> FeatureSpec | None:
+    """Only the bands the config asks for are ever computed; None for `auto` (resolved from the
+    scene's first frame)."""
+    if cfg.features.space == "auto":
+        return None
     return FeatureSpec(FeatureSpace(cfg.features.space), cfg.features.bands or None)
 
 
@@ -139,10 +144,17 @@ class Pipeline:
         self.spec = feature_spec(cfg)
         self.pca: PcaBasis | None = None
         self.pca_pending = False  # fitted, not yet attached to a capture
+        self.space_choice: str | None = None  # features.space auto: why the scene's space was chosen
+        self.choice_pending = False  # resolved, not yet attached to a capture
         self._fitter: FrameFitter | None = None
         self._previous: dict[tuple[int, int], dict[tuple[int, int], FittedModel]] = {}
         self.faults: Recent = Recent(32)  # every retried fault, for STATUS
         self.lock = CameraLock(hal.camera, cfg.camera) if hal is not None else None
+
+    def keep_space(self, chosen: tuple[str, str] | None) -> None:
+        """The scene's automatic space, as chosen before a restart (None: choose from the next frame)."""
+        if chosen is not None:
+            self.spec, self.space_choice = FeatureSpec(FeatureSpace(chosen[0])), chosen[1]
 
     @property
     def cfg(self) -> Config:
@@ -298,6 +310,9 @@ class Pipeline:
         clock = time.perf_counter
         t0 = clock()
         try:
+            if self.spec is None:  # features.space auto: once per scene, from its first frame
+                self.spec, choice = space_auto.resolve(frame, cfg.segment.k)
+                self.space_choice, self.choice_pending = choice.reason[:space_auto.MAX_REASON], True
             if self.spec.space is FeatureSpace.PCA and self.pca is None:
                 self.pca = PcaBasis.fit(frame)  # once per scene; sent with the scene
                 self.pca_pending = True
@@ -328,6 +343,8 @@ class Pipeline:
             remember(self._previous, key, results)
         pca = self.pca if self.pca_pending else None
         self.pca_pending = False
+        chosen = self.space_choice if self.choice_pending else None
+        self.choice_pending = False
         t3 = clock()
         dep = None
         if cfg.features.dependence and results and not same:  # a bounded second pass
@@ -337,7 +354,8 @@ class Pipeline:
             dep = {lab: Dependence.observed(*seen[lab]) for lab in {lab for lab, _ in results} if lab in seen}
         timing = PoseTiming(t1 - t0, t2 - t1, t3 - t2, clock() - t3)
         return FittedView(commanded, measured, feats.band_names, feats.levels, results, dropped,
-                          labels, changed, same, stride, pca, dep, camera, seg.small, timing)
+                          labels, changed, same, stride, pca, dep, camera, seg.small, timing,
+                          self.spec.space.value, chosen)
 
     def bracket(self, results: dict[tuple[int, int], FittedModel], camera: CaptureSettings, labels: np.ndarray,
                 stride: int, levels: int) -> tuple[dict[tuple[int, int], FittedModel], CaptureSettings]:
@@ -377,6 +395,8 @@ class Pipeline:
         """`cap` could not be queued: the next capture carries what it would have sent."""
         if cap.pca is not None:
             self.pca_pending = True
+        if cap.space_choice is not None:
+            self.choice_pending = True
         if cap.mask_changed:
             self.resend_mask()
         self._previous.pop(skip.pose_key(cap.commanded), None)  # next one sends full MODELS

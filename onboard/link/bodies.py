@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from btf.fit import space_choice
 from hal.interfaces import ViewAngles
 from onboard.capture.pipeline import FittedView
 from radio import packets as pk
@@ -61,6 +62,8 @@ def models_body(robot_id: int, seq: int, now: float, space: str, cap: FittedView
     """MODELS for a capture, with its dependence when measured; the first capture of a PCA
     scene carries the basis in its extras."""
     extras = dict(cap.pca.to_extras()) if cap.pca is not None else {}
+    if cap.space_choice is not None:  # the scene's space was chosen automatically: say why, once
+        extras[space_choice.EXTRA_KEY] = cap.space_choice
     body = pk.encode_models(cap.results, robot_id=robot_id, seq=seq, time=now,
                             commanded=_pose(cap.commanded), measured=_pose(cap.measured),
                             feature_space=space, bands=cap.band_names, levels=cap.levels,

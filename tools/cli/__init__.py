@@ -26,6 +26,8 @@ COMMANDS: tuple[Subcommand, ...] = (
                "compare photo.png synth.png --mask mask.png"),
     Subcommand("pdfs", "the paper's Table 2: histogram error of Johnson against its peers per region",
                "pdfs photo.png --mask mask.png"),
+    Subcommand("spaces", "the paper's Table 1 on any photograph: every mask x feature space judged, and the choice",
+               "spaces photo.png --masks isodata5,isodata8 --spaces rgb,hsv,pca --picture spaces.png"),
     Subcommand("ingest", "fit every image of a dataset folder into a database (resumable)",
                "ingest DATASET_DIR --layout folder --db dataset.db"),
     Subcommand("resolve", "facet-based or statistical modelling for a grain size",

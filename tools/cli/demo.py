@@ -11,7 +11,8 @@ from tools.cli.options import CliError, writable_place
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="demo-out",
-                   help="output directory (created if missing; its scene.db, work/ and report/ are rebuilt)")
+                   help="output directory (created if missing; its scene.db, work/, report/ and the field scene's "
+                        "field.png and field-mask.png are rebuilt)")
     p.add_argument("--force", action="store_true", help="use an --out directory that holds other files too")
     p.add_argument("--size", type=bounded(int, 16, 1024, "pixels"), nargs=2, default=(120, 160), metavar=("H", "W"),
                    help="camera frame height and width, each 16..1024 (default 120 160)")
@@ -42,7 +43,7 @@ def _summary(res) -> list[str]:
 
 
 # What a demo leaves in its --out directory (it deletes and rebuilds these).
-DEMO_ENTRIES = {"scene.db", "scene.db-wal", "scene.db-shm", "work", "report"}
+DEMO_ENTRIES = {"scene.db", "scene.db-wal", "scene.db-shm", "work", "report", "field.png", "field-mask.png"}
 
 
 def _check_out(out: Path, force: bool) -> None:

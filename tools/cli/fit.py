@@ -5,6 +5,8 @@ import argparse
 import json
 import time
 
+import numpy as np
+
 from btf.dependence import window
 from onboard.cli.runner import RetryLater
 from tools.cli.options import FEATURE_SPACES, CliError, elevation, label
@@ -17,8 +19,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = "Fit Johnson models per (label, band); without --mask the whole image is label 0."
     p.add_argument("image", help="the photograph to fit (8- or 16-bit PNG, TIFF, JPEG)")
     p.add_argument("--mask", help="label mask PNG, same size as the image")
-    p.add_argument("--space", choices=FEATURE_SPACES,
-                   help="feature space (default: the image's own: gray for a one-band image, rgb for colour)")
+    p.add_argument("--space", choices=FEATURE_SPACES + ("auto",),
+                   help="feature space (default: the image's own: gray for a one-band image, rgb for colour); auto "
+                        "chooses it as btf-host spaces does (docs/spaces.md)")
     p.add_argument("--angle", type=float, help="view elevation in degrees (needed with --db)")
     p.add_argument("--db", help="store the models as a capture in this database, under --robot and --scene")
     p.add_argument("--robot", type=label, default=ROBOT_ID, metavar="NAME",
@@ -41,7 +44,7 @@ def _open(db: str) -> Store:
         raise CliError(str(exc)) from None
 
 
-def _store(store: Store, args: argparse.Namespace, fitted) -> int:
+def _store(store: Store, args: argparse.Namespace, fitted, choice=None) -> int:
     """Stores the fit as the next capture of --robot under --scene; its sequence number."""
     try:
         seq = store.next_sequence(args.robot)
@@ -52,6 +55,8 @@ def _store(store: Store, args: argparse.Namespace, fitted) -> int:
                            "not stored (run fit again)")
         if args.mask:
             store.add_mask(f"{args.robot}/{seq}", fitted.labels, args.robot)
+        if choice is not None:
+            store.add_space_choice(args.robot, seq, choice.reason)
     except CorruptDatabase as exc:
         raise CliError(str(exc)) from None
     return seq
@@ -72,21 +77,36 @@ def run(args: argparse.Namespace) -> int:
             store.close()
 
 
+def _auto(args: argparse.Namespace):
+    """The space `--space auto` fits in (btf.fit.space_choice over the photograph's spaces)."""
+    # heavy (OpenCV, scipy): loaded to run, not for --help
+    from tools.analysis.spaces import auto_space
+    from tools.data.images import read_image, read_mask
+
+    image = read_image(args.image)
+    labels = read_mask(args.mask, image.shape[:2]) if args.mask else np.zeros(image.shape[:2], np.uint8)
+    return auto_space(image, labels)
+
+
 def _fit(args: argparse.Namespace, store: Store | None) -> int:
     # heavy (OpenCV, scipy): loaded to run, not for --help
     from tools.analysis.models_doc import models_document
     from tools.data.images import fit_image
 
     try:
-        fitted = fit_image(args.image, args.mask, args.space, dependence=not args.independent_only)
+        choice = _auto(args) if args.space == "auto" else None
+        space = choice.space if choice is not None else args.space
+        fitted = fit_image(args.image, args.mask, space, dependence=not args.independent_only)
     except ValueError as exc:  # ImageError too
         raise CliError(str(exc)) from None
     feats, pca, results = fitted.feats, fitted.pca, fitted.results
     doc = models_document(feats.space.value, feats.band_names, feats.levels, args.angle, results,
                           pca=None if pca is None else pca.to_record(), image=str(args.image),
                           dependence=fitted.dependence)  # levels only with --independent-only
+    if choice is not None:
+        doc["space_choice"] = {"automatic": True, "reason": choice.reason}
     if store is not None:
-        seq = _store(store, args, fitted)
+        seq = _store(store, args, fitted, choice)
         doc["stored"] = {"db": str(args.db), "robot": args.robot, "scene": args.scene or "", "sequence": seq}
     if args.json:
         print(json.dumps(doc, indent=1))
@@ -97,6 +117,8 @@ def _fit(args: argparse.Namespace, store: Store | None) -> int:
                   f"gamma {row['gamma']:9.4f} delta {row['delta']:8.4f} xi {row['xi']:9.3f} "
                   f"lam {row['lam']:9.3f}  n {row['count']}{seen}")
         _print_dependence(doc["dependence"], feats.band_names)
+        if choice is not None:
+            print(f"space chosen automatically: {choice.reason}")
         if store is not None:
             scene = f" (scene {args.scene})" if args.scene else ""
             print(f"stored as capture {args.robot}/{seq}{scene} in {args.db}")

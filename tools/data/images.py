@@ -216,6 +216,7 @@ class FittedImage:
     labels: np.ndarray  # the mask's labels, or all 0 without a mask
     results: dict
     dependence: dict  # {label: btf.dependence.Dependence}: observed levels, and grain when measured
+    counts: np.ndarray | None = None  # the fitter's histograms, labels x bands x levels
 
 
 def fit_image(image_path: str | Path, mask_path: str | Path | None, space: str | None = None,
@@ -227,6 +228,12 @@ def fit_image(image_path: str | Path, mask_path: str | Path | None, space: str |
     labels = read_mask(mask_path, image.shape[:2]) if mask_path else np.zeros(image.shape[:2], np.uint8)
     feats, pca = feature_bands(image, space)
     del image
+    return fit_bands(feats, pca, labels, dependence)
+
+
+def fit_bands(feats: "FeatureFrame", pca: "PcaBasis | None", labels: np.ndarray,
+              dependence: bool = True) -> FittedImage:
+    """`fit_image` on feature bands in memory."""
     fitter = FrameFitter(int(labels.max()) + 1, feats.data.shape[2], bins=feats.levels)
     fitter.add(feats.data, labels)
     results = fitter.fit()
@@ -237,7 +244,7 @@ def fit_image(image_path: str | Path, mask_path: str | Path | None, space: str |
                        max_anchors=HOST_ANCHORS, levels_seen=seen)
     else:
         deps = {lab: Dependence.observed(*seen[lab]) for lab in fitted if lab in seen}
-    return FittedImage(feats, pca, labels, results, deps)
+    return FittedImage(feats, pca, labels, results, deps, fitter.counts)
 
 
 def to_rgb(bands: np.ndarray, space: str, pca=None) -> np.ndarray:

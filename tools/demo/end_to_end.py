@@ -41,7 +41,7 @@ from tools.analysis.metrics import compare_bands, correlation, histogram
 from tools.analysis.pdfs import table as pdf_table
 from tools.analysis.synth import synthesize
 from tools.cli.mask import segment
-from tools.data.images import feature_bands
+from tools.data.images import feature_bands, write_image, write_mask
 from tools.report.document import write_report
 from tools.station.receiver import HOST_NODE, LINK_ID, ROBOT_NODE, HostSession, ItemKind, Receiver
 from tools.store.database import Store
@@ -419,6 +419,9 @@ def run_demo(out: Path, cfg: DemoConfig = DemoConfig(), progress: bool = True) -
         res.pdfs = {s: pdf_totals(s, cfg.field_angle, cfg.size) for s in (*PLATES, "field")}
         steps.update()
         res.table1 = table1(cfg.field_angle, cfg.size, rng)
+        field = capture("field", cfg.field_angle, cfg.size)  # for `btf-host spaces` (the README's walk)
+        write_image(out / "field.png", field.image)
+        write_mask(out / "field-mask.png", field.mask)
         steps.update()
         steps.close()
 

@@ -65,7 +65,9 @@ class CaptureIndex:
         changed = {}
         for c in sorted(self.store.captures_after(self.last_id), key=lambda c: c.id):
             self.last_id, self.count = c.id, self.count + 1
-            changed[pose_key(c)] = self.latest[pose_key(c)] = card(c)
+            shown = card(c)
+            shown["space_auto"] = self.store.space_choice(c.id)  # None: the space was configured
+            changed[pose_key(c)] = self.latest[pose_key(c)] = shown
         return list(changed.values())
 
     def close(self) -> None:
@@ -151,7 +153,7 @@ def _warm() -> None:
     first figure costs a second)."""
     with warnings.catch_warnings():  # an empty plot's "no artists for the legend"
         warnings.simplefilter("ignore")
-        histogram_png(None, np.zeros((2, 2), np.uint8), {}, ("Y",), "")
+        histogram_png(None, np.zeros((2, 2), np.uint8), {}, ("Y",))
 
 
 def btf_query(query: Mapping[str, str]) -> dict:

@@ -43,6 +43,7 @@ class CaptureViews:
     no_mask: bool = False  # no label map: nothing synthesized
     problem: str = ""  # why nothing was synthesized (no mask, a label of the mask without models)
     whole: bool = False  # no label map, models of region 0 alone: the whole image is region 0
+    space_choice: str | None = None  # why the feature space was chosen automatically (None: configured)
 
 
 def capture_mask(store: Store, cap: StoredCapture) -> np.ndarray | None:
@@ -69,7 +70,7 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
     """Everything drawn of one capture (images as 8-bit arrays, 16-bit ones stretched over the
     levels they occupy, one span for both syntheses)."""
     fitted = store.models(cap.id)
-    out = CaptureViews(cap, fitted)
+    out = CaptureViews(cap, fitted, space_choice=store.space_choice(cap.id))
     real = measured(cap) if measured is not None else None
     if real is not None and shown(cap, real):
         out.images["measured"] = stretched_8bit(real)

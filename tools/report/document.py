@@ -45,11 +45,13 @@ table.sources td:last-child,table.sources th:last-child{text-align:left}
 FILES = {"measured": "measured", "independent": "synthetic", "correlated": "correlated", "histograms": "hist"}
 
 
-def _captures_html(caps: list, fitted: dict) -> str:
-    """The captures and models tables, each folded under a line saying what it holds."""
+def _captures_html(caps: list, fitted: dict, automatic: set[int] = frozenset()) -> str:
+    """The captures and models tables, each folded under a line saying what it holds; a space
+    chosen automatically (`automatic`: those captures' ids) is marked "auto"."""
     els = sorted(c.elevation for c in caps)
     rows = [[c.scene, c.robot, c.sequence, "" if c.commanded[0] is None else f"{c.commanded[0]:.1f}",
-             f"{c.measured[0]:.2f}", c.space, len(fitted[c.id]), describe_camera(c.camera)] for c in caps]
+             f"{c.measured[0]:.2f}", c.space + (" (auto)" if c.id in automatic else ""), len(fitted[c.id]),
+             describe_camera(c.camera)] for c in caps]
     parts = [f"<section id=captures><h2>Captures and models</h2><details><summary>Captures per angle: "
              f"{len(caps)} capture(s), view elevations {els[0]:.1f}° to {els[-1]:.1f}°</summary>"
              + table(["scene", "robot", "seq", "commanded", "measured", "space", "models", "camera"], rows)
@@ -139,7 +141,7 @@ def write_report(store: Store, out: Path, measured: Measured | None = None, demo
         parts.append(f"<section id=btf><h2>BTF: the models against angle</h2><p>{INTRO}</p>"
                      + "".join(b.html for b in btfs) + "</section>")
     if caps:
-        parts.append(_captures_html(caps, fitted))
+        parts.append(_captures_html(caps, fitted, {c.id for c in caps if store.space_choice(c.id)}))
     with tqdm(total=len(caps), desc="report", unit="capture", disable=not progress) as bar:
         parts.append(_images_html(store, out, groups, measured, rng, bar))
     parts.append("</body>")

@@ -147,6 +147,8 @@ def capture_section(views: Any, src: Callable[[str], str], models: bool = True) 
     source = capture_source(cap)
     if views.whole:
         source += "; no label map: the whole image is region 0"
+    if getattr(views, "space_choice", None):
+        source += f"; feature space chosen automatically, {views.space_choice}"
     if not models and cap.camera is not None:  # no camera table: the settings in the source line
         source += f"; camera {describe_camera(cap.camera)}"
     parts = [f"<div class=capture data-capture='{cap.id}'><h3>{html.escape(capture_title(cap))}</h3>",

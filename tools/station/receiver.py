@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from btf.fit import space_choice
 from btf.fit.features import PcaBasis
 from radio import FrameError
 from radio import packets as pk
@@ -239,6 +240,10 @@ class Receiver:
                                      incarnation=incarnation)
         if p.camera is not None and p.camera.unlocked:
             notes.append("taken with the camera NOT locked")
+        chosen = p.extras.get(space_choice.EXTRA_KEY)
+        if new and isinstance(chosen, str) and chosen:
+            self.store.add_space_choice(str(p.robot_id), p.seq, chosen, incarnation)
+            notes.append(f"feature space {p.feature_space} chosen automatically")
         extra = "".join(f"; {n}" for n in notes)
         return Item(ItemKind.CAPTURE, p.robot_id, p.seq, new,
                     f"capture at {p.measured[0]:.1f}° ({len(p.labels)} regions, {len(p.bands)} bands"

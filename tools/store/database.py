@@ -301,6 +301,25 @@ class Store:
         except ValueError as exc:  # ImageError too
             raise CorruptDatabase(f"database {self.path}: {what}: {exc}; left untouched") from None
 
+    def add_space_choice(self, robot: str, sequence: int, reason: str, incarnation: str = "") -> None:
+        """Records that capture (robot, incarnation, sequence) resolved its feature space
+        automatically, and why."""
+        self._conn.execute("INSERT OR REPLACE INTO space_choices (capture, reason) SELECT id, ? FROM captures"
+                           " WHERE robot = ? AND incarnation = ? AND sequence = ?",
+                           (reason, robot, incarnation, int(sequence)))
+
+    def space_choice(self, capture: int) -> str | None:
+        """Why a capture's feature space was chosen automatically: the choice it recorded, or for
+        a robot's capture (one with a commanded pose) the one an earlier capture of its scene
+        recorded (same incarnation and space); None when the space was configured."""
+        row = self._conn.execute(
+            "SELECT s.reason FROM space_choices s JOIN captures c ON c.id = s.capture"
+            " JOIN captures me ON me.id = ? WHERE c.id = me.id OR (me.cmd_elevation IS NOT NULL"
+            " AND c.robot = me.robot AND c.incarnation = me.incarnation AND c.scene = me.scene"
+            " AND c.space = me.space AND c.sequence <= me.sequence) ORDER BY c.sequence DESC LIMIT 1",
+            (capture,)).fetchone()
+        return None if row is None else str(row[0])
+
     def capture_by_seq(self, robot: str, sequence: int, incarnation: str = "") -> StoredCapture | None:
         """The capture (robot, incarnation, sequence), or None when it is not stored."""
         sql, args = self._capture_filter(robot, None, None)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import sqlite3
 from pathlib import Path
 
-SCHEMA_VERSION = 11
+SCHEMA_VERSION = 12
 # PRAGMA application_id: marks the file as ours ("BTFS").
 APPLICATION_ID = 0x42544653
 _SQLITE_MAGIC = b"SQLite format 3\x00"
@@ -88,6 +88,14 @@ CREATE TABLE IF NOT EXISTS rejected_packets (
 """
 _BEFORE_INCARNATIONS = ("id, robot, sequence, time, cmd_elevation, cmd_azimuth, elevation, azimuth, space, bands,"
                         " scene, light_elevation, light_azimuth, source, levels")
+# A feature space chosen automatically (btf.fit.space_choice): the capture it was resolved at,
+# and the criterion's reason; the robot's later captures of the scene keep it.
+_SPACE_CHOICES = """
+CREATE TABLE IF NOT EXISTS space_choices (
+    capture INTEGER PRIMARY KEY REFERENCES captures(id) ON DELETE CASCADE,
+    reason TEXT NOT NULL
+);
+"""
 _SCHEMA = _CAPTURES.format(name="captures") + """
 CREATE INDEX captures_by_source ON captures (robot, source);
 CREATE TABLE models (
@@ -113,7 +121,7 @@ CREATE TABLE masks (
     data BLOB NOT NULL,
     UNIQUE (robot, key)
 );
-""" + _DEPENDENCE + _PCA + _CAMERA + _CAMERA_SOURCE + _REJECTED
+""" + _DEPENDENCE + _PCA + _CAMERA + _CAMERA_SOURCE + _REJECTED + _SPACE_CHOICES
 _TABLES = {"captures", "models", "masks"}
 # Upgrades from the keyed version to the next; each keeps every existing row.
 _MIGRATIONS: dict[int, str] = {
@@ -149,6 +157,8 @@ _MIGRATIONS: dict[int, str] = {
     10: f"CREATE TABLE dependence_new ({_DEPENDENCE_COLUMNS});"
        "INSERT INTO dependence_new (capture, label, corr, dx, dy) SELECT capture, label, corr, dx, dy FROM dependence;"
        "DROP TABLE dependence; ALTER TABLE dependence_new RENAME TO dependence;",
+    # the feature spaces chosen automatically
+    11: _SPACE_CHOICES,
 }
 
 

@@ -5,6 +5,7 @@ from pathlib import Path
 from benchmarks.hostile_clients import until
 from tests.support.browser import page_address
 from tests.support.station_rig import Rig, kill9
+from tools.page import data
 
 
 def children(pid: int) -> list[int]:
@@ -29,3 +30,13 @@ def test_the_pages_workers_end_with_a_station_killed_before_they_were_ready(tmp_
         assert workers and until(lambda: not any(os.path.exists(f"/proc/{p}") for p in workers), 60), workers
     finally:
         rig.close()
+
+
+def test_a_drawing_worker_warms_up_by_drawing_one_plot(monkeypatch):
+    """The warm-up draws a plot as a request would; a failure there would be swallowed by the pool
+    and the first operator to click a capture would wait for matplotlib instead."""
+    drawn = []
+    real = data.histogram_png
+    monkeypatch.setattr(data, "histogram_png", lambda *a, **k: drawn.append(real(*a, **k)))
+    data._warm()
+    assert drawn and drawn[0].startswith(b"\x89PNG")

@@ -195,3 +195,21 @@ def test_a_database_from_before_rejected_packets_gains_the_table(tmp_path):
         assert len(s.captures()) == 1 and s.rejected() == []
         s.add_rejected(1.0, 1, "", 7, "refused", b"x")
         assert [r.msg_id for r in s.rejected()] == [7]
+
+
+def test_a_database_from_before_space_choices_gains_the_table_and_keeps_its_captures(tmp_path):
+    db = tmp_path / "old.db"
+    with Store.open(db) as s:
+        s.add_capture("1", 1, 1.0, (90.0, 0.0), (90.0, 0.0), "pca", ("P1", "P2", "P3"), {})
+    con = sqlite3.connect(db)
+    con.executescript("DROP TABLE space_choices; PRAGMA user_version = 11;")
+    con.close()
+    with Store.open(db) as s:
+        cap = s.captures()[0]
+        assert s.space_choice(cap.id) is None
+        s.add_space_choice("1", 1, "pca: its bands correlate least")
+        s.add_capture("1", 2, 2.0, (80.0, 0.0), (80.0, 0.0), "pca", ("P1", "P2", "P3"), {})
+        s.add_capture("1", 3, 3.0, (70.0, 0.0), (70.0, 0.0), "rgb", ("R", "G", "B"), {})
+        by_seq = {c.sequence: s.space_choice(c.id) for c in s.captures()}
+    # a robot's later capture in the same space inherits the choice; one in another space does not
+    assert by_seq == {1: "pca: its bands correlate least", 2: "pca: its bands correlate least", 3: None}

@@ -152,7 +152,7 @@ function selectedPose() {
 function cardHtml(c) {
   const src = `capture/${c.id}/thumb.png?r=${state.rev}`;
   return `<img loading=lazy ${state.thumbsHeld ? "data-src" : "src"}="${src}" alt="capture ${c.seq}">` +
-    `${deg(c.elevation)} / ${azDeg(c.azimuth)}<br>seq ${c.seq}`;
+    `${deg(c.elevation)} / ${azDeg(c.azimuth)}<br>seq ${c.seq}` + (c.space_auto ? ` · ${esc(c.space)} auto` : "");
 }
 
 // The browser asks a station for few pictures at a time: the chosen capture's go first, the
@@ -187,7 +187,8 @@ function drawCards(list, fresh) {
     el.className = "card" + (c.unlocked ? " unlocked" : "") + (fresh ? " new" : "") + (c.key === state.selected ? " sel" : "");
     el.dataset.seq = c.seq;
     el.dataset.id = c.id;
-    el.title = `${c.scene || "robot " + c.robot} seq ${c.seq} at ${clock(c.time)}${c.camera ? "\n" + c.camera : ""}`;
+    el.title = `${c.scene || "robot " + c.robot} seq ${c.seq} at ${clock(c.time)}${c.camera ? "\n" + c.camera : ""}` +
+      (c.space_auto ? `\nfeature space ${c.space} chosen automatically: ${c.space_auto}` : "");
     if (!old || old.id !== c.id) el.innerHTML = cardHtml(c);
     const seen = `${c.robot}:${c.seq}`;
     if (!(seen in window.btfPage.shown)) window.btfPage.shown[seen] = Date.now();

@@ -1,0 +1,51 @@
+"""`[features] space = "auto"`: a scene's feature space, resolved once from its first frame.
+
+The criterion is the host's (btf.fit.space_choice, numpy only): each colour space (rgb, hsv,
+pca) is fitted under an ISODATA mask of the frame and judged by its Table-2 error at two seeds
+and by how much its bands correlate within regions. The robot judges a lattice of at most
+JUDGED_PIXELS pixels of the frame, so the one-off cost is bounded at any frame size. A one-band
+frame is gray; a 16-bit colour frame is rgb (hsv and pca are 8-bit spaces).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from btf.fit import space_choice
+from btf.fit.features import FeatureSpace, FeatureSpec, PcaBasis, compute
+from btf.fit.fitter import FrameFitter
+from btf.fit.isodata import IsodataParams, isodata
+
+JUDGED_PIXELS = 1 << 16
+COLOUR_SPACES = ("rgb", "hsv", "pca")
+MAX_REASON = 500  # characters of the reason a MODELS packet's extras carry (a string holds 512)
+
+
+def lattice(frame: np.ndarray, pixels: int = JUDGED_PIXELS) -> np.ndarray:
+    """Every step-th pixel along both axes, the step the smallest that keeps at most `pixels`."""
+    h, w = frame.shape[:2]
+    step = 1
+    while -(-h // step) * -(-w // step) > pixels:
+        step += 1
+    return np.ascontiguousarray(frame[::step, ::step])
+
+
+def resolve(frame: np.ndarray, classes: int, seed: int = 0) -> tuple[FeatureSpec, space_choice.Choice]:
+    """The feature spec to fit the scene in, and the criterion's choice with its reason."""
+    if frame.ndim == 2 or frame.shape[2] == 1:
+        spec = FeatureSpec(FeatureSpace.GRAY)
+        return spec, space_choice.Choice("gray", "gray: the frame has one band", ("gray",))
+    if frame.dtype != np.uint8:
+        return FeatureSpec(FeatureSpace.RGB), space_choice.Choice(
+            "rgb", "rgb: a 16-bit colour frame (hsv and pca are 8-bit spaces)", ("rgb",))
+    sub = lattice(frame[..., :3])
+    labels = isodata(sub, IsodataParams(k=classes, seed=seed)).labels
+    figures = []
+    for name in COLOUR_SPACES:
+        spec = FeatureSpec(FeatureSpace(name))
+        feats = compute(sub, spec, PcaBasis.fit(sub) if name == "pca" else None)
+        fitter = FrameFitter(int(labels.max()) + 1, feats.data.shape[2])
+        fitter.add(feats.data, labels)
+        models = {k: r.model for k, r in fitter.fit().items()}
+        figures.append(space_choice.figures(name, feats.data, labels, fitter.counts, models, 256, seed))
+    choice = space_choice.choose(figures)
+    return FeatureSpec(FeatureSpace(choice.space)), choice
