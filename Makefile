@@ -3,7 +3,8 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-PYTEST_ARGS ?=
+# The tests run in two processes where there are two cores (pytest-xdist).
+PYTEST_ARGS ?= -n auto --maxprocesses 2
 
 .PHONY: setup demo test browser bench bench-peers stress fuzz clean
 
