@@ -7,29 +7,10 @@ import json
 import numpy as np
 import pytest
 
+from tests.support.cli import refused
 from tests.support.images import plate
-from tools.cli import main
 from tools.data.images import read_image, write_image, write_mask
 from tools.store.database import Store
-
-
-@pytest.fixture
-def run(capfd):
-    """btf-host in this process, stderr caught at the file descriptor (native libraries' lines too)."""
-    def call(*argv):
-        code = main([str(a) for a in argv])
-        out, err = capfd.readouterr()
-        return code, out, err
-    return call
-
-
-def refused(code: int, err: str) -> str:
-    """The one line of a refusal."""
-    lines = err.strip().splitlines()
-    assert code == 2 and len(lines) == 1, err
-    assert "Traceback" not in err and "libpng" not in err and "WARN" not in err and "usage:" not in err
-    assert lines[0].startswith("btf-host")
-    return lines[0]
 
 
 @pytest.fixture

@@ -8,30 +8,15 @@ import numpy as np
 import pytest
 
 from btf.fit.fitter import FrameFitter
+from tests.support.cli import refused
 from tests.support.images import plate, public_photos
 from tests.support.spaces import bands_of, table2
-from tools.cli import main
 from tools.data.images import read_image, stretched_8bit, three_bands, write_image, write_mask
 from tools.data.masks import segment
 from tools.store.database import Store
 
 PHOTOS = public_photos(48)
 COLOUR = [n for n, p in PHOTOS.items() if p.shape[2] == 3]
-
-
-@pytest.fixture
-def run(capfd):
-    def call(*argv):
-        code = main([str(a) for a in argv])
-        out, err = capfd.readouterr()
-        return code, out, err
-    return call
-
-
-def refused(code: int, err: str) -> str:
-    lines = err.strip().splitlines()
-    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
-    return lines[0]
 
 
 @pytest.fixture
