@@ -1,4 +1,8 @@
 """Databases as older releases wrote them."""
+import sqlite3
+from pathlib import Path
+
+from tools.store.database import Store
 
 # The first released schema, verbatim: what a version-1 database on disk holds.
 SCHEMA_1 = """
@@ -17,3 +21,16 @@ CREATE TABLE masks (id INTEGER PRIMARY KEY, robot TEXT NOT NULL DEFAULT '', key 
     height INTEGER NOT NULL, width INTEGER NOT NULL, encoding TEXT NOT NULL, data BLOB NOT NULL,
     UNIQUE (robot, key));
 """
+
+
+def older_database(path: Path, version: int, undo: str, *capture, **stored) -> Path:
+    """A database holding one capture (`Store.add_capture(*capture, **stored)`; an RGB one of robot
+    "1" by default) as schema `version` left it: today's, with `undo` taking back what came since."""
+    with Store.open(path) as s:
+        s.add_capture(*(capture or ("1", 1, 1.0, (90.0, 0.0), (90.0, 0.0), "rgb", ("R", "G", "B"), {})), **stored)
+    con = sqlite3.connect(path)
+    try:
+        con.executescript(f"{undo} PRAGMA user_version = {version};")
+    finally:
+        con.close()
+    return path

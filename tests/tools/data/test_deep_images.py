@@ -7,7 +7,6 @@ camera records it: its optics blur (a Gaussian of 1 pixel) and its noise (NETD 5
 from __future__ import annotations
 
 import json
-import sqlite3
 
 import cv2
 import numpy as np
@@ -15,6 +14,7 @@ import pytest
 
 from hal.interfaces import ViewAngles
 from hal.scene import render
+from tests.support.databases import older_database
 from tools.data.images import read_image, write_image, write_mask
 from tools.store.database import Store
 
@@ -162,13 +162,9 @@ def test_depth_mistakes_are_one_line_and_exit_2(host, thermal, tmp_path):
 
 
 def test_a_schema_5_database_is_upgraded_with_8_bit_levels(tmp_path):
-    db = tmp_path / "old.db"
-    with Store.open(db) as store:
-        store.add_capture("bot", 1, 0.0, None, (60.0, 0.0), "gray", ("Y",), {})
-    con = sqlite3.connect(db)
-    con.executescript("ALTER TABLE captures DROP COLUMN levels; DROP TABLE capture_camera; DROP TABLE rejected_packets;"
-                      " PRAGMA user_version = 5;")  # the tables schema 5 did not have yet
-    con.close()
+    db = older_database(tmp_path / "old.db", 5,  # the tables schema 5 did not have yet
+                        "ALTER TABLE captures DROP COLUMN levels; DROP TABLE capture_camera; DROP TABLE rejected_packets;",
+                        "bot", 1, 0.0, None, (60.0, 0.0), "gray", ("Y",), {})
     with Store.open(db) as store:
         assert [c.levels for c in store.captures()] == [256]
         assert store.add_capture("bot", 2, 0.0, None, (50.0, 0.0), "gray", ("Y",), {}, levels=65536)

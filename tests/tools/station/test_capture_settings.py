@@ -18,6 +18,7 @@ from radio.auth import MemoryCounterStore
 from radio.keys import load_key, write_key
 from radio.link import Link
 from radio.packets.camera import decode_camera, encode_camera
+from tests.support.databases import older_database
 from tests.support.robots import IDLE, robot_toml
 from tools.analysis.radiometry import settings_json
 from tools.cli import main as host
@@ -197,12 +198,7 @@ def recording(key_path, body, tmp_path):
 
 
 def test_an_older_database_gains_the_camera_table_and_a_bad_row_is_one_line(tmp_path):
-    db = tmp_path / "old.db"
-    with Store.open(db) as s:
-        s.add_capture("1", 1, 1.0, (90.0, 0.0), (90.0, 0.0), "rgb", ("R", "G", "B"), {})
-    con = sqlite3.connect(db)
-    con.executescript("DROP TABLE capture_camera; PRAGMA user_version = 6;")
-    con.close()
+    db = older_database(tmp_path / "old.db", 6, "DROP TABLE capture_camera;")
     with Store.open(db) as s:
         (c,) = s.captures()
         assert c.camera is None

@@ -1,7 +1,6 @@
 """The file a replayed frame came from: in the capture's settings, on the wire (MODELS schema 5,
 older bodies still decoding), in the host's database and in the report's source line."""
 import dataclasses
-import sqlite3
 
 import pytest
 from hypothesis import given
@@ -13,6 +12,7 @@ from radio import FrameError
 from radio import packets as pk
 from radio.packets.camera import decode_camera, encode_camera
 from radio.packets.models import ModelsPacket
+from tests.support.databases import older_database
 from tests.support.replay import models, robot_text, run_sweep, write_shots
 from tools.report.look import capture_source
 from tools.store.database import Store
@@ -90,13 +90,8 @@ def test_each_replayed_capture_carries_its_file_to_the_host_and_the_report(fake_
 
 
 def test_an_older_database_gains_the_source_column_and_keeps_its_rows(tmp_path):
-    db = tmp_path / "old.db"
-    camera = CaptureSettings(1000.0, 1.0)
-    with Store.open(db) as s:
-        s.add_capture("1", 1, 1.0, (90.0, 0.0), (90.0, 0.0), "rgb", ("R", "G", "B"), {}, camera=camera)
-    con = sqlite3.connect(db)  # the database as schema 9 left it: no source column
-    con.executescript("ALTER TABLE capture_camera DROP COLUMN source; PRAGMA user_version = 9;")
-    con.close()
+    camera = CaptureSettings(1000.0, 1.0)  # as schema 9 stored it: no source column
+    db = older_database(tmp_path / "old.db", 9, "ALTER TABLE capture_camera DROP COLUMN source;", camera=camera)
     with Store.open(db) as s:
         (old,) = s.captures()
         assert old.camera == camera and old.camera.source is None

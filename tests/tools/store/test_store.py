@@ -7,6 +7,7 @@ import pytest
 
 from btf.fit.fitter import fit_histogram
 from btf.johnson import Family
+from tests.support.databases import older_database
 from tools.store.database import CorruptDatabase, Store
 
 
@@ -185,12 +186,7 @@ def test_rejected_packets_are_kept_raw_newest_first_and_bounded(tmp_path, monkey
 
 
 def test_a_database_from_before_rejected_packets_gains_the_table(tmp_path):
-    db = tmp_path / "old.db"
-    with Store.open(db) as s:
-        s.add_capture("1", 1, 1.0, (90.0, 0.0), (90.0, 0.0), "rgb", ("R", "G", "B"), {})
-    con = sqlite3.connect(db)
-    con.executescript("DROP TABLE rejected_packets; ALTER TABLE capture_camera DROP COLUMN source; PRAGMA user_version = 8;")
-    con.close()
+    db = older_database(tmp_path / "old.db", 8, "DROP TABLE rejected_packets; ALTER TABLE capture_camera DROP COLUMN source;")
     with Store.open(db) as s:
         assert len(s.captures()) == 1 and s.rejected() == []
         s.add_rejected(1.0, 1, "", 7, "refused", b"x")
@@ -198,12 +194,8 @@ def test_a_database_from_before_rejected_packets_gains_the_table(tmp_path):
 
 
 def test_a_database_from_before_space_choices_gains_the_table_and_keeps_its_captures(tmp_path):
-    db = tmp_path / "old.db"
-    with Store.open(db) as s:
-        s.add_capture("1", 1, 1.0, (90.0, 0.0), (90.0, 0.0), "pca", ("P1", "P2", "P3"), {})
-    con = sqlite3.connect(db)
-    con.executescript("DROP TABLE space_choices; PRAGMA user_version = 11;")
-    con.close()
+    db = older_database(tmp_path / "old.db", 11, "DROP TABLE space_choices;",
+                        "1", 1, 1.0, (90.0, 0.0), (90.0, 0.0), "pca", ("P1", "P2", "P3"), {})
     with Store.open(db) as s:
         cap = s.captures()[0]
         assert s.space_choice(cap.id) is None
