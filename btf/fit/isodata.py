@@ -366,12 +366,19 @@ def assign(data: np.ndarray, centres: np.ndarray) -> np.ndarray:
     return out.reshape(np.shape(data)[:-1])
 
 
-def spread(sample: np.ndarray, centres: np.ndarray) -> float:
-    """Mean distance from each sample row to its nearest centre: how well centres fit data."""
+def nearest_centres(sample: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each sample row's nearest centre and its distance to it."""
     x = np.asarray(sample, dtype=np.float64)
     c = np.asarray(centres, dtype=np.float64)
-    d2 = (x * x).sum(axis=1)[:, None] + (c * c).sum(axis=1)[None, :] - 2.0 * (x @ c.T)
-    return float(np.sqrt(np.maximum(d2.min(axis=1), 0.0)).mean())
+    d = (c * c).sum(axis=1)[None, :] - 2.0 * (x @ c.T)  # the squared distance less |x|^2
+    nearest = np.argmin(d, axis=1)
+    d2 = np.take_along_axis(d, nearest[:, None], axis=1)[:, 0] + np.einsum("ij,ij->i", x, x)
+    return nearest, np.sqrt(np.maximum(d2, 0.0))
+
+
+def spread(sample: np.ndarray, centres: np.ndarray) -> float:
+    """Mean distance from each sample row to its nearest centre: how well centres fit data."""
+    return float(nearest_centres(sample, centres)[1].mean())
 
 
 def light_gain(sample: np.ndarray, centres: np.ndarray, rounds: int = 2) -> float:

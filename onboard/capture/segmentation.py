@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from btf.fit.features import FeatureFrame
-from btf.fit.isodata import IsodataParams, Labeller, fit_centres, light_gain, spread, subsample
+from btf.fit.isodata import IsodataParams, Labeller, fit_centres, light_gain, nearest_centres, spread, subsample
 from hal.devices import Hal
 from hal.interfaces import ViewAngles
 from hal.state_file import write_state
@@ -24,6 +24,11 @@ from onboard.capture.pipeline import PoseSkipped, Segmented
 from onboard.config import Config, ConfigError, SegmentConfig
 from radio.packets.base import MAX_LABELS
 from radio.packets.mask import MAX_SIDE, pool_labels
+
+
+# A sample row farther than this many times the spread at fitting from every centre is a
+# colour the centres were not fitted on.
+REACH = 1.5
 
 
 class SegmentMethod(enum.Enum):
@@ -36,11 +41,15 @@ class Segmenter:
 
     ISODATA centres belong to the scene, not the frame: they are fitted once, matched to
     the palette, and baked into a `Labeller`; later frames are only looked up. A cheap
-    drift check on a small sample refits when the centres no longer fit the view: when the
-    mean distance to the nearest centre on `drift_sample` pixels grows past (1 + refit_drift)
-    times its value when they were fitted, even with the view's light level allowed for (one
-    gain over all bands: a sweep over one scene sees it brighter or darker by view angle and
-    exposure, and that is what a BTF measures, not a new scene); 0: every frame.
+    drift check on `drift_sample` pixels refits when the centres no longer fit the view,
+    with the view's light level allowed for (one gain over all bands: a sweep over one scene
+    sees it brighter or darker by view angle and exposure, and that is what a BTF measures,
+    not a new scene): when the mean distance to the nearest centre grows past
+    (1 + refit_drift) times its value when they were fitted (refit_drift 0: every frame), or
+    when more than `scene_change` of the sample moves from one view to the next between
+    centres or out of their reach (a new scene's first view; a sweep's next view of the same
+    scene moves a little). The mean distance alone misses a new scene whose colours the old
+    centres happen to cover about as well as its own would.
     A map is changed when more than `change_fraction` of the MASK map's cells differ
     from the last one sent (`mask_side`: the longest side of that map).
     """
@@ -60,6 +69,7 @@ class Segmenter:
         change_fraction: float = 0.02,
         refit_drift: float = 0.25,
         drift_sample: int = 2000,
+        scene_change: float = 0.35,
     ) -> None:
         method = SegmentMethod(method)
         if method is SegmentMethod.MASK and not mask_path:
@@ -70,6 +80,8 @@ class Segmenter:
             raise ValueError(f"segmentation: change_fraction must be in 0..1, got {change_fraction}")
         if not (np.isfinite(refit_drift) and refit_drift >= 0) or drift_sample < 1:
             raise ValueError("segmentation: refit_drift must be >= 0 and drift_sample >= 1")
+        if not 0 < scene_change <= 1:
+            raise ValueError(f"segmentation: scene_change must be in (0, 1], got {scene_change}")
         self.method = method
         self.mask_path = mask_path
         self.isodata = isodata
@@ -77,6 +89,7 @@ class Segmenter:
         self.change_fraction = change_fraction
         self.refit_drift = refit_drift
         self.drift_sample = drift_sample
+        self.scene_change = scene_change
         self.changed = False
         self.small: np.ndarray | None = None  # the last map noted, pooled as the MASK packet pools it
         self.counts: np.ndarray | None = None  # its pixels per label 0..255
@@ -85,6 +98,7 @@ class Segmenter:
         self._mask: np.ndarray | None = None
         self._labeller: Labeller | None = None
         self._fit_spread = 0.0
+        self._last_shares: np.ndarray | None = None  # the last view's sample by centre, near and far
         self._frames = 0
         self.refits = 0  # how many times centres were fitted (for STATUS and tests)
         if method is SegmentMethod.MASK:
@@ -131,13 +145,26 @@ class Segmenter:
             lab = self._labeller = Labeller(centres, self.palette.match(centres))
             # One level of slack keeps a near-perfect fit from refitting on noise.
             self._fit_spread = spread(check, centres) + 1.0
+            self._last_shares = self._shares(check, centres)[0]
             self.refits += 1
         return lab.assign(data)
 
+    def _shares(self, check: np.ndarray, centres: np.ndarray) -> tuple[np.ndarray, float]:
+        """The sample's share at each centre, split into rows within reach of it (REACH times
+        the spread at fitting) and beyond, where a new scene's colours show; and its spread."""
+        nearest, distance = nearest_centres(check, centres)
+        beyond = distance > REACH * self._fit_spread
+        shares = np.bincount(2 * nearest + beyond, minlength=2 * len(centres)) / len(check)
+        return shares, float(distance.mean())
+
     def _drifted(self, check: np.ndarray, centres: np.ndarray) -> bool:
-        """Whether the scene's centres no longer fit the sample, at its own light level."""
+        """Whether the scene's centres no longer fit the sample, at its own light level, or the
+        sample moved among them from the last view as far as a new scene's does."""
         limit = self._fit_spread * (1 + self.refit_drift)
-        return spread(check, centres) > limit and spread(check / light_gain(check, centres), centres) > limit
+        shares, scaled_spread = self._shares(check / light_gain(check, centres), centres)
+        last, self._last_shares = self._last_shares, shares
+        moved = last is not None and 0.5 * float(np.abs(shares - last).sum()) > self.scene_change
+        return moved or (scaled_spread > limit and spread(check, centres) > limit)
 
     def force_send(self) -> None:
         """The next map counts as changed (the host asked for the mask)."""

@@ -22,6 +22,18 @@ def rgb_frame(seed: int) -> np.ndarray:
     return np.clip(img + rng.normal(0, 6, img.shape), 0, 255).astype(np.uint8)
 
 
+def sweep_views(image: np.ndarray, h: int, w: int, views: int = len(ELEVATIONS)) -> list[np.ndarray]:
+    """A sweep's views of one scene: `image` (RGB) mirror-tiled to 2h x 2w, each view h x w panned
+    a further 1/views across it and brighter, its light x0.85 .. x1.15 (as a sweep's angles catch
+    more or less light)."""
+    ry, rx = -(-2 * h // image.shape[0]), -(-2 * w // image.shape[1])
+    row = np.concatenate([image if j % 2 == 0 else image[:, ::-1] for j in range(rx)], axis=1)
+    canvas = np.concatenate([row if i % 2 == 0 else row[::-1] for i in range(ry)], axis=0).astype(np.float64)
+    gains = np.linspace(0.85, 1.15, views)
+    return [np.clip(canvas[k * h // views:][:h, k * w // views:][:, :w] * gains[k], 0, 255).astype(np.uint8)
+            for k in range(views)]
+
+
 def write_rgb(path: Path, rgb: np.ndarray) -> Path:
     assert cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
     return path

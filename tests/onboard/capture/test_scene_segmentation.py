@@ -98,3 +98,5 @@ def test_zero_drift_refits_every_frame_and_new_scene_forces_a_refit():
 def test_bad_refit_settings_are_refused():
     with pytest.raises(ValueError, match="refit_drift"):
         Segmenter(SegmentMethod.ISODATA, refit_drift=-1)
+    with pytest.raises(ValueError, match="scene_change"):
+        Segmenter(SegmentMethod.ISODATA, scene_change=0)
