@@ -50,7 +50,7 @@ def _store(store: Store, args: argparse.Namespace, fitted, choice=None) -> int:
         seq = store.next_sequence(args.robot)
         if not store.add_capture(args.robot, seq, time.time(), None, (args.angle, 0.0), fitted.feats.space.value,
                                  fitted.feats.band_names, fitted.results, scene=args.scene or "",
-                                 dependence=fitted.dependence, levels=fitted.feats.levels):
+                                 dependence=fitted.dependence, levels=fitted.feats.levels, pca=fitted.pca):
             raise CliError(f"database {args.db}: capture {args.robot}/{seq} was taken by another writer; "
                            "not stored (run fit again)")
         if args.mask:

@@ -1,6 +1,6 @@
 """What a stored capture looks like: its label map, the view synthesized from its models
-(independent pixels, and correlated when it carries dependence), the measured frame where the
-host has it, and the histograms with the Johnson curves. The static report and the operator's
+(independent pixels, and correlated when it carries dependence; hsv and pca ones turned back
+into RGB, pca through the scene's stored basis), the measured frame where the host has it, and the histograms with the Johnson curves. The static report and the operator's
 page both draw captures with these (`tools.report.look` lays them out).
 
 Measured frames are not in the database (the robot sends models, not pixels): `Frames` finds
@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from btf.fit.features import BAND_NAMES, FeatureSpace, PcaBasis
 from hal.fakes.camera import REFERENCE_EXPOSURE_US, REFERENCE_KELVIN, kelvin_gains
 from hal.interfaces import ViewAngles
 from hal.scene import render
@@ -25,7 +26,7 @@ from onboard.config import load
 from tools.analysis.level_bins import Grid
 from tools.analysis.radiometry import adjusted
 from tools.analysis.synth import MissingModels, ReachWarning, synthesize
-from tools.data.images import ImageError, read_image, stretched_8bit
+from tools.data.images import ImageError, read_image, stretched_8bit, to_rgb
 from tools.station.receiver import mask_key
 from tools.store.database import Store, StoredCapture
 
@@ -65,6 +66,19 @@ def shown(cap: StoredCapture, image: np.ndarray) -> bool:
     return (cap.space == "rgb" and image.shape[2] == 3) or (cap.space == "gray" and image.shape[2] == 1)
 
 
+def picture(cap: StoredCapture, bands: np.ndarray, basis: PcaBasis | None) -> np.ndarray | None:
+    """A synthesis of this capture as a picture to set beside the photograph: rgb and gray as
+    drawn, hsv and pca turned back into RGB (pca through the scene's `basis`); None where its
+    bands make none (raw bands, some of a space's bands only, pca without its basis)."""
+    if shown(cap, bands):
+        return bands
+    if cap.space == "hsv" and cap.band_names == BAND_NAMES[FeatureSpace.HSV]:
+        return to_rgb(bands, "hsv")
+    if cap.space == "pca" and basis is not None and cap.band_names == tuple(f"P{k + 1}" for k in range(basis.n)):
+        return to_rgb(bands, "pca", basis)
+    return None
+
+
 def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: Measured | None = None,
           histograms: bool = True) -> CaptureViews:
     """Everything drawn of one capture (images as 8-bit arrays, 16-bit ones stretched over the
@@ -94,12 +108,12 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
     except MissingModels as exc:
         out.problem = str(exc)
         return out
-    if shown(cap, syn):
-        both = [syn] if corr is None else [syn, corr]
+    basis = store.pca_basis(cap.id) if cap.space == "pca" else None
+    both = [picture(cap, a, basis) for a in ([syn] if corr is None else [syn, corr])]
+    if all(a is not None for a in both):
         span = (int(min(a.min() for a in both)), int(max(a.max() for a in both)))
-        out.images["independent"] = stretched_8bit(syn, span)
-        if corr is not None:
-            out.images["correlated"] = stretched_8bit(corr, span)
+        for name, image in zip(("independent", "correlated"), both):
+            out.images[name] = stretched_8bit(image, span)
     if histograms:
         out.images["histograms"] = histogram_png(real if real is not None and shown(cap, real) else None, mask, models,
                                                  cap.band_names, cap.levels)

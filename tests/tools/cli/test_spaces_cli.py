@@ -107,6 +107,21 @@ def test_fit_space_auto_is_recorded_with_the_capture(run, photo):
         assert s.space_choice(configured.id) is None  # a fit's space is its own, never inherited
 
 
+def test_a_pca_fit_is_stored_with_its_basis_and_synthesized_back_into_the_photographs_colours(run, photo):
+    assert run("fit", photo / "a.png", "--mask", photo / "m.png", "--space", "pca", "--db", photo / "p.db",
+               "--angle", 40)[0] == 0
+    with Store.open(photo / "p.db") as s:
+        (cap,) = s.captures()
+        assert s.pca_basis(cap.id) is not None
+    code, _, err = run("synth", "--db", photo / "p.db", "--mask", photo / "m.png", "--angle", 40,
+                       "--out", photo / "s.png")
+    assert code == 0, err
+    image, mask = read_image(photo / "a.png"), read_image(photo / "m.png")[:, :, 0]
+    drawn = read_image(photo / "s.png")
+    for label in np.unique(mask):
+        assert np.abs(drawn[mask == label].mean(0) - image[mask == label].mean(0)).max() < 10
+
+
 @pytest.mark.parametrize("name", COLOUR)
 @pytest.mark.parametrize("masked", [False, True])
 def test_auto_never_chooses_a_space_worse_than_rgb_beyond_the_noise_between_two_seeds(run, tmp_path, name, masked):

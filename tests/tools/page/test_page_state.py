@@ -1,10 +1,12 @@
 """What the page draws, without a browser: the sweep's grid from the robot's own STATUS answer,
 advanced by captures between reports; the failsafe assumed while the link is silent; the robot's
 disk and rejections; goodput; the latest capture per pose; azimuths in [0, 360); what watch says
-of a robot not heard yet; a one-band photograph's histograms with its measured levels."""
+of a robot not heard yet; a one-band photograph's histograms with its measured levels; hsv and pca captures drawn as RGB pictures."""
 import dataclasses
 
+import cv2
 import numpy as np
+import pytest
 from skimage import data as skdata
 
 from hal.interfaces import ViewAngles
@@ -12,6 +14,7 @@ from onboard.link.status import sweep_report
 from onboard.sweep.plan import SkippedPose, SweepPlan, SweepProgress
 from radio import packets as pk
 from tests.support.packets import models_body
+from tests.support.spaces import stored_plate
 from tools.cli.watch import summary
 from tools.data.images import read_image, write_image, write_mask
 from tools.page.data import CaptureIndex, render
@@ -238,3 +241,20 @@ def test_a_gray_photographs_histograms_carry_its_measured_levels(host, tmp_path)
     drawn = render(str(db), cap.id, None, "histograms", 0)["png"]
     assert drawn == histogram_png(read_image(folder / "text.png"), mask, models, cap.band_names, cap.levels)
     assert drawn != histogram_png(None, mask, models, cap.band_names, cap.levels)
+
+
+@pytest.mark.parametrize("space", ["pca", "hsv"])
+def test_hsv_and_pca_captures_have_a_picture_on_their_card_and_in_their_section(host, tmp_path, space):
+    """Their syntheses turned back into RGB, in the photograph's colours."""
+    db, photo, labels = stored_plate(host, tmp_path, space)
+    with Store.open(db) as store:
+        (cap,) = store.captures()
+    thumb = render(str(db), cap.id, None, "thumb", 0)
+    section = render(str(db), cap.id, None, "section", 0)
+    assert set(section["images"]) == {"independent", "correlated"} and "missing" not in thumb
+    assert thumb["png"] == section["images"]["correlated"]
+    for name, data in section["images"].items():
+        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR)[:, :, ::-1]
+        for label in np.unique(labels):
+            region = labels == label
+            assert np.abs(image[region].mean(0) - photo[region].mean(0)).max() < 10, (name, label)

@@ -1,8 +1,10 @@
 """The HTML report: images, histograms and tables from a database; bad databases refused."""
 import numpy as np
+import pytest
 
 from radio import packets as pk
 from tests.support.packets import filled_database, models_body
+from tests.support.spaces import stored_plate
 from tools.cli import main
 from tools.report.document import write_report
 from tools.station.receiver import Receiver
@@ -88,3 +90,19 @@ def test_a_dataset_capture_is_shown_beside_the_image_it_was_fitted_from(tmp_path
     assert html.index("measured") < html.index("synthesized")
     (tmp_path / "plate.png").unlink()  # a dataset moved away: no frame, no error
     assert Frames()(cap) is None
+
+
+@pytest.mark.parametrize("space", ["pca", "hsv"])
+def test_hsv_and_pca_captures_are_drawn_as_pictures_in_the_scenes_colours(host, tmp_path, space):
+    """Their syntheses turned back into RGB (pca through the stored basis) look like the photograph."""
+    from tools.data.images import read_image
+
+    db, photo, labels = stored_plate(host, tmp_path, space)
+    with Store.open(db) as s:
+        write_report(s, tmp_path / "rep")
+    drawn = {k: read_image(tmp_path / "rep" / f"robothost_050.0_0_{k}.png") for k in ("synthetic", "correlated")}
+    for name, image in drawn.items():
+        assert image.shape == photo.shape, name
+        for label in np.unique(labels):
+            region = labels == label
+            assert np.abs(image[region].mean(0) - photo[region].mean(0)).max() < 10, (name, label)
