@@ -381,13 +381,13 @@ def spread(sample: np.ndarray, centres: np.ndarray) -> float:
     return float(nearest_centres(sample, centres)[1].mean())
 
 
-def light_gain(sample: np.ndarray, centres: np.ndarray, rounds: int = 2) -> float:
+def light_gain(sample: np.ndarray, centres: np.ndarray, rounds: int = 2, start: float = 1.0) -> float:
     """The one gain g over all bands for which g * centres fit the sample best (least squares,
-    each row against its nearest scaled centre, `rounds` times): how much brighter the view is
-    than the one the centres were fitted on. Clipped to [1/4, 4]."""
+    each row against its nearest scaled centre, `rounds` times from `start`): how much brighter
+    the view is than the one the centres were fitted on. Clipped to [1/4, 4]."""
     x = np.asarray(sample, dtype=np.float64)
     c = np.asarray(centres, dtype=np.float64)
-    g = 1.0
+    g = start
     for _ in range(rounds):
         near = c[_nearest(x, g * c)]
         energy = float((near * near).sum())

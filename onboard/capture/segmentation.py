@@ -98,6 +98,7 @@ class Segmenter:
         self._mask: np.ndarray | None = None
         self._labeller: Labeller | None = None
         self._fit_spread = 0.0
+        self._gain = 1.0  # the last view's light level against the scene's centres
         self._last_shares: np.ndarray | None = None  # the last view's sample by centre, near and far
         self._frames = 0
         self.refits = 0  # how many times centres were fitted (for STATUS and tests)
@@ -146,6 +147,7 @@ class Segmenter:
             # One level of slack keeps a near-perfect fit from refitting on noise.
             self._fit_spread = spread(check, centres) + 1.0
             self._last_shares = self._shares(check, centres)[0]
+            self._gain = 1.0
             self.refits += 1
         return lab.assign(data)
 
@@ -161,7 +163,9 @@ class Segmenter:
         """Whether the scene's centres no longer fit the sample, at its own light level, or the
         sample moved among them from the last view as far as a new scene's does."""
         limit = self._fit_spread * (1 + self.refit_drift)
-        shares, scaled_spread = self._shares(check / light_gain(check, centres), centres)
+        # The last view's gain is close to this one's: one round from it is enough.
+        self._gain = light_gain(check, centres, rounds=1, start=self._gain)
+        shares, scaled_spread = self._shares(check / self._gain, centres)
         last, self._last_shares = self._last_shares, shares
         moved = last is not None and 0.5 * float(np.abs(shares - last).sum()) > self.scene_change
         return moved or (scaled_spread > limit and spread(check, centres) > limit)
