@@ -67,7 +67,7 @@ def _mle(px: np.ndarray) -> tuple[Johnson | None, float, str]:
 
 
 def versus_mle(rng: np.random.Generator, ctx: Context) -> list[str]:
-    """The issue's bar: on the same 100k 8-bit samples, at least 1000x faster than
+    """The bar: on the same 100k 8-bit samples, at least 1000x faster than
     johnsonsu.fit with a histogram error no worse than 1.1x the MLE fit's."""
     truth = Johnson(Family.SU, -0.6, 1.6, 110.0, 22.0)
     n = ctx.pick(100_000, 5_000)

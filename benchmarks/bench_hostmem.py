@@ -21,7 +21,7 @@ LARGE = ("compare", "compare hsv", "synth", "pdfs", "mask isodata")
 GLOBAL = ("mask kmeans", "mask felzenszwalb", "mask slic")
 
 
-BAR = (("compare", "synth"), 20000)  # the commands and size the bar is stated for
+BAR = (("compare", "synth"), 20000)  # the commands and size the bar is stated for
 
 
 def _rows(big, tiny, work: Path, names: tuple[str, ...]) -> list[str]:

@@ -1,7 +1,7 @@
 """On-board features and segmentation for a 1 MP RGB frame, timed against np.percentile.
 
 Every time is the best of several runs, reported as a ratio to one np.percentile over
-a 1M-value band in the same run (the issue's yardstick: a whole capture, fit and
+a 1M-value band in the same run (the yardstick: a whole capture, fit and
 encode included, should cost at most 4 of those). ISODATA rows also give the share of
 pixels labelled differently from the scene's true regions, so the subsample size can
 be chosen by time against error.

@@ -235,7 +235,7 @@ def _emulated(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, 
         emulator.servos[sid].position = 2048.0 + joint.servo_deg(0.0) * 4096.0 / 360.0
     cleanup: list[Callable[[], None]] = [emulator.close]
     try:
-        bus = DynamixelServoBus(emulator.port, latency_ms=float(options.get("servo_latency_ms", 4.0)))
+        bus = DynamixelServoBus(emulator.port, latency_ms=float(options.get("servo_latency_ms", 16.0)))
         arm = Arm(bus, cal)
 
         def orientation() -> Orientation:

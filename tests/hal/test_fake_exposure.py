@@ -95,8 +95,8 @@ def test_an_unlocked_sweep_loses_the_view_dependence_a_locked_sweep_keeps():
     locked = view_dependence(sweep(CameraControls(2 * REFERENCE_EXPOSURE_US, 1.0, 5500.0)))
     unlocked_means = sweep(CameraControls())
     unlocked = view_dependence(unlocked_means)
-    assert locked == pytest.approx(truth, rel=0.05)  # the bar: within 5% of the locked truth
-    assert abs(unlocked) < locked / 3  # the bar: under a third of the locked difference
+    assert locked == pytest.approx(truth, rel=0.05)  # the bar: within 5% of the locked truth
+    assert abs(unlocked) < locked / 3  # the bar: under a third of the locked difference
     assert all(m == pytest.approx(AE_TARGET_DN, rel=0.05) for m in unlocked_means.values())
 
 

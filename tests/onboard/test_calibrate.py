@@ -88,7 +88,7 @@ def test_arm_calibration_recovers_a_3_degree_joint_offset(body):
         report = calibrate_arm(hal)
     finally:
         hal.close()
-    assert report.fit.tilt.offset_deg == pytest.approx(3.0, abs=0.2)  # the bar
+    assert report.fit.tilt.offset_deg == pytest.approx(3.0, abs=0.2)  # the bar
     assert report.fit.yaw.offset_deg == pytest.approx(0.0, abs=0.2)
     assert report.fit.tilt.sign == report.fit.yaw.sign == 1.0
     assert report.ok and report.check_error_deg < 0.5
@@ -147,7 +147,7 @@ def test_tracker_calibration_names_p4_for_a_tracker_mounted_upside_down(body):
     finally:
         hal.close()
     assert report.nadir.pitch == pytest.approx(90.0, abs=2.0) and not report.nadir_ok
-    assert report.needed == AxisRemap.parse("P4") and report.current == AxisRemap()  # the bar
+    assert report.needed == AxisRemap.parse("P4") and report.current == AxisRemap()  # the bar
     assert not report.ok
 
 

@@ -125,7 +125,7 @@ def test_a_camera_setting_sent_while_the_worker_takes_the_frame_is_refused_as_bu
 @pytest.mark.slow
 @pytest.mark.skipif(not os.environ.get("BTF_STRESS"), reason="stress run only (make stress): 20 timed trials, ~1 min")
 def test_the_failsafe_holds_within_failsafe_s_plus_a_tenth_in_20_of_20_trials_at_960x1280():
-    """The issue's bar, on a real link over a pty, with the base stopping at random instants."""
+    """The bar, on a real link over a pty, with the base stopping at random instants."""
     trials = run_trials(size=(960, 1280), trials=20, failsafe_s=1.0, seed=18)
     late = [t.late_s for t in trials]
     assert len(late) == 20 and max(late) <= 0.1, late

@@ -39,7 +39,7 @@ def emulated_hal(size: tuple[int, int] = (24, 32), scene: str = "mixed") -> Emul
         v = view()
         return Orientation(heading=v.azimuth, roll=0.0, pitch=-v.elevation)
 
-    bus = DynamixelServoBus(servos.port, latency_ms=4.0)
+    bus = DynamixelServoBus(servos.port, latency_ms=16.0)  # the SDK's own: a busy machine's emulator thread answers in time
     i2c = EmulatedSMBus(orientation_source=orientation)
     camera = FakeCamera(scene, view, size=size)
     camera.open(size[1], size[0])

@@ -1,5 +1,5 @@
 """The end-to-end demo on fakes: robot runtimes over a pty and a simulated lossy radio, the
-database they fill, and the paper's experiments judged against the issue's bars.
+database they fill, and the paper's experiments judged against their bars.
 
 The robot (`btf-robot run --hal fake`) runs as a subprocess on the slave side of a pty;
 the host's link reads the master side through the simulated radio

@@ -1,6 +1,6 @@
 """Host memory does not grow with image size beyond the image: the peak resident set (VmHWM)
 of `compare`, `synth`, `pdfs` and `mask` in a fresh process, per pixel above what the process
-held after the same command on a 64 x 64 scene (libraries loaded). The issue's bar is 64
+held after the same command on a 64 x 64 scene (libraries loaded). The bar is 64
 bytes per pixel with the input image; before tiling, compare held 47 (70 in hsv), correlated
 synthesis 33, ISODATA masks 19, Felzenszwalb 339, SLIC 129. The 20000 x 20000 figures are in
 `python -m benchmarks hostmem`."""
