@@ -5,7 +5,9 @@ non-negative power spectrum: what synthesis draws each field from (tools.analysi
    tools.analysis.latent) on both halves, r(-h) = r(h), and r(0) = 1.
 2. Beyond the window the autocorrelation is unknown. A model fitted to the window continues it:
    two anisotropic exponentials a_i exp(-sqrt(h' M_i h)), a short and a long scale each with its
-   own orientation and aspect, plus the nugget 1 - a_1 - a_2 at h = 0. It is positive definite
+   own orientation and aspect, plus the nugget 1 - a_1 - a_2 at h = 0. Each length is at most
+   RING and each aspect about MAX_ASPECT at most (`bounded_rates`): six lags cannot tell a long
+   length, which left free runs away along the window's longer axis. It is positive definite
    and continues a diagonal grain diagonally, with no plaid and no ringing.
 3. On a ring of at most RING x RING lags: alternating projections, the spectrum clipped at zero
    <-> the window reset to its values; then the spectrum itself refined (L-BFGS-B, S >= 0)
@@ -31,6 +33,7 @@ from btf.dependence import window
 from tools.analysis.latent import GRID, latent_acf
 
 RING = 128
+MAX_ASPECT = 4.0  # an exponential's long axis over its short one
 PROJECTIONS = 15
 REFIT_ITERATIONS = 150
 
@@ -41,13 +44,24 @@ def full_window(radius: int, values: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return np.concatenate(([[0, 0]], half, -half)), np.concatenate(([1.0], values, values))
 
 
+def bounded_rates(m: np.ndarray) -> np.ndarray:
+    """The inverse squared lengths M'M of one exponential, raised so that no length exceeds
+    RING and the long axis is at most sqrt(1 + MAX_ASPECT^2) times the short one (the floor
+    is the fastest rate over MAX_ASPECT^2). Six lags cannot tell a long length: left free, a
+    window a little longer one way sends that length to thousands of pixels, all the
+    component's power on one line of the spectrum (streaks along that axis)."""
+    q = m.T @ m
+    fastest = 0.5 * np.trace(q) + np.sqrt(0.25 * (q[0, 0] - q[1, 1]) ** 2 + q[0, 1] ** 2)
+    return q + (1.0 / RING ** 2 + fastest / MAX_ASPECT ** 2) * np.eye(2)
+
+
 def _model(p: np.ndarray, lags: np.ndarray) -> np.ndarray:
     share, split = 1 / (1 + np.exp(-p[0])), 1 / (1 + np.exp(-p[1]))
     out = np.zeros(len(lags))
     for i, weight in enumerate((share * split, share * (1 - split))):
         c = p[2 + 3 * i:5 + 3 * i]
-        m = np.array([[np.exp(c[0]), 0.0], [c[1], np.exp(c[2])]])
-        d = np.sqrt(np.maximum(np.einsum("ni,ij,kj,nk->n", lags, m, m, lags), 0.0))
+        q = bounded_rates(np.array([[np.exp(c[0]), 0.0], [c[1], np.exp(c[2])]]))
+        d = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", lags, q, lags), 0.0))
         out += weight * np.exp(-d)
     return out
 
