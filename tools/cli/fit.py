@@ -47,16 +47,18 @@ def _open(db: str) -> Store:
 def _store(store: Store, args: argparse.Namespace, fitted, choice=None) -> int:
     """Stores the fit as the next capture of --robot under --scene; its sequence number."""
     try:
-        seq = store.next_sequence(args.robot)
-        if not store.add_capture(args.robot, seq, time.time(), None, (args.angle, 0.0), fitted.feats.space.value,
-                                 fitted.feats.band_names, fitted.results, scene=args.scene or "",
-                                 dependence=fitted.dependence, levels=fitted.feats.levels, pca=fitted.pca):
-            raise CliError(f"database {args.db}: capture {args.robot}/{seq} was taken by another writer; "
-                           "not stored (run fit again)")
-        if args.mask:
-            store.add_mask(f"{args.robot}/{seq}", fitted.labels, args.robot)
-        if choice is not None:
-            store.add_space_choice(args.robot, seq, choice.reason)
+        with store.batch():  # the capture, its mask and its space's reason: all stored, or none
+            seq = store.next_sequence(args.robot)
+            if not store.add_capture(args.robot, seq, time.time(), None, (args.angle, 0.0),
+                                     fitted.feats.space.value, fitted.feats.band_names, fitted.results,
+                                     scene=args.scene or "", dependence=fitted.dependence,
+                                     levels=fitted.feats.levels, pca=fitted.pca):
+                raise CliError(f"database {args.db}: capture {args.robot}/{seq} was taken by another writer; "
+                               "not stored (run fit again)")
+            if args.mask:
+                store.add_mask(f"{args.robot}/{seq}", fitted.labels, args.robot)
+            if choice is not None:
+                store.add_space_choice(args.robot, seq, choice.reason)
     except CorruptDatabase as exc:
         raise CliError(str(exc)) from None
     return seq

@@ -14,18 +14,8 @@ import pytest
 from btf.fit.fitter import FrameFitter
 from tests.support import ROOT
 from tests.support.images import plate
-from tools.cli import main
 from tools.data.images import read_image, read_mask, write_image, write_mask
 from tools.store.database import Store
-
-
-@pytest.fixture
-def run(capsys):
-    def call(*argv):
-        code = main([str(a) for a in argv])
-        out, err = capsys.readouterr()
-        return code, out, err
-    return call
 
 
 @pytest.fixture
