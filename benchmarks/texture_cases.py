@@ -64,7 +64,7 @@ def pixels_of(name: str) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def load(name: str, side: int | None = None, per_band: bool = False) -> Photo:
+def load(name: str, side: int | None = None, per_band: bool | None = None) -> Photo:
     """A photograph (its top-left `side` x `side` crop when given), fitted and measured."""
     img = pixels_of(name)
     if side is not None:

@@ -4,7 +4,9 @@ Per region (btf.dependence.Dependence):
 
   corr  the correlation matrix of the bands' pixel values, upper triangle;
   acf   the autocorrelation of the pixels at every lag of the half-plane window W(R)
-        (btf.dependence.window), the bands' average or one row per band;
+        (btf.dependence.window): one row per band when some region's bands differ in grain
+        by more than ROW_SPREAD beyond sampling noise (JPEG and Bayer noise set a band apart),
+        else their average;
   lo/hi the lowest and highest level of each band, from the fitter's histograms (`observed`).
 
 Anchors lie on a deterministic lattice (at most `max_anchors`, inside the frame by R so every
@@ -39,6 +41,9 @@ MAX_ANCHORS = 6144
 CHUNK = 2048  # anchors per chunk: about 1 MB of temporaries
 PRODUCT_LIMIT = 400_000  # regions x anchors x positions of one product: OpenBLAS keeps it on one thread
 MIN_PAIRS = 32  # fewer pairs than this: the correlation is reported as 0 (independent)
+# A band's row further than this (plus its sampling noise) from the bands' average at some lag:
+# every band keeps its row (on photographs the average missed a band's grain by up to 0.29)
+ROW_SPREAD = 0.03
 CORR_ANCHORS = 2 * MAX_ANCHORS  # points of the band correlations' own lattice over the whole frame (cheap: no window)
 
 
@@ -137,11 +142,13 @@ class _Sums:
 def measure(
     data: np.ndarray, labels: np.ndarray, models: Mapping[tuple[int, int], Johnson],
     levels: int = 256, max_anchors: int = MAX_ANCHORS, chunk: int = CHUNK, radius: int = RADIUS,
-    per_band: bool = False, levels_seen: Mapping[int, tuple[tuple[int, ...], tuple[int, ...]]] | None = None,
+    per_band: bool | None = None, levels_seen: Mapping[int, tuple[tuple[int, ...], tuple[int, ...]]] | None = None,
 ) -> dict[int, Dependence]:
     """Dependence of every label that has a model for each band of `data` (H x W x B pixels);
-    `levels_seen` ({label: (lo, hi)}, `observed`) fills in the observed levels, `per_band`
-    keeps one autocorrelation row per band instead of their average."""
+    `levels_seen` ({label: (lo, hi)}, `observed`) fills in the observed levels; `per_band`
+    True keeps one autocorrelation row per band, False their average, None (the robot's
+    choice) rows per band when some region's bands differ by more than ROW_SPREAD (one
+    packet carries one row count, so the choice is the frame's)."""
     if data.ndim == 2:
         data = data[..., None]
     if data.ndim != 3 or labels.shape != data.shape[:2]:
@@ -166,12 +173,16 @@ def measure(
             _chunk(sums, data, labels, rows[start:start + per], col, nx, index, centre, radius)
     live = np.array([[models[(lab, b)].family is not Family.CONST for b in range(n_bands)] for lab in regions])
     corrs = _band_correlations(data, labels, index, centre, CORR_ANCHORS * max_anchors // MAX_ANCHORS, chunk)
+    grains = [_window(sums.pearson(j), radius) for j in range(len(regions))]
+    shared = [g[keep].mean(axis=0) if keep.any() else np.zeros(g.shape[1]) for g, keep in zip(grains, live)]
+    if per_band is None:
+        per_band = n_bands > 1 and any(
+            keep.any() and bool((np.abs(g[keep] - mean) > ROW_SPREAD + _noise(sums, j, radius)).any())
+            for j, (g, keep, mean) in enumerate(zip(grains, live, shared)))
     out = {}
     for j, lab in enumerate(regions):
-        r, corr = sums.pearson(j), corrs[j]
-        grain = _window(r, radius)
-        rows_out = grain if per_band else (grain[live[j]].mean(axis=0) if live[j].any()
-                                          else np.zeros(grain.shape[1]))[None]
+        corr, grain = corrs[j], grains[j]
+        rows_out = grain if per_band else shared[j][None]
         seen = (levels_seen or {}).get(lab, ((), ()))
         out[lab] = Dependence(tuple(corr[np.triu_indices(n_bands, 1)].tolist()),
                               tuple(tuple(row.tolist()) for row in rows_out), radius, *seen)
@@ -247,6 +258,13 @@ def _band_correlations(data: np.ndarray, labels: np.ndarray, index: np.ndarray, 
             s2[b, c] = s2[c, b] = sums[j, 1 + n_bands + q]
         out.append(_pearson_matrix(sums[j, 0], sums[j, 1:1 + n_bands], s2))
     return np.array(out)
+
+
+def _noise(sums: _Sums, region: int, radius: int) -> np.ndarray:
+    """Per window lag, three standard errors of a correlation from its pairs (at most 1 / sqrt(n)
+    each): the most that bands alike in grain differ by over the window from sampling alone."""
+    n = _window(sums.anchor_side[:1, region], radius)[0]
+    return 3.0 / np.sqrt(np.maximum(n, 1.0))
 
 
 def _window(r: np.ndarray, radius: int) -> np.ndarray:

@@ -59,7 +59,7 @@ def test_a_diagonal_grain_is_measured_diagonally_not_as_a_product_of_rows_and_co
             assert abs(_at(dep, lag, band)) < 0.06  # a separable product would need these near 0.9
     assert max(abs(v) for v in dep.acf[2]) < 0.06  # the white band has no grain
     assert dep.corr == pytest.approx([0.7, 0.0, 0.0], abs=0.05)
-    shared = measure(img, labels, models)[0]
+    shared = measure(img, labels, models, per_band=False)[0]
     assert len(shared.acf) == 1 and _at(shared, (1, 1)) == pytest.approx(np.mean([_at(dep, (1, 1), b) for b in range(3)]))
 
 
@@ -90,8 +90,20 @@ def test_an_anchor_budget_bounds_the_work_but_keeps_the_estimate():
     img = _image(200, 240, phi=0.8, mix=0.5, seed=5)
     labels = np.zeros(img.shape[:2], np.uint8)
     models, _ = _fits(img, labels)
-    dep = measure(img, labels, models, max_anchors=2048, chunk=256)[0]
+    dep = measure(img, labels, models, max_anchors=2048, chunk=256, per_band=False)[0]
     assert _at(dep, (1, 1)) == pytest.approx(np.mean([0.8, 0.8, 0.0]), abs=0.06)
+
+
+def test_bands_keep_their_own_rows_only_when_their_grains_differ():
+    img = _image(160, 200, phi=0.8, mix=0.7, seed=7)
+    labels = np.zeros(img.shape[:2], np.uint8)
+    models, _ = _fits(img, labels)
+    apart = measure(img, labels, models)[0]  # the white band's grain is far from the others'
+    assert len(apart.acf) == 3 and _at(apart, (1, 1), 0) > 0.7 and abs(_at(apart, (1, 1), 2)) < 0.06
+    alike = np.repeat(img[..., :1], 3, axis=2)  # three copies of one band: one row says it all
+    models, _ = _fits(alike, labels)
+    shared = measure(alike, labels, models)[0]
+    assert len(shared.acf) == 1 and _at(shared, (1, 1)) == pytest.approx(_at(apart, (1, 1), 0), abs=0.02)
 
 
 def test_observed_levels_are_the_regions_lowest_and_highest_per_band():
