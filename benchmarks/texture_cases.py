@@ -4,8 +4,9 @@ Every image ships inside a public package (scikit-image's data module, matplotli
 data); none is a render of our scene model. Gray textures are one region (the whole frame),
 scenes get a seeded 3-class k-means mask (benchmarks.photo_cases), and the 16-bit case is
 matplotlib's sample elevation raster (jacksboro_fault_dem.npz), its metres as 16-bit levels.
-The robot's steps: FrameFitter, the observed levels from its histograms, the dependence pass,
-and the int8 steps of the radio (radio.packets.dependence.quantized).
+The steps of `btf-host fit` (and of the robot, `robot=True`: fewer anchors on a smaller
+window): FrameFitter, the observed levels from its histograms, the dependence pass, and the int8
+steps of the radio (radio.packets.dependence.quantized).
 """
 from __future__ import annotations
 
@@ -19,6 +20,7 @@ from btf.fit.dependence import measure, observed
 from btf.fit.fitter import FrameFitter
 from btf.johnson import Johnson
 from radio.packets.dependence import quantized
+from tools.data.images import HOST_ANCHORS, HOST_RADIUS
 
 TEXTURES = ("grass", "gravel", "brick")
 GRAY_SCENES = ("camera", "moon", "coins")
@@ -64,8 +66,9 @@ def pixels_of(name: str) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
-def load(name: str, side: int | None = None, per_band: bool | None = None) -> Photo:
-    """A photograph (its top-left `side` x `side` crop when given), fitted and measured."""
+def load(name: str, side: int | None = None, per_band: bool | None = None, robot: bool = False) -> Photo:
+    """A photograph (its top-left `side` x `side` crop when given), fitted and measured as
+    `btf-host fit` does, or as the robot does."""
     img = pixels_of(name)
     if side is not None:
         img = np.ascontiguousarray(img[:side, :side])
@@ -81,6 +84,7 @@ def load(name: str, side: int | None = None, per_band: bool | None = None) -> Ph
     fits = fitter.fit()
     models = {k: r.model for k, r in fits.items()}
     seen = observed(fitter.counts, fitter.centre0, fitter.bin_width, levels)
-    deps = measure(img, labels, models, levels, per_band=per_band, levels_seen=seen)
+    reach = {} if robot else {"max_anchors": HOST_ANCHORS, "radius": HOST_RADIUS}
+    deps = measure(img, labels, models, levels, per_band=per_band, levels_seen=seen, **reach)
     ids = sorted(deps)
     return Photo(name, img, labels, levels, models, quantized(deps, ids, n_bands, levels))

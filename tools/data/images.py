@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import cv2
 import numpy as np
 
-from btf.dependence import Dependence
+from btf.dependence import MAX_RADIUS, Dependence
 from btf.fit.dependence import measure, observed
 from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from btf.fit.fitter import FrameFitter
@@ -201,15 +201,19 @@ def feature_bands(image: np.ndarray, space: str | None = None, pca=None):
 
 
 # The host is not held to the robot's time per pose: the robot's pass at more anchors (the
-# window's worst error 0.059 against 0.082 at the robot's 6,144; benchmarks: "dependence").
+# window's worst error 0.059 against 0.082 at the robot's 6,144; benchmarks: "dependence") and
+# on the widest window, so the lags out to 8 that a comparison reads are measured, not extended
+# (regions within 0.10 of the photograph's 2-D autocorrelation: 25 of 36 against 17 at the
+# robot's window; benchmarks: "Texture synthesis on photographs").
 HOST_ANCHORS = 16384
+HOST_RADIUS = MAX_RADIUS
 
 
 @dataclass(frozen=True)
 class FittedImage:
     """An image on disk fitted with the robot's own FrameFitter, label by label, band by band,
     with each region's grain and band dependence measured by the robot's own pass (at
-    HOST_ANCHORS)."""
+    HOST_ANCHORS on the window of HOST_RADIUS)."""
 
     feats: "FeatureFrame"
     pca: "PcaBasis | None"
@@ -241,7 +245,7 @@ def fit_bands(feats: "FeatureFrame", pca: "PcaBasis | None", labels: np.ndarray,
     fitted = {lab for lab, _ in results}
     if dependence and results:
         deps = measure(feats.data, labels, {k: r.model for k, r in results.items()}, feats.levels,
-                       max_anchors=HOST_ANCHORS, levels_seen=seen)
+                       max_anchors=HOST_ANCHORS, radius=HOST_RADIUS, levels_seen=seen)
     else:
         deps = {lab: Dependence.observed(*seen[lab]) for lab in fitted if lab in seen}
     return FittedImage(feats, pca, labels, results, deps, fitter.counts)
