@@ -56,6 +56,8 @@ def _judge(photo, cors: list[np.ndarray], ind: np.ndarray, bare: np.ndarray) -> 
             "outside_bare": gm.outside(img, bare, inside),
             "plaid": _mean_plaid(img, cors, inside),
             "acf": float(np.mean([gm.acf_gap(img, c, inside) for c in cors])),
+            # two draws of one record differ this much: the photograph is one draw too
+            "acf_draws": float(np.mean([gm.acf_gap(a, b, inside) for i, a in enumerate(cors) for b in cors[i + 1:]])),
             "acf_ind": gm.acf_gap(img, ind, inside),
             "band": max(gm.band_gap(img, c, inside) for c in cors),
             "w1": _w1(img, cors[0], inside), "w1_bare": _w1(img, bare, inside),
@@ -125,7 +127,10 @@ def _summary(results) -> list[str]:
            f"{np.median([r['acf'] for r in rows]):.3f}, worst {worst('acf'):.3f} (independent pixels: worst "
            f"{worst('acf_ind'):.2f}); from the robot's records (6,144 anchors, lags within 6): "
            f"{sum(r['acf_robot'] <= 0.10 for r in rows)} of {len(rows)}, median "
-           f"{np.median([r['acf_robot'] for r in rows]):.3f}",
+           f"{np.median([r['acf_robot'] for r in rows]):.3f}; two draws of one record differ by "
+           f"{np.median([r['acf_draws'] for r in rows]):.3f} (median), and "
+           f"{sum(r['acf'] <= max(0.10, r['acf_draws']) for r in rows)} of {len(rows)} regions are within 0.10 "
+           f"or their own draw-to-draw gap",
            f"- **band-correlation gap: worst {max(colour):.3f}** over {len(colour)} colour regions "
            f"(target <= 0.05: {verdict(max(colour), 0.05)})",
            f"- W1 to the photograph, mean over regions: {np.mean([r['w1_bare'] for r in rows]):.2f} levels without the "

@@ -20,7 +20,7 @@ from btf.fit.dependence import measure, observed
 from btf.fit.fitter import FrameFitter
 from btf.johnson import Johnson
 from radio.packets.dependence import quantized
-from tools.data.images import HOST_ANCHORS, HOST_RADIUS
+from tools.data.images import HOST_ANCHORS, HOST_CORR_POINTS, HOST_RADIUS
 
 TEXTURES = ("grass", "gravel", "brick")
 GRAY_SCENES = ("camera", "moon", "coins")
@@ -84,7 +84,7 @@ def load(name: str, side: int | None = None, per_band: bool | None = None, robot
     fits = fitter.fit()
     models = {k: r.model for k, r in fits.items()}
     seen = observed(fitter.counts, fitter.centre0, fitter.bin_width, levels)
-    reach = {} if robot else {"max_anchors": HOST_ANCHORS, "radius": HOST_RADIUS}
+    reach = {} if robot else {"max_anchors": HOST_ANCHORS, "radius": HOST_RADIUS, "corr_points": HOST_CORR_POINTS}
     deps = measure(img, labels, models, levels, per_band=per_band, levels_seen=seen, **reach)
     ids = sorted(deps)
     return Photo(name, img, labels, levels, models, quantized(deps, ids, n_bands, levels))

@@ -143,12 +143,14 @@ def measure(
     data: np.ndarray, labels: np.ndarray, models: Mapping[tuple[int, int], Johnson],
     levels: int = 256, max_anchors: int = MAX_ANCHORS, chunk: int = CHUNK, radius: int = RADIUS,
     per_band: bool | None = None, levels_seen: Mapping[int, tuple[tuple[int, ...], tuple[int, ...]]] | None = None,
+    corr_points: int | None = None,
 ) -> dict[int, Dependence]:
     """Dependence of every label that has a model for each band of `data` (H x W x B pixels);
     `levels_seen` ({label: (lo, hi)}, `observed`) fills in the observed levels; `per_band`
     True keeps one autocorrelation row per band, False their average, None (the robot's
     choice) rows per band when some region's bands differ by more than ROW_SPREAD (one
-    packet carries one row count, so the choice is the frame's)."""
+    packet carries one row count, so the choice is the frame's); `corr_points` bounds the
+    band correlations' lattice (default twice the anchors)."""
     if data.ndim == 2:
         data = data[..., None]
     if data.ndim != 3 or labels.shape != data.shape[:2]:
@@ -172,7 +174,8 @@ def measure(
         for start in range(0, len(rows), per):
             _chunk(sums, data, labels, rows[start:start + per], col, nx, index, centre, radius)
     live = np.array([[models[(lab, b)].family is not Family.CONST for b in range(n_bands)] for lab in regions])
-    corrs = _band_correlations(data, labels, index, centre, CORR_ANCHORS * max_anchors // MAX_ANCHORS, chunk)
+    corrs = _band_correlations(data, labels, index, centre,
+                               corr_points or CORR_ANCHORS * max_anchors // MAX_ANCHORS, chunk)
     grains = [_window(sums.pearson(j), radius) for j in range(len(regions))]
     shared = [g[keep].mean(axis=0) if keep.any() else np.zeros(g.shape[1]) for g, keep in zip(grains, live)]
     if per_band is None:
@@ -230,6 +233,7 @@ def _band_correlations(data: np.ndarray, labels: np.ndarray, index: np.ndarray, 
     included (the window's anchors keep R pixels off them, which biased regions that lie there)."""
     h, w, n_bands = data.shape
     step = max(1, math.ceil(math.sqrt(h * w / max(1, max_points))))
+    step += 1 - step % 2  # odd: an even step reads one phase of every 2x2 Bayer and 8x8 JPEG block
     k = len(centre)
     pairs = [(b, c) for b in range(n_bands) for c in range(b + 1)]
     sums = np.zeros((k, 1 + n_bands + len(pairs)))  # n, sum x_b, sum x_b x_c

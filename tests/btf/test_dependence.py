@@ -178,3 +178,22 @@ def test_dependence_memory_does_not_grow_with_the_frame():
         return top
 
     assert peak(1500) <= 1.2 * peak(400) + 200_000
+
+
+def test_band_correlations_read_every_phase_of_a_two_by_two_mosaic():
+    """A sensor's 2x2 mosaic (or JPEG's 8x8 blocks) gives each phase its own band statistics; a
+    lattice of even step reads one phase only. The step is odd, and `corr_points` covering the
+    frame reads every pixel."""
+    rng = np.random.default_rng(8)
+    base = rng.normal(128, 20, (240, 240))
+    img = np.stack([base, base, rng.normal(128, 20, (240, 240))], axis=-1)
+    img[::2, ::2, 1] = rng.normal(128, 20, (120, 120))  # one phase of four: green independent of red
+    img = np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    labels = np.zeros(img.shape[:2], np.uint8)
+    models, _ = _fits(img, labels)
+    every = np.corrcoef(img.reshape(-1, 3).T.astype(np.float64))[0, 1]  # about 0.75
+    for points in (240 * 240 // 16, 240 * 240 // 36):  # steps 4 and 6 before they were made odd
+        lattice = measure(img, labels, models, corr_points=points)[0]
+        assert lattice.corr[0] == pytest.approx(every, abs=0.05)
+    whole = measure(img, labels, models, corr_points=240 * 240)[0]
+    assert whole.corr[0] == pytest.approx(every, abs=1e-6)

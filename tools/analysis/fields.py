@@ -64,10 +64,13 @@ def grain_of(dep: Dependence, maps: tuple[LevelMap, ...]) -> Grain:
     """A measured record through its bands' maps: latent band matrix and grain spectra."""
     if not dep.measured or dep.n_bands != len(maps):
         raise ValueError(f"a measured record of {len(maps)} band(s) is needed for correlated fields")
-    rows = [(list(maps), dep.acf[0])] if not dep.per_band else [([m], row) for m, row in zip(maps, dep.acf)]
     with _BLAS.limit(limits=1, user_api="blas"):
         latent, reached = latent_bands(dep.matrix(), list(maps))
-        rings = tuple(ring_spectrum(dep.radius, row, grain_curve(ms), RING, RING) for ms, row in rows)
+        shared = dep.acf[0] if not dep.per_band else tuple(np.mean(dep.acf, axis=0).tolist())
+        rings = (ring_spectrum(dep.radius, shared, grain_curve(list(maps)), RING, RING),)
+        if dep.per_band:
+            rings = tuple(ring_spectrum(dep.radius, row, grain_curve([m]), RING, RING, reference=rings[0])
+                          for m, row in zip(maps, dep.acf))
     for r in rings:
         r.flags.writeable = False
     return Grain(latent, reached, rings)
@@ -175,7 +178,17 @@ def _gram(spectra: np.ndarray, weights: np.ndarray, n: int, diagonal: np.ndarray
 
 
 def _fold(spectra: list[np.ndarray], t: np.ndarray) -> None:
-    """spectra <- t spectra for lower-triangular t, in place from the last band down."""
+    """spectra <- t spectra, in place from the last band down (lower-triangular t), through
+    copies of the originals for a full t."""
+    if np.triu(t, 1).any():
+        originals = [s.copy() for s in spectra]
+        for i in range(len(spectra)):
+            flat = spectra[i].reshape(-1)
+            flat *= np.complex64(t[i, i])
+            for j in range(len(spectra)):
+                if j != i:
+                    blas.caxpy(originals[j].reshape(-1), flat, a=np.complex64(t[i, j]))
+        return
     for i in range(len(spectra) - 1, -1, -1):
         flat = spectra[i].reshape(-1)
         flat *= np.complex64(t[i, i])
@@ -209,12 +222,13 @@ def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale:
         spectra[b] *= shaping.amps[b if len(shaping.amps) > 1 else 0]
         spectra[b, 0, 0] = 0.0
     whole = inside is None and grid == (h, w)
+    own = shaping.mixing is not None  # bands of their own spectra: any correction mixes them
     low = np.linalg.cholesky(grain.latent + 1e-9 * np.eye(n_bands))
     if whole:  # exact over the grid, which is the region
-        known = None if shaping.mixing is not None else np.full(n_bands, shaping.power)
+        known = None if own else np.full(n_bands, shaping.power)
         gram = _gram(spectra, shaping.weights, ny * nx, known) + 1e-12 * scale * scale * np.eye(n_bands)
-        _fold(spectra, low @ np.linalg.inv(np.linalg.cholesky(gram / (scale * scale))))
-    elif shaping.mixing is None:  # mixed here, made exact over the region's pixels below
+        _fold(spectra, correction(gram / (scale * scale), grain.latent, own))
+    elif not own:  # mixed here, made exact over the region's pixels below
         _fold(spectra, low)
     out = []
     for b in range(n_bands):
@@ -224,14 +238,40 @@ def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale:
         np.fft.irfft(rows, n=nx, axis=1, out=fields[b])
         out.append(fields[b, :h, :w])
     if not whole:
-        exact_moments(out, inside, low * scale, offset)
+        exact_moments(out, inside, grain.latent * (scale * scale), offset, own)
     return out
+
+
+def correction(now: np.ndarray, want: np.ndarray, least_mixing: bool = False) -> np.ndarray:
+    """A matrix T with T now T^T = want (covariances). Lower-triangular by default (in place
+    and cheap); `least_mixing`, the one nearest the identity (the optimal transport map
+    now^-1/2 (now^1/2 want now^1/2)^1/2 now^-1/2): where every band has its own spectrum, a
+    triangular one built on a nearly singular matrix mixed them wholesale and took up to 0.19
+    off a band's autocorrelation."""
+    b = len(now)
+    ridge = 1e-12 * np.eye(b) * max(1.0, float(np.trace(now)))
+    if not least_mixing:
+        return np.linalg.cholesky(want + 1e-9 * np.eye(b)) @ np.linalg.inv(np.linalg.cholesky(now + ridge))
+    vals, vecs = np.linalg.eigh(now + ridge)
+    root = (vecs * np.sqrt(np.maximum(vals, 1e-12))) @ vecs.T
+    inv_root = (vecs / np.sqrt(np.maximum(vals, 1e-12))) @ vecs.T
+    vals, vecs = np.linalg.eigh(root @ want @ root)
+    middle = (vecs * np.sqrt(np.maximum(vals, 0.0))) @ vecs.T
+    return inv_root @ middle @ inv_root
 
 
 def _affine(fields: list[np.ndarray], t: np.ndarray, shift: np.ndarray) -> None:
     """fields_i <- sum_(j <= i) t_ij fields_j + shift_i in place (t lower triangular), from the
     last band down so every band still reads the others' originals; views (a crop of a larger
     grid) take a temporary, contiguous fields BLAS."""
+    if np.triu(t, 1).any():  # a full t: each band from copies of the originals
+        originals = [f.copy() for f in fields]
+        for i, f in enumerate(fields):
+            np.multiply(originals[0], np.float32(t[i, 0]), out=f)
+            for j in range(1, len(fields)):
+                f += originals[j] * np.float32(t[i, j])
+            f += np.float32(shift[i])
+        return
     flat = [f.reshape(-1) if f.flags.c_contiguous else None for f in fields]
     scratch = None
     for i in range(len(fields) - 1, -1, -1):
@@ -245,9 +285,11 @@ def _affine(fields: list[np.ndarray], t: np.ndarray, shift: np.ndarray) -> None:
         fields[i] += np.float32(shift[i])
 
 
-def exact_moments(fields: list[np.ndarray], inside: np.ndarray | None, target: np.ndarray, offset: float) -> None:
+def exact_moments(fields: list[np.ndarray], inside: np.ndarray | None, target: np.ndarray, offset: float,
+                  least_mixing: bool = False) -> None:
     """fields (B, each h x w) <- T (fields - mean) + offset in place, with the mean and T from
-    the pixels `inside` (None: all), so their sample covariance there is target target^T."""
+    the pixels `inside` (None: all), so their sample covariance there is `target` (T from
+    `correction`)."""
     b = len(fields)
     weight = None if inside is None else inside.astype(np.float32)
     n = fields[0].size if weight is None else float(weight.sum())
@@ -261,18 +303,17 @@ def exact_moments(fields: list[np.ndarray], inside: np.ndarray | None, target: n
     cov = np.array([[float(np.einsum(spec, fields[i], fields[j], *ops, dtype=np.float64)) / n for j in range(b)]
                     for i in range(b)]) - np.outer(mean, mean)
     try:
-        t = target @ np.linalg.inv(np.linalg.cholesky(cov + 1e-12 * np.eye(b) * max(1.0, float(np.trace(cov)))))
+        t = correction(cov, target, least_mixing)
     except np.linalg.LinAlgError:
         t = np.eye(b)
     _affine(fields, t, offset - t @ mean)
 
 
-def remix(fields: list[np.ndarray], old: np.ndarray, new: np.ndarray, offset: float) -> None:
+def remix(fields: list[np.ndarray], old: np.ndarray, new: np.ndarray, offset: float, least_mixing: bool = False) -> None:
     """Fields drawn with latent band correlation `old` (each z * scale + offset) made to carry
-    `new` in place: z <- L_new L_old^-1 z."""
+    `new` in place: z <- T z (`correction`)."""
     with _BLAS.limit(limits=1, user_api="blas"):
-        b = len(fields)
-        t = np.linalg.cholesky(new + 1e-9 * np.eye(b)) @ np.linalg.inv(np.linalg.cholesky(old + 1e-9 * np.eye(b)))
+        t = correction(old, new, least_mixing)
         _affine(fields, t, offset * (1.0 - t.sum(axis=1)))
 
 

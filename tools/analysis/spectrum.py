@@ -36,6 +36,7 @@ RING = 128
 MAX_ASPECT = 4.0  # an exponential's long axis over its short one
 PROJECTIONS = 15
 REFIT_ITERATIONS = 150
+TIE = 0.3  # a band's pull to the bands' shared spectrum, against its window's squared misses
 
 
 def full_window(radius: int, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -96,10 +97,12 @@ def _projected(radius: int, latent: np.ndarray, ny: int, nx: int) -> np.ndarray:
     return s / total if total > 0 else np.ones_like(s)
 
 
-def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray) -> np.ndarray:
+def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray,
+           reference: np.ndarray | None = None) -> np.ndarray:
     """The spectrum S = a^2 (so S >= 0 without bounds, which slow L-BFGS-B down by orders of
     magnitude where many frequencies sit at zero) whose pixel autocorrelation over the window
-    comes nearest `target`."""
+    comes nearest `target`; with a `reference` spectrum, the one nearest it (in sqrt S) among
+    those that meet the window about as well (see ring_spectrum)."""
     ny, nx = start.shape
     lags, vals = full_window(radius, target)
     iy, ix = lags[:, 0] % ny, lags[:, 1] % nx
@@ -116,21 +119,34 @@ def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray
         grad = np.zeros((ny, nx))
         np.add.at(grad, (iy, ix), 2 * weight * res * dp)
         # d r(h) / d S_k = cos(2 pi k h) / n, d S_k / d a_k = 2 a_k
-        return float(weight @ res ** 2), 2.0 * root * sfft.fft2(grad).real.ravel() / n
+        value, slope_a = float(weight @ res ** 2), 2.0 * root * sfft.fft2(grad).real.ravel() / n
+        if anchor is not None:
+            away = root - anchor
+            value += TIE * float(away @ away) / n
+            slope_a += 2.0 * TIE * away / n
+        return value, slope_a
 
+    anchor = None if reference is None else np.sqrt(np.maximum(reference, 0.0)).ravel()
     # a floor under the start: a frequency at exactly zero would have no gradient to grow by
-    fit = minimize(loss, np.sqrt(start + 1e-3).ravel(), jac=True, method="L-BFGS-B", options={"maxiter": REFIT_ITERATIONS})
+    first = np.sqrt(start + 1e-3).ravel() if anchor is None else anchor + 1e-3
+    fit = minimize(loss, first, jac=True, method="L-BFGS-B", options={"maxiter": REFIT_ITERATIONS})
     s = (fit.x * fit.x).reshape(ny, nx)
     s = 0.5 * (s + s[(-np.arange(ny)) % ny][:, (-np.arange(nx)) % nx])  # r real: S(k) = S(-k)
     mean = s.mean()
     return s / mean if mean > 0 else np.ones_like(s)
 
 
-def ring_spectrum(radius: int, pixel_acf: tuple[float, ...], curve: np.ndarray, ny: int, nx: int) -> np.ndarray:
+def ring_spectrum(radius: int, pixel_acf: tuple[float, ...], curve: np.ndarray, ny: int, nx: int,
+                  reference: np.ndarray | None = None) -> np.ndarray:
     """The spectrum on a ring of ny x nx (at most RING each) for a measured pixel
-    autocorrelation row, through the bands' grain `curve`."""
+    autocorrelation row, through the bands' grain `curve`. A band of several is refined from
+    the bands' shared spectrum (`reference`) and held near it beyond what its own row asks:
+    fitted apart, two bands' spectra differed in detail no row measured, and bands that
+    correlate 0.98 cannot then reach it (their correlation is at most the spectra's overlap,
+    mean sqrt(S_i S_j), which fell to 0.86)."""
     acf = np.asarray(pixel_acf, dtype=np.float64)
-    return _refit(radius, acf, _projected(radius, latent_acf(acf, curve), ny, nx), curve)
+    start = reference if reference is not None else _projected(radius, latent_acf(acf, curve), ny, nx)
+    return _refit(radius, acf, start, curve, reference)
 
 
 def _axis_weights(n: int, g: int) -> np.ndarray:

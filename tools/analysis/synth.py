@@ -189,7 +189,8 @@ def region_fields(grain: Grain, maps: tuple[LevelMap, ...], measured: np.ndarray
         live = np.array([m.sd > 0 for m in maps])
         miss = np.abs(drawn - measured)[np.ix_(live, live)]
         if miss.size and miss.max() > TOLERANCE:
-            remix(fields, grain.latent, corrected(grain.latent, measured, drawn, list(maps), REACH), offset)
+            remix(fields, grain.latent, corrected(grain.latent, measured, drawn, list(maps), REACH), offset,
+                  least_mixing=len(grain.rings) > 1)
     return fields
 
 

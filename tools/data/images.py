@@ -207,6 +207,9 @@ def feature_bands(image: np.ndarray, space: str | None = None, pca=None):
 # robot's window; benchmarks: "Texture synthesis on photographs").
 HOST_ANCHORS = 16384
 HOST_RADIUS = MAX_RADIUS
+# The band correlations from every pixel up to 16 MP: a lattice's few thousand points of a
+# region with a long grain missed grace_hopper's background by 0.05.
+HOST_CORR_POINTS = 1 << 24
 
 
 @dataclass(frozen=True)
@@ -245,7 +248,8 @@ def fit_bands(feats: "FeatureFrame", pca: "PcaBasis | None", labels: np.ndarray,
     fitted = {lab for lab, _ in results}
     if dependence and results:
         deps = measure(feats.data, labels, {k: r.model for k, r in results.items()}, feats.levels,
-                       max_anchors=HOST_ANCHORS, radius=HOST_RADIUS, levels_seen=seen)
+                       max_anchors=HOST_ANCHORS, radius=HOST_RADIUS, levels_seen=seen,
+                       corr_points=HOST_CORR_POINTS)
     else:
         deps = {lab: Dependence.observed(*seen[lab]) for lab in fitted if lab in seen}
     return FittedImage(feats, pca, labels, results, deps, fitter.counts)

@@ -111,3 +111,43 @@ def test_blending_mixes_spectra_and_matrices_linearly():
     assert np.linalg.eigvalsh(m.latent).min() >= -1e-12
     with pytest.raises(ValueError, match="weight"):
         blend(a, b, 1.5)
+
+
+def test_the_least_mixing_correction_meets_the_covariance_nearer_the_identity_than_a_triangular_one():
+    from tools.analysis.fields import correction
+
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a = rng.standard_normal((3, 3))
+        now = a @ a.T + 0.05 * np.eye(3)
+        want = np.corrcoef(rng.standard_normal((3, 6)))  # nearly singular at times
+        least, tri = correction(now, want, least_mixing=True), correction(now, want)
+        assert least @ now @ least.T == pytest.approx(want, abs=1e-6)
+        assert tri @ now @ tri.T == pytest.approx(want, abs=1e-6)
+        # the optimal transport map moves a draw least: E|T z - z|^2 = tr((T - I) now (T - I)^T)
+        cost = lambda t: float(np.trace((t - np.eye(3)) @ now @ (t - np.eye(3)).T))  # noqa: E731
+        assert cost(least) <= cost(tri) + 1e-9
+
+
+def test_bands_of_their_own_grain_keep_it_beside_a_correlation_one_constant_mixing_cannot_give():
+    """A stained micrograph's make-up: red and blue uncorrelated, green following both. Bands
+    whose spectra differ cannot all meet such a matrix by one mixing of their phases; the draw's
+    correction then must not pour one band's grain into another."""
+    dep = Dependence((0.7, 0.0, 0.7), (_grain(0.95), _grain(0.8), _grain(0.4)), 6)
+    fields = draw(grain_of(dep, NORMALS), (256, 256), np.random.default_rng(2),
+                  inside=np.arange(256)[:, None].repeat(256, 1) % 64 < 48)  # not the whole box
+    for band, decay in enumerate((0.95, 0.8, 0.4)):  # a triangular correction took blue's lag 1 to 0.68
+        f = fields[band].astype(np.float64)
+        assert _acf(f, 0, 1) == pytest.approx(decay, abs=0.08)
+        assert _acf(f, 2, 2) == pytest.approx(decay ** np.hypot(2, 2), abs=0.08)
+    v = np.stack([f[np.arange(256)[:, None].repeat(256, 1) % 64 < 48] for f in fields])
+    assert np.corrcoef(v)[np.triu_indices(3, 1)] == pytest.approx([0.7, 0.0, 0.7], abs=0.01)
+
+
+def test_bands_with_near_rows_get_near_spectra_so_a_high_band_correlation_stays_reachable():
+    noise = np.random.default_rng(4).normal(0, 0.01, (3, len(window(6))))
+    rows = tuple(tuple(np.clip(np.array(_grain(0.8)) + n, -1, 1).tolist()) for n in noise)
+    grain = grain_of(Dependence((0.97, 0.95, 0.97), rows, 6), NORMALS)
+    s = np.stack([r.ravel() for r in grain.rings])
+    overlap = np.sqrt(s[:, None] * s[None]).mean(axis=2)  # the most two bands can correlate
+    assert overlap.min() > 0.98

@@ -24,7 +24,7 @@ STREAK_TOLERANCE = 0.12
 @pytest.fixture(scope="module")
 def rocket():
     """(photograph, its lighter sky's mask, the latent windows the extension was fitted to)."""
-    photo = texture_cases.load("rocket")
+    photo = texture_cases.load("rocket", robot=True)  # the robot's window: lags within 6
     means = {lab: float(photo.pixels[photo.labels == lab].mean()) for lab in photo.regions}
     sky = sorted(means, key=means.get)[1]  # the lighter of the two sky classes
     windows = []
