@@ -12,13 +12,15 @@ or one per band. Per call (`draw`), for each band:
 2. per-band spectra are mixed before the amplitude, so each band keeps its own spectrum and
    the bands their correlation (less the coherence their spectra lose, corrected for);
 3. exact sample moments in the frequency domain: the bands' covariance over the grid is read
-   off the coefficients (Parseval) and a lower-triangular matrix folded into them makes it the
-   target exactly, so one realisation of a long grain does not scatter the band correlation;
+   off the coefficients (Parseval) and a matrix folded into them makes it the target exactly
+   (`correction`: lower-triangular for bands of one spectrum, the least-mixing map for bands
+   of their own), so one realisation of a long grain does not scatter the band correlation;
    the mean is the zero-frequency coefficient, set to the table's offset;
 4. one inverse real FFT per field (float32, scipy.fft sizes from next_fast_len), the output
    already the index of each pixel's level in its band's z table.
 A region that does not fill its grid has its moments made exact over its own pixels after the
-transform instead (two passes more).
+transform instead (two passes more), and when it is scattered over its box, its own pairs'
+autocorrelation imposed on the draw (tools.analysis.imposed).
 """
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ from scipy.linalg import blas
 from threadpoolctl import ThreadpoolController
 
 from btf.dependence import MAX_RADIUS, Dependence
+from tools.analysis.imposed import MIN_PIXELS, impose, lag_acf
 from tools.analysis.latent import grain_curve, latent_bands
 from tools.analysis.levelmap import Z_SPAN, LevelMap
 from tools.analysis.spectrum import RING, amplitude, ring_spectrum
@@ -129,6 +132,14 @@ def _shaping(grain: Grain, grid: tuple[int, int], scale: float) -> _Shaping:
     for a in amps:
         a.flags.writeable = False
     return _Shaping(amps, mixing, weights, power)
+
+
+@lru_cache(maxsize=8)
+def _targets(grain: Grain, grid: tuple[int, int], scale: float) -> tuple[np.ndarray, ...]:
+    """Per band, the latent autocorrelation within 2 MAX_RADIUS of its drawn spectrum (what
+    a fragmented region's draw is held to)."""
+    amps = _shaping(grain, grid, scale).amps
+    return tuple(lag_acf(amps[b if len(amps) > 1 else 0], grid[1], 2 * MAX_RADIUS) for b in range(grain.n_bands))
 
 
 def _workspace(n_bands: int, ny: int, nx: int) -> tuple[np.ndarray, np.ndarray]:
@@ -230,15 +241,23 @@ def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale:
         _fold(spectra, correction(gram / (scale * scale), grain.latent, own))
     elif not own:  # mixed here, made exact over the region's pixels below
         _fold(spectra, low)
-    out = []
     for b in range(n_bands):
         spectra[b, 0, 0] = offset * ny * nx
-        # the inverse real FFT in two steps, both into the workspace (irfft2 allocates twice)
-        rows = sfft.ifft(spectra[b], axis=0, overwrite_x=True, workers=1)
-        np.fft.irfft(rows, n=nx, axis=1, out=fields[b])
-        out.append(fields[b, :h, :w])
-    if not whole:
-        exact_moments(out, inside, grain.latent * (scale * scale), offset, own)
+    fragmented = inside is not None and int(np.count_nonzero(inside)) >= MIN_PIXELS
+    keep = [s.copy() for s in spectra] if fragmented else None
+    out = [fields[b, :h, :w] for b in range(n_bands)]
+
+    def redraw() -> None:
+        for b in range(n_bands):
+            # the inverse real FFT in two steps, both into the workspace (irfft2 allocates twice)
+            rows = sfft.ifft(spectra[b], axis=0, overwrite_x=True, workers=1)
+            np.fft.irfft(rows, n=nx, axis=1, out=fields[b])
+        if not whole:
+            exact_moments(out, inside, grain.latent * (scale * scale), offset, own)
+
+    redraw()
+    if keep is not None:  # a region scattered over its box: its own pairs' grain imposed
+        impose(spectra, keep, out, inside, _targets(grain, grid, float(scale)), nx, scale, offset, redraw)
     return out
 
 

@@ -151,3 +151,22 @@ def test_bands_with_near_rows_get_near_spectra_so_a_high_band_correlation_stays_
     s = np.stack([r.ravel() for r in grain.rings])
     overlap = np.sqrt(s[:, None] * s[None]).mean(axis=2)  # the most two bands can correlate
     assert overlap.min() > 0.98
+
+
+def test_a_region_scattered_over_its_box_gets_the_grain_over_its_own_pairs():
+    """One draw's autocorrelation over a fragmented region strays from the spectrum's at the
+    longer lags; the draw imposes it there, which a whole-box draw cut to the region does not."""
+    from tools.analysis.grain_metrics import acf2d
+
+    rng = np.random.default_rng(5)
+    inside = np.kron(rng.random((10, 10)) < 0.35, np.ones((40, 40), bool))  # blocks over a 400 x 400 box
+    dep = Dependence((0.0,), (_grain(0.95),), 6)
+    grain = grain_of(dep, NORMALS[:2])
+    target = np.array(_grain(0.95))
+    imposed, cut = [], []
+    for seed in range(3):
+        f = draw(grain, inside.shape, np.random.default_rng(seed), inside=inside)[0]
+        imposed.append(np.abs(acf2d(f, inside, 6) - target).max())
+        g = draw(grain, inside.shape, np.random.default_rng(seed))[0]
+        cut.append(np.abs(acf2d(g, inside, 6) - target).max())
+    assert np.mean(imposed) < 0.04 and np.mean(imposed) < 0.6 * np.mean(cut)
