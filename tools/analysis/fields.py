@@ -64,10 +64,11 @@ def grain_of(dep: Dependence, maps: tuple[LevelMap, ...]) -> Grain:
     """A measured record through its bands' maps: latent band matrix and grain spectra."""
     if not dep.measured or dep.n_bands != len(maps):
         raise ValueError(f"a measured record of {len(maps)} band(s) is needed for correlated fields")
-    rows = [(list(maps), dep.acf[0])] if not dep.per_band else [([m], row) for m, row in zip(maps, dep.acf)]
+    rows = [(list(maps), dep.acf[0], dep.known(0))] if not dep.per_band else [
+        ([m], row, dep.known(b)) for b, (m, row) in enumerate(zip(maps, dep.acf))]
     with _BLAS.limit(limits=1, user_api="blas"):
         latent, reached = latent_bands(dep.matrix(), list(maps))
-        rings = tuple(ring_spectrum(dep.radius, row, grain_curve(ms), RING, RING) for ms, row in rows)
+        rings = tuple(ring_spectrum(dep.radius, row, grain_curve(ms), RING, RING, known) for ms, row, known in rows)
     for r in rings:
         r.flags.writeable = False
     return Grain(latent, reached, rings)
