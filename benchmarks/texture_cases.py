@@ -84,7 +84,8 @@ def load(name: str, side: int | None = None, per_band: bool | None = None, robot
     fits = fitter.fit()
     models = {k: r.model for k, r in fits.items()}
     seen = observed(fitter.counts, fitter.centre0, fitter.bin_width, levels)
-    reach = {} if robot else {"max_anchors": HOST_ANCHORS, "radius": HOST_RADIUS, "corr_points": HOST_CORR_POINTS}
+    reach = {} if robot else {"max_anchors": HOST_ANCHORS, "radius": HOST_RADIUS, "corr_points": HOST_CORR_POINTS,
+                              "sparse_budget": HOST_ANCHORS // 2}
     deps = measure(img, labels, models, levels, per_band=per_band, levels_seen=seen, **reach)
     ids = sorted(deps)
     return Photo(name, img, labels, levels, models, quantized(deps, ids, n_bands, levels))

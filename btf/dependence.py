@@ -7,6 +7,8 @@ acf     the autocorrelation of the pixels at every lag of the half-plane window 
         (`window`), one row shared by the bands (their average) or one row per band
 radius  the window's radius R: W(R) holds (0, 1..R) and (dy, -R..R) for dy = 1..R, 2R(R+1)
         lags; the other half follows from r(-h) = r(h)
+unmeasured  per acf row, the window indices of the lags too few pixel pairs measured (each
+        stored as 0.0, never to be read as "independent"); () when every lag was measured
 
 corr and acf are None when the grain was not measured (the region is then drawn pixel by
 pixel). The robot measures the record (btf.fit.dependence), the packet carries it in int8 steps
@@ -61,6 +63,7 @@ class Dependence:
     radius: int = RADIUS
     lo: tuple[int, ...] = ()
     hi: tuple[int, ...] = ()
+    unmeasured: tuple[tuple[int, ...], ...] = ()
 
     def __post_init__(self) -> None:
         check_radius(self.radius)
@@ -75,6 +78,7 @@ class Dependence:
                 not 0 <= a <= b for a, b in zip(self.lo, self.hi)):
             raise ValueError(f"observed levels need 0 <= lo <= hi, got lo {self.lo}, hi {self.hi}")
         if self.corr is None:
+            self._check_unmeasured()
             return
         object.__setattr__(self, "corr", _unit("corr", self.corr))
         rows = tuple(_unit("acf", row) for row in self.acf)
@@ -83,6 +87,23 @@ class Dependence:
         if len(rows) not in (1, n) or any(len(r) != window_size(self.radius) for r in rows):
             raise ValueError(f"dependence needs 1 or {n} rows of {window_size(self.radius)} lags "
                              f"(radius {self.radius}), got {[len(r) for r in rows]}")
+        self._check_unmeasured()
+
+    def _check_unmeasured(self) -> None:
+        gaps = tuple(tuple(row) for row in self.unmeasured)
+        if not any(gaps):
+            object.__setattr__(self, "unmeasured", ())  # every lag measured, however it was said
+            return
+        if self.acf is None or len(gaps) != len(self.acf):
+            raise ValueError(f"unmeasured lags need one entry per acf row, got {len(gaps)}")
+        size = window_size(self.radius)
+        for row, gap in zip(self.acf, gaps):
+            if any(type(k) is not int for k in gap) or list(gap) != sorted(set(gap)) or not all(
+                    0 <= k < size for k in gap):
+                raise ValueError(f"unmeasured lags must be increasing window indices below {size}, got {gap}")
+            if any(row[k] != 0.0 for k in gap):
+                raise ValueError("an unmeasured lag must hold 0.0")
+        object.__setattr__(self, "unmeasured", gaps)
 
     @property
     def n_bands(self) -> int:
@@ -100,6 +121,19 @@ class Dependence:
     def band_acf(self, band: int) -> tuple[float, ...]:
         assert self.acf is not None
         return self.acf[band if len(self.acf) > 1 else 0]
+
+    def known(self, row: int) -> np.ndarray:
+        """Per window lag of an acf row, whether it was measured."""
+        assert self.acf is not None
+        out = np.ones(window_size(self.radius), dtype=bool)
+        if self.unmeasured:
+            out[list(self.unmeasured[row])] = False
+        return out
+
+    def acf_rows(self) -> list[list[float | None]]:
+        """The acf rows with None at unmeasured lags (JSON null in stores and documents)."""
+        assert self.acf is not None
+        return [[None if not k else v for v, k in zip(row, self.known(i))] for i, row in enumerate(self.acf)]
 
     def matrix(self) -> np.ndarray:
         """The full B x B correlation matrix (identity when not measured)."""
@@ -125,6 +159,13 @@ class Dependence:
         return cls(lo=tuple(int(v) for v in lo), hi=tuple(int(v) for v in hi))
 
     @classmethod
+    def from_rows(cls, corr, rows, radius: int = RADIUS, lo=(), hi=()) -> Dependence:
+        """A record from acf rows holding None at unmeasured lags (`acf_rows`)."""
+        acf = tuple(tuple(0.0 if v is None else float(v) for v in row) for row in rows)
+        gaps = tuple(tuple(k for k, v in enumerate(row) if v is None) for row in rows)
+        return cls(tuple(float(v) for v in corr), acf, radius, tuple(lo), tuple(hi), gaps)
+
+    @classmethod
     def from_lags(cls, corr, dx, dy, lo=(), hi=()) -> Dependence:
         """A record of the older layout (autocorrelation at LAGS along rows and columns) on the
         window of radius MAX_RADIUS, as the separable product r(dy, dx) = r_y(dy) r_x(dx) it stood for."""
@@ -133,7 +174,8 @@ class Dependence:
         return cls(_unit("corr", corr), (acf,), MAX_RADIUS, tuple(lo), tuple(hi))
 
     def with_levels(self, lo, hi) -> Dependence:
-        return Dependence(self.corr, self.acf, self.radius, tuple(int(v) for v in lo), tuple(int(v) for v in hi))
+        return Dependence(self.corr, self.acf, self.radius, tuple(int(v) for v in lo), tuple(int(v) for v in hi),
+                          self.unmeasured)
 
 
 def _lag_sequence(values: tuple[float, ...]) -> np.ndarray:

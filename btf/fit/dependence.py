@@ -9,21 +9,28 @@ Per region (btf.dependence.Dependence):
         else their average;
   lo/hi the lowest and highest level of each band, from the fitter's histograms (`observed`).
 
-Anchors lie on a deterministic lattice (at most `max_anchors`, inside the frame by R so every
-partner exists). Each anchor's whole window of partners is read at once as a strided view of
-the frame; a pair counts only when both pixels carry the anchor's label, so a mask edge never
-mixes regions. Values are centred on the region's median (from its models) before the float32
-products, which keeps 8-bit products exact and 16-bit ones accurate. Per region, lag and band
-the pass keeps the pair count and the sums of a, b, a^2, b^2 and a b (anchor a, partner b):
-per window row, the partners' planes (bands apart) masked to the anchor's label, then one-hot
-matrix products small enough for one BLAS thread; the Pearson correlation of the pairs
-follows. The lags (0, dx) are read on both sides of the anchor, doubling their pairs.
+Anchors lie on a deterministic lattice (btf.fit.anchors: at most `max_anchors`, inside the
+frame by R so every partner exists). Each anchor's whole window of partners is read at once as
+a strided view of the frame; a pair counts only when both pixels carry the anchor's label, so a
+mask edge never mixes regions. A region the lattice leaves with few pairs (its median lag under
+SPARSE_PAIRS: a small or scattered region) gets a second pass on its own pixels off the
+lattice, at most max_anchors // SPARSE_SHARE in all, its sums added to the first's; the other regions'
+values are those of the lattice alone (a small region whose bands differ in grain beyond its
+noise may give the frame rows per band). A lag still under MIN_PAIRS pairs is reported
+unmeasured (the record's `unmeasured`, its value 0.0), not independent. Values are centred on
+the region's median (from its models) before the float32 products, which keeps 8-bit products
+exact and 16-bit ones accurate. Per region, lag and band the pass keeps the pair count and the
+sums of a, b, a^2, b^2 and a b (anchor a, partner b): per window row, the partners' planes
+(bands apart) masked to the anchor's label, then one-hot matrix products small enough for one
+BLAS thread; the Pearson correlation of the pairs follows. The lags (0, dx) are read on both
+sides of the anchor, doubling their pairs.
 
 These are plain Pearson correlations of the pixels, what an image comparison measures; the
 host turns them into the correlations of normal scores that reproduce them through the
 models (tools.analysis.latent). Memory is fixed: the accumulators (regions x window x bands)
-and, per chunk of anchors, a few chunk x bands x (2R+1) float32 planes; the frame itself is
-only viewed.
+and, per chunk of anchors, a few chunk x bands x (2R+1) float32 planes (the second pass also
+gathers its chunk's windows, chunk x bands x (R+1) x (2R+1) pixels); the frame itself is only
+viewed.
 """
 from __future__ import annotations
 
@@ -31,16 +38,26 @@ import math
 from typing import Mapping
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from btf.dependence import RADIUS, Dependence, check_radius
+from btf.fit.anchors import lattice, sparse_anchors
 from btf.johnson import Family, Johnson
 
-# The most anchors whose pass stays within the fit's time at 1 MP on replayed photographs
-# (benchmarks: "dependence", "pose"); the error against every pixel pair is in RESULTS.md.
+# The most anchors whose lattice pass stays within the fit's time at 1 MP on replayed photographs
+# (benchmarks: "dependence", "pose"; the second pass for sparse regions comes on top); the error
+# against every pixel pair is in RESULTS.md.
 MAX_ANCHORS = 6144
 CHUNK = 2048  # anchors per chunk: about 1 MB of temporaries
 PRODUCT_LIMIT = 400_000  # regions x anchors x positions of one product: OpenBLAS keeps it on one thread
-MIN_PAIRS = 32  # fewer pairs than this: the correlation is reported as 0 (independent)
+MIN_PAIRS = 32  # fewer pairs than this: the lag is reported unmeasured (its value 0.0)
+# A region whose median lag has fewer pairs than this (a standard error of about 1/16) gets a
+# second pass on its own pixels: a small or scattered region meets few of the lattice's anchors
+SPARSE_PAIRS = 256
+# The second pass takes at most max_anchors // SPARSE_SHARE anchors in all: an eighth keeps the
+# robot's pass near its time and takes the moon's 2,400-pixel class from 0.74 to 0.10 against
+# every pixel pair; the host (tools.data.images) gives it half, for 0.03.
+SPARSE_SHARE = 8
 # A band's row further than this (plus its sampling noise) from the bands' average at some lag:
 # every band keeps its row (on photographs the average missed a band's grain by up to 0.29)
 ROW_SPREAD = 0.03
@@ -61,26 +78,6 @@ def observed(counts: np.ndarray, centre0: float = 0.0, bin_width: float = 1.0,
         hi = np.ceil(centre0 + (last + 0.5) * bin_width - 0.5)
         out[int(label)] = (tuple(int(v) for v in np.clip(lo, 0, levels - 1)),
                            tuple(int(v) for v in np.clip(hi, 0, levels - 1)))
-    return out
-
-
-def _lattice(h: int, w: int, radius: int, max_anchors: int) -> list[tuple[np.ndarray, int, int]]:
-    """Anchor blocks: (window top rows, first window column, windows per row) per phase. A
-    row's windows lie side by side (2R + 1 columns each), so its partners are one run of the
-    frame's row."""
-    width = 2 * radius + 1
-    hv, nx = h - radius, w // width
-    if hv < 1 or nx < 1:
-        return []
-    # Phases: several runs of windows per row, shifted, so the lattice is about as fine across
-    # as down (13 x 10 pixels for 8192 anchors of a 1 MP frame; finer phases for small frames).
-    phases = min(width, max(1, round(width / math.sqrt(hv * w / max_anchors))))
-    step = max(1, math.ceil(hv * nx * phases / max_anchors))
-    out = []
-    for p in range(phases):
-        off = p * width // phases
-        if (w - off) // width >= 1:
-            out.append((np.arange(p * step // phases, hv, step), off, (w - off) // width))
     return out
 
 
@@ -143,14 +140,15 @@ def measure(
     data: np.ndarray, labels: np.ndarray, models: Mapping[tuple[int, int], Johnson],
     levels: int = 256, max_anchors: int = MAX_ANCHORS, chunk: int = CHUNK, radius: int = RADIUS,
     per_band: bool | None = None, levels_seen: Mapping[int, tuple[tuple[int, ...], tuple[int, ...]]] | None = None,
-    corr_points: int | None = None,
+    corr_points: int | None = None, sparse_budget: int | None = None,
 ) -> dict[int, Dependence]:
     """Dependence of every label that has a model for each band of `data` (H x W x B pixels);
     `levels_seen` ({label: (lo, hi)}, `observed`) fills in the observed levels; `per_band`
     True keeps one autocorrelation row per band, False their average, None (the robot's
     choice) rows per band when some region's bands differ by more than ROW_SPREAD (one
     packet carries one row count, so the choice is the frame's); `corr_points` bounds the
-    band correlations' lattice (default twice the anchors)."""
+    band correlations' lattice (default twice the anchors), `sparse_budget` the second pass's
+    anchors (default max_anchors // SPARSE_SHARE)."""
     if data.ndim == 2:
         data = data[..., None]
     if data.ndim != 3 or labels.shape != data.shape[:2]:
@@ -169,14 +167,24 @@ def measure(
     sums = _Sums(len(regions), n_bands, (radius + 1) * (2 * radius + 1))
     # anchors per chunk: at most `chunk`, fewer with many regions (see _Sums.pairs)
     chunk = max(1, min(chunk, PRODUCT_LIMIT // (len(regions) * (2 * radius + 1))))
-    for rows, col, nx in _lattice(h, w, radius, max_anchors):
+    grid = lattice(h, w, radius, max_anchors)
+    for rows, col, nx in grid:
         per = max(1, chunk // nx)
         for start in range(0, len(rows), per):
             _chunk(sums, data, labels, rows[start:start + per], col, nx, index, centre, radius)
+    sparse = np.flatnonzero(np.median(_pairs(sums, radius), axis=1) < SPARSE_PAIRS)
+    met = sums.anchor_side[0][:, radius]  # the lattice's anchors per region: lag (0, 0)
+    budget = max_anchors // SPARSE_SHARE if sparse_budget is None else sparse_budget
+    extra = sparse_anchors(labels, index, sparse, met, radius, budget, grid)
+    if extra is not None:  # the sparse regions' own pixels as anchors, added to their sums
+        only, ys, xs = extra
+        for start in range(0, len(ys), chunk):
+            _points(sums, data, labels, ys[start:start + chunk], xs[start:start + chunk], only, centre, radius)
     live = np.array([[models[(lab, b)].family is not Family.CONST for b in range(n_bands)] for lab in regions])
     corrs = _band_correlations(data, labels, index, centre,
                                corr_points or CORR_ANCHORS * max_anchors // MAX_ANCHORS, chunk)
-    grains = [_window(sums.pearson(j), radius) for j in range(len(regions))]
+    pairs = sums.anchor_side[0]
+    grains = [_window(sums.pearson(j), radius, pairs[j]) for j in range(len(regions))]
     shared = [g[keep].mean(axis=0) if keep.any() else np.zeros(g.shape[1]) for g, keep in zip(grains, live)]
     if per_band is None:
         per_band = n_bands > 1 and any(
@@ -187,8 +195,10 @@ def measure(
         corr, grain = corrs[j], grains[j]
         rows_out = grain if per_band else shared[j][None]
         seen = (levels_seen or {}).get(lab, ((), ()))
+        gaps = _unmeasured(pairs[j], radius)
         out[lab] = Dependence(tuple(corr[np.triu_indices(n_bands, 1)].tolist()),
-                              tuple(tuple(row.tolist()) for row in rows_out), radius, *seen)
+                              tuple(tuple(row.tolist()) for row in rows_out), radius, *seen,
+                              (gaps,) * len(rows_out) if gaps else ())
     return out
 
 
@@ -202,15 +212,10 @@ def _chunk(sums: _Sums, data: np.ndarray, labels: np.ndarray, rows: np.ndarray, 
     n_bands = data.shape[2]
     anchor_labels = labels[r0:r1:step, col + radius:col + span:width]  # (ny, nx)
     ny, n = len(anchor_labels), anchor_labels.size
-    region = index[np.where(anchor_labels < 0, -1, anchor_labels)].reshape(n)
-    measured = region >= 0
-    present = np.flatnonzero(np.bincount(region[measured], minlength=len(centre)))
+    region, present, onehot = _anchor_regions(anchor_labels, index, len(centre))
     if not present.size:
         return
-    local = np.zeros(len(centre), np.intp)
-    local[present] = np.arange(len(present))
-    onehot = np.zeros((len(present), n), dtype=np.float32)
-    onehot[local[region[measured]], np.flatnonzero(measured)] = 1.0
+    measured = region >= 0
     wide_labels = np.repeat(anchor_labels, width, axis=1)
     # every operand full-sized: a broadcast over a short inner axis runs far slower
     centres = np.repeat(centre[np.where(measured, region, 0)].T[:, :, None], width, axis=2)  # (B, n, 2R+1)
@@ -225,6 +230,51 @@ def _chunk(sums: _Sums, data: np.ndarray, labels: np.ndarray, rows: np.ndarray, 
             sums.anchors(onehot, planes[:, :, radius].copy(), width)
         sums.pairs(slice(dy * width, (dy + 1) * width), planes, inside.reshape(n, width))
     sums.flush(present)
+
+
+def _anchor_regions(anchor_labels: np.ndarray, index: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(region of each anchor, -1 off the measured ones; the regions present; their one-hot
+    rows over the anchors, K' x n)."""
+    region = index[np.where(anchor_labels < 0, -1, anchor_labels)].reshape(anchor_labels.size)
+    measured = region >= 0
+    present = np.flatnonzero(np.bincount(region[measured], minlength=k))
+    local = np.zeros(k, np.intp)
+    local[present] = np.arange(len(present))
+    onehot = np.zeros((len(present), anchor_labels.size), dtype=np.float32)
+    onehot[local[region[measured]], np.flatnonzero(measured)] = 1.0
+    return region, present, onehot
+
+
+def _points(sums: _Sums, data: np.ndarray, labels: np.ndarray, ys: np.ndarray, xs: np.ndarray,
+            index: np.ndarray, centre: np.ndarray, radius: int) -> None:
+    """Anchors at (ys, xs), inside the frame by R: as `_chunk`, but each anchor's window rows
+    gathered (the second pass's anchors lie on its regions' own pixels, not on a lattice)."""
+    width, n_bands = 2 * radius + 1, data.shape[2]
+    anchor_labels = labels[ys, xs]
+    region, present, onehot = _anchor_regions(anchor_labels, index, len(centre))
+    if not present.size:
+        return
+    # each anchor's whole window, one gather: (n, R+1, 2R+1) labels, (n, B, R+1, 2R+1) values
+    lab = sliding_window_view(labels, (radius + 1, width))[ys, xs - radius]
+    val = sliding_window_view(data, (radius + 1, width), axis=(0, 1))[ys, xs - radius]
+    centres = np.repeat(centre[np.where(region >= 0, region, 0)].T[:, :, None], width, axis=2)
+    planes = np.empty((n_bands, len(ys), width), dtype=np.float32)
+    inside = np.empty((len(ys), width), dtype=np.float32)
+    for dy in range(radius + 1):
+        np.equal(lab[:, dy], anchor_labels[:, None], out=inside, casting="unsafe")
+        np.copyto(planes, val[:, :, dy].transpose(1, 0, 2), casting="unsafe")
+        planes -= centres
+        if dy == 0:
+            sums.anchors(onehot, planes[:, :, radius].copy(), width)
+        sums.pairs(slice(dy * width, (dy + 1) * width), planes, inside)
+    sums.flush(present)
+
+
+def _pairs(sums: _Sums, radius: int) -> np.ndarray:
+    """(regions, window): the pairs each lag holds, the lags (0, dx) counted on both sides."""
+    out = _window(sums.anchor_side[0], radius)
+    out[:, :radius] *= 2
+    return out
 
 
 def _band_correlations(data: np.ndarray, labels: np.ndarray, index: np.ndarray, centre: np.ndarray,
@@ -271,13 +321,25 @@ def _noise(sums: _Sums, region: int, radius: int) -> np.ndarray:
     return 3.0 / np.sqrt(np.maximum(n, 1.0))
 
 
-def _window(r: np.ndarray, radius: int) -> np.ndarray:
+def _window(r: np.ndarray, radius: int, n: np.ndarray | None = None) -> np.ndarray:
     """(B, window) in record order from (B, positions): the lags (0, dx) from both sides of the
-    anchor (weighted alike: each side a like number of pairs)."""
+    anchor (weighted alike: each side a like number of pairs); given the pair counts `n`
+    (positions), a side with fewer than MIN_PAIRS is left out rather than averaged in as 0."""
     width = 2 * radius + 1
     right = r[:, radius + 1:width]
     left = r[:, radius - 1::-1][:, :radius]
-    return np.concatenate([0.5 * (right + left), r[:, width:]], axis=1)
+    if n is None:
+        return np.concatenate([0.5 * (right + left), r[:, width:]], axis=1)
+    sides = (n[radius + 1:width] >= MIN_PAIRS).astype(int) + (n[radius - 1::-1][:radius] >= MIN_PAIRS)
+    return np.concatenate([(right + left) / np.maximum(sides, 1), r[:, width:]], axis=1)
+
+
+def _unmeasured(n: np.ndarray, radius: int) -> tuple[int, ...]:
+    """Window indices of a region's lags with fewer than MIN_PAIRS pairs (on either side, for (0, dx))."""
+    width = 2 * radius + 1
+    side = n >= MIN_PAIRS
+    known = np.concatenate([side[radius + 1:width] | side[radius - 1::-1][:radius], side[width:]])
+    return tuple(np.flatnonzero(~known).tolist())
 
 
 def _median(model: Johnson, levels: int) -> float:

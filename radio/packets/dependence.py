@@ -1,6 +1,6 @@
 """The dependence section of a MODELS blob: per label, its observed levels, grain and band correlation.
 
-Version 1 (what robots send):
+Version 1 (what robots send while every lag is measured):
   marker   0x80, then the version byte 1 (no section of the older layout starts so: a record
            of it that begins with -128 is all -128)
   shape    one byte: bits 0-3 the window radius R (1..8), bit 4 one autocorrelation row per
@@ -14,6 +14,10 @@ Version 1 (what robots send):
 For RGB at R = 6 with one row, a label costs 6 + 3 + 84 = 93 bytes (gray 2 + 84 = 86, 16-bit
 gray 88); its levels alone 6 (gray 2). A record is bounded by its shape: at most
 2 x 16 x 2 + 120 + 16 x 144 bytes.
+
+Version 2 (written only when some lag was not measured: too few pixel pairs): version 1's layout
+with the version byte 2, where an autocorrelation code -128 is a lag not measured (the record's
+`unmeasured`). A band correlation of -128 stays an error, and so does any -128 in version 1.
 
 The older layout (robots before the version): per label 11 bytes for RGB, B(B-1)/2 band
 correlations then the autocorrelation at `LAGS` along rows and along columns, all -128 for
@@ -36,6 +40,7 @@ from radio.packets.base import want_bin
 SCALE = 127
 ABSENT = -128
 MARKER, VERSION = 0x80, 1
+GAPS_VERSION = 2  # version 1 plus -128 for a lag not measured
 _PER_BAND = 0x10
 _RADIUS_MASK = 0x0F
 _LEVELS, _GRAIN = 1, 2
@@ -75,6 +80,7 @@ def encode_dependence(deps: Mapping[int, Dependence], labels: Sequence[int], n_b
     if stray:
         raise ValueError(f"dependence for labels the packet does not carry: {sorted(stray)}")
     radius, rows = _shape_of(deps, n_bands)
+    version = GAPS_VERSION if any(d.unmeasured for d in deps.values()) else VERSION
     kinds = bytearray((len(labels) + 3) // 4)
     body = bytearray()
     level_type = np.uint8 if levels <= 256 else np.dtype(">u2")
@@ -91,8 +97,11 @@ def encode_dependence(deps: Mapping[int, Dependence], labels: Sequence[int], n_b
                 raise ValueError(f"label {lab}: observed level {max(dep.hi)} beyond {levels} levels")
             body += np.array(dep.lo + dep.hi).astype(level_type).tobytes()
         if dep.measured:
-            body += _quantize((*dep.corr, *(v for row in dep.acf for v in row))).tobytes()
-    return bytes([MARKER, VERSION, radius | (_PER_BAND if rows > 1 else 0)]) + bytes(kinds) + bytes(body)
+            codes = _quantize((*dep.corr, *(v for row in dep.acf for v in row)))
+            for r, gap in enumerate(dep.unmeasured):
+                codes[len(dep.corr) + r * window_size(radius) + np.array(gap, dtype=np.intp)] = ABSENT
+            body += codes.tobytes()
+    return bytes([MARKER, version, radius | (_PER_BAND if rows > 1 else 0)]) + bytes(kinds) + bytes(body)
 
 
 def is_versioned(blob: bytes, pos: int) -> bool:
@@ -113,8 +122,8 @@ def decode_dependence(blob: Any, labels: Sequence[int], n_bands: int, levels: in
     if len(blob) < pos + 3:
         raise FrameError("dependence section is shorter than its header")
     version, shape = blob[pos + 1], blob[pos + 2]
-    if version != VERSION:
-        raise FrameError(f"dependence section version {version}; this host reads version {VERSION}")
+    if version not in (VERSION, GAPS_VERSION):
+        raise FrameError(f"dependence section version {version}; this host reads versions {VERSION} and {GAPS_VERSION}")
     radius, rows = shape & _RADIUS_MASK, (n_bands if shape & _PER_BAND else 1)
     if not 1 <= radius <= MAX_RADIUS or shape & ~(_RADIUS_MASK | _PER_BAND):
         raise FrameError(f"dependence shape byte {shape:#04x}: radius outside 1..{MAX_RADIUS} or unknown bits")
@@ -129,14 +138,15 @@ def decode_dependence(blob: Any, labels: Sequence[int], n_bands: int, levels: in
     out: dict[int, Dependence] = {}
     for lab, kind in zip(labels, kinds):
         if kind:
-            out[int(lab)], pos = _record(blob, pos, int(lab), kind, n_bands, levels, radius, rows)
+            out[int(lab)], pos = _record(blob, pos, int(lab), kind, n_bands, levels, radius, rows,
+                                         version == GAPS_VERSION)
     if not out:
         raise FrameError("dependence section flagged but no label has a record")
     return out, pos
 
 
 def _record(blob: bytes, pos: int, label: int, kind: int, n_bands: int, levels: int, radius: int,
-            rows: int) -> tuple[Dependence, int]:
+            rows: int, gaps: bool) -> tuple[Dependence, int]:
     size = record_size(n_bands, radius, levels, rows, bool(kind & _GRAIN), bool(kind & _LEVELS))
     if pos + size > len(blob):
         raise FrameError(f"label {label}: dependence record needs {size} bytes, {len(blob) - pos} left")
@@ -152,11 +162,13 @@ def _record(blob: bytes, pos: int, label: int, kind: int, n_bands: int, levels: 
         return Dependence.observed(lo, hi), pos
     nc, nw = corr_size(n_bands), window_size(radius)
     codes = np.frombuffer(blob, np.int8, nc + rows * nw, pos)
-    if (codes == ABSENT).any():
+    absent = codes == ABSENT
+    if absent[:nc].any() or (absent.any() and not gaps):
         raise FrameError(f"label {label}: dependence code -128 outside [-127, 127]")
-    v = codes.astype(np.float64) / SCALE
+    v = np.where(absent, 0, codes).astype(np.float64) / SCALE
     acf = tuple(tuple(v[nc + r * nw:nc + (r + 1) * nw]) for r in range(rows))
-    return Dependence(tuple(v[:nc]), acf, radius, lo, hi), pos + nc + rows * nw
+    unmeasured = tuple(tuple(np.flatnonzero(absent[nc + r * nw:nc + (r + 1) * nw]).tolist()) for r in range(rows))
+    return Dependence(tuple(v[:nc]), acf, radius, lo, hi, unmeasured), pos + nc + rows * nw
 
 
 def _decode_lags(blob: bytes, labels: Sequence[int], n_bands: int) -> dict[int, Dependence]:

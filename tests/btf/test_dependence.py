@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from btf.dependence import LAGS, MAX_RADIUS, RADIUS, Dependence, window, window_size
-from btf.fit.dependence import measure, observed
+from btf.fit import anchors
+from btf.fit import dependence as onboard
+from btf.fit.dependence import MIN_PAIRS, measure, observed
 from btf.fit.fitter import FrameFitter
 from btf.johnson import Johnson
 
@@ -84,6 +86,7 @@ def test_constant_band_and_tiny_frames_report_independence_not_nan():
     assert dep.corr == (0.0,) and all(np.isfinite(dep.acf[0]))
     tiny = measure(img[:5, :9], labels[:5, :9], models)[0]  # narrower than one window
     assert tiny.corr == (0.0,) and set(tiny.acf[0]) == {0.0}
+    assert tiny.unmeasured == (tuple(range(window_size(RADIUS))),)  # no pair at all: nothing measured
 
 
 def test_an_anchor_budget_bounds_the_work_but_keeps_the_estimate():
@@ -150,6 +153,11 @@ def test_the_older_layout_becomes_its_separable_window():
 
 @pytest.mark.parametrize("kwargs, reason", [
     ({"corr": (0.5,), "acf": ((0.1,) * 84,), "radius": 6, "lo": (0,), "hi": (9,)}, "bands"),
+    ({"corr": (0.5,), "acf": ((0.0,) * 84,), "unmeasured": ((3,), (4,))}, "one entry per acf row"),
+    ({"corr": (0.5,), "acf": ((0.0,) * 84,), "unmeasured": ((5, 3),)}, "increasing window indices"),
+    ({"corr": (0.5,), "acf": ((0.0,) * 84,), "unmeasured": ((84,),)}, "increasing window indices"),
+    ({"corr": (0.5,), "acf": ((0.1,) * 84,), "unmeasured": ((3,),)}, "must hold 0.0"),
+    ({"lo": (1,), "hi": (9,), "unmeasured": ((3,),)}, "one entry per acf row"),
     ({"corr": (1.5,), "acf": ((0.1,) * 84,)}, r"\[-1, 1\]"),
     ({"corr": (0.5,), "acf": ((0.1,) * 83,)}, "rows of 84 lags"),
     ({"corr": (0.5,), "acf": ((0.1,) * 84,), "radius": 9}, "radius"),
@@ -197,3 +205,137 @@ def test_band_correlations_read_every_phase_of_a_two_by_two_mosaic():
         assert lattice.corr[0] == pytest.approx(every, abs=0.05)
     whole = measure(img, labels, models, corr_points=240 * 240)[0]
     assert whole.corr[0] == pytest.approx(every, abs=1e-6)
+
+
+def _scattered(h: int, w: int, share: float, seed: int) -> np.ndarray:
+    """Blobs over the whole frame, about `share` of the pixels (the peaks of a smooth noise): as
+    the moon's smallest k-means class, 2,412 pixels in 57 blobs over 512 x 512."""
+    e = np.random.default_rng(seed).standard_normal((h, w))
+    fy, fx = np.fft.fftfreq(h)[:, None], np.fft.fftfreq(w)[None, :]
+    s = np.fft.ifft2(np.fft.fft2(e) * np.exp(-50 * np.pi ** 2 * (fy ** 2 + fx ** 2))).real  # sigma 5
+    return s >= np.quantile(s, 1 - share)
+
+
+def _all_pairs(values: np.ndarray, inside: np.ndarray, radius: int) -> np.ndarray:
+    """Pearson correlation over every pixel pair of the region at each window lag."""
+    out = []
+    h, w = values.shape
+    for dy, dx in window(radius):
+        a = (slice(0, h - dy), slice(max(0, -dx), w - max(0, dx)))
+        b = (slice(dy, h), slice(max(0, dx), w - max(0, -dx)))
+        both = inside[a] & inside[b]
+        out.append(np.corrcoef(values[a][both], values[b][both])[0, 1])
+    return np.array(out)
+
+
+@pytest.fixture(scope="module")
+def specks():
+    """A 512 x 512 gray frame of the diagonal grain, a large region and 2,400 scattered pixels
+    (label 2) of the same grain, as the moon's smallest k-means class."""
+    img = _image(512, 512, phi=0.8, mix=0.0, seed=11)[..., :1]
+    labels = np.zeros((512, 512), np.uint8)
+    labels[_scattered(512, 512, 2400 / 512 ** 2, seed=12)] = 2
+    models, _ = _fits(img, labels)
+    return img, labels, models
+
+
+def test_a_small_scattered_region_gets_enough_pairs_and_every_pairs_grain(specks, monkeypatch):
+    img, labels, models = specks
+    truth = _all_pairs(img[..., 0].astype(np.float64), labels == 2, RADIUS)
+    dep = measure(img, labels, models)[2]
+    assert dep.unmeasured == ()
+    assert np.abs(np.array(dep.acf[0]) - truth).max() < 0.1
+    assert _at(dep, (1, 1)) == pytest.approx(0.8, abs=0.1)
+    monkeypatch.setattr(onboard, "SPARSE_PAIRS", 0)  # the lattice alone, as before the second pass
+    alone = measure(img, labels, models)[2]
+    assert len(alone.unmeasured[0]) > 10  # lags of fewer than MIN_PAIRS pairs
+    assert np.abs(np.array(alone.acf[0]) - truth).max() > 0.3
+
+
+def test_large_regions_come_out_exactly_as_without_the_second_pass(specks, monkeypatch):
+    img, labels, models = specks
+    with_pass = measure(img, labels, models, per_band=True)
+    monkeypatch.setattr(onboard, "SPARSE_PAIRS", 0)
+    assert measure(img, labels, models, per_band=True)[0] == with_pass[0]
+
+
+def test_a_budget_thin_over_large_regions_runs_no_second_pass(monkeypatch):
+    img = _image(240, 320, phi=0.8, mix=0.5, seed=14)
+    labels = (np.arange(240)[:, None] * 4 // 240 * 4 + np.arange(320)[None, :] * 4 // 320).astype(np.uint8)
+    models, _ = _fits(img, labels)
+
+    def refuse(*args):
+        raise AssertionError("a second pass ran")
+
+    monkeypatch.setattr(onboard, "_points", refuse)
+    deps = measure(img, labels, models, max_anchors=512)  # 32 anchors a region, 16 of the second pass's
+    assert len(deps) == 16 and all(np.all(np.isfinite(d.acf)) for d in deps.values())
+
+
+def test_several_sparse_regions_and_signed_labels_share_the_second_pass():
+    img = _image(512, 512, phi=0.8, mix=0.0, seed=11)[..., :1]
+    labels = np.zeros((512, 512), np.int32)
+    for lab, seed in ((2, 12), (3, 15), (4, 16)):
+        labels[_scattered(512, 512, 1000 / 512 ** 2, seed)] = lab  # together within the budget
+    labels[:, :40] = -1  # unlabelled pixels, never a region
+    unsigned = np.where(labels < 0, 9, labels).astype(np.uint8)
+    models = {k: m for k, m in _fits(img, unsigned)[0].items() if k[0] != 9}
+    deps = measure(img, labels, models)
+    for lab in (2, 3, 4):
+        truth = _all_pairs(img[..., 0].astype(np.float64), labels == lab, RADIUS)
+        assert deps[lab].unmeasured == () and np.abs(np.array(deps[lab].acf[0]) - truth).max() < 0.1
+    assert measure(img, unsigned, models) == deps
+
+
+def test_the_second_pass_keeps_to_its_budget_and_off_the_lattice(specks, monkeypatch):
+    img, labels, models = specks
+    seen = []
+    points = onboard._points
+    monkeypatch.setattr(onboard, "_points", lambda sums, data, lab, ys, xs, *rest: seen.append(
+        (ys.copy(), xs.copy())) or points(sums, data, lab, ys, xs, *rest))
+    measure(img, labels, models, max_anchors=2048)
+    ys, xs = np.concatenate([y for y, _ in seen]), np.concatenate([x for _, x in seen])
+    assert 0 < len(ys) <= 1024 and len(set(zip(ys.tolist(), xs.tolist()))) == len(ys)
+    assert np.all(labels[ys, xs] == 2)  # only the sparse region's own pixels
+    lattice = {(int(y), c + RADIUS + k * (2 * RADIUS + 1)) for rows, c, nx in anchors.lattice(512, 512, RADIUS, 2048)
+               for y in rows for k in range(nx)}
+    assert not lattice & set(zip(ys.tolist(), xs.tolist()))
+    assert anchors.on_lattice(np.array([p[0] for p in lattice]), np.array([p[1] for p in lattice]),
+                               anchors.lattice(512, 512, RADIUS, 2048), RADIUS).all()
+
+
+def test_the_pixels_read_for_one_region_stay_within_their_cap_and_the_frame():
+    labels = np.full((200, 300), 2, np.uint8)
+    index = np.array([-1, -1, 0, -1])
+    found = anchors._candidates(labels, index, np.array([0]), np.array([1.0]), RADIUS, 500, np.random.default_rng(0))
+    ys, xs = np.divmod(found[0], 300)
+    assert 100 < len(ys) <= 500 and len(set(found[0].tolist())) == len(ys)
+    assert ys.max() < 200 - RADIUS and RADIUS <= xs.min() and xs.max() < 300 - RADIUS
+
+
+def test_the_smallest_regions_keep_all_their_pixels_when_the_budget_is_shared():
+    shares = anchors.shares(np.array([0, 100, 5000, 40000]), 3000)
+    assert shares.tolist() == [0.0, 100.0, 1450.0, 1450.0]
+
+
+def test_lags_with_too_few_pairs_are_unmeasured_not_independent():
+    img = _image(120, 160, phi=0.8, mix=0.0, seed=13)[..., :1]
+    labels = np.ones((120, 160), np.uint8)
+    labels[:, 40:43] = 0  # a strip three pixels wide: no pair at |dx| >= 3
+    models, _ = _fits(img, labels)
+    dep = measure(img, labels, models)[0]
+    gaps = {window(RADIUS)[k] for k in dep.unmeasured[0]}
+    assert gaps == {(dy, dx) for dy, dx in window(RADIUS) if abs(dx) >= 3}
+    assert all(dep.acf[0][k] == 0.0 for k in dep.unmeasured[0])
+    assert _at(dep, (1, 1)) == pytest.approx(0.8, abs=0.1) and np.all(np.isfinite(dep.acf[0]))
+    assert MIN_PAIRS > 0 and dep.known(0).sum() == window_size(RADIUS) - len(gaps)
+
+
+def test_a_record_keeps_its_unmeasured_lags_through_rows_with_gaps_and_new_levels():
+    acf = tuple(0.0 if k in (2, 40) else 0.5 for k in range(84))
+    dep = Dependence((0.3,), (acf,), 6, unmeasured=((2, 40),))
+    rows = dep.acf_rows()
+    assert rows[0][2] is None and rows[0][40] is None and rows[0][0] == 0.5
+    assert Dependence.from_rows((0.3,), rows, 6) == dep
+    assert dep.with_levels((1, 2), (9, 9)).unmeasured == ((2, 40),)
+    assert Dependence((0.3,), (acf,), 6, unmeasured=((),)) == Dependence((0.3,), (acf,), 6)  # none: ()

@@ -132,14 +132,14 @@ def test_records_for_labels_the_packet_lacks_or_of_other_bands_are_refused():
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.binary(min_size=0, max_size=200))
-def test_any_section_bytes_decode_to_valid_records_or_a_frame_error(section):
+@given(st.sampled_from([1, 2]), st.binary(min_size=0, max_size=200))
+def test_any_section_bytes_decode_to_valid_records_or_a_frame_error(version, section):
     fits, _ = _fits(2, plain=True)
     plain = pk.encode_models(fits, bands=RGB, **HEADER)
     items = msgpack.unpackb(plain)
     blob = bytearray(items[7])
     blob[10] |= 0x80
-    items[7] = bytes(blob) + bytes([0x80, 0x01]) + section
+    items[7] = bytes(blob) + bytes([0x80, version]) + section
     try:
         got = pk.decode(msgpack.packb(items, use_bin_type=True)).dependence
     except FrameError:
@@ -150,3 +150,42 @@ def test_any_section_bytes_decode_to_valid_records_or_a_frame_error(section):
         if d.measured:
             codes = np.rint(np.array([*d.corr, *(v for r in d.acf for v in r)]) * 127)
             assert np.all(np.abs(codes) <= 127) and len(d.acf[0]) == window_size(d.radius)
+            assert version == 2 or not d.unmeasured
+            assert all(d.acf[r][k] == 0.0 for r, gap in enumerate(d.unmeasured) for k in gap)
+
+
+def _gaps(seed: int, gap: tuple[int, ...], rows: int = 1) -> Dependence:
+    d = _grain(seed, rows=rows)
+    acf = tuple(tuple(0.0 if k in gap else v for k, v in enumerate(row)) for row in d.acf)
+    return Dependence(d.corr, acf, 6, d.lo, d.hi, (gap,) * rows)
+
+
+def test_unmeasured_lags_travel_as_minus_128_in_version_2():
+    deps = {0: _gaps(5, (0, 7, 83)), 1: _grain(6), 2: Dependence.observed((1, 1, 1), (5, 5, 5))}
+    blob = encode_dependence(deps, [0, 1, 2], 3)
+    assert blob[:2] == bytes([0x80, 2]) and len(blob) == 3 + 1 + 2 * 93 + 6  # no byte more than version 1
+    codes = np.frombuffer(blob, np.int8, 3 + 84, 4 + 6)  # label 0's grain: its 3 correlations, then its lags
+    assert set(np.flatnonzero(codes[3:] == -128)) == {0, 7, 83}
+    back, _ = decode_dependence(blob, [0, 1, 2], 3)
+    assert back[0].unmeasured == ((0, 7, 83),) and back[1].unmeasured == () and _close(back[0], deps[0])
+    assert back[2] == deps[2]
+    per_band = _gaps(7, (1, 2), rows=3)
+    got = decode_dependence(encode_dependence({4: per_band}, [4], 3), [4], 3)[0][4]
+    assert got.unmeasured == ((1, 2),) * 3 and _close(got, per_band)
+
+
+def test_a_record_with_every_lag_measured_keeps_version_1_byte_for_byte():
+    codes = np.array([100, -5, 0, *((np.arange(84) * 3) % 255 - 127)], dtype=np.int8)
+    assert not (codes == -128).any()
+    old = bytes([0x80, 1, 6, 0b10]) + codes.tobytes()  # one label, grain only: what robots have sent
+    dep = decode_dependence(old, [3], 3)[0][3]
+    assert dep == Dependence(tuple(codes[:3] / 127), (tuple(codes[3:] / 127),), 6)
+    assert dep.unmeasured == () and encode_dependence({3: dep}, [3], 3) == old
+
+
+@pytest.mark.parametrize("version, at, reason", [(1, 10, "-128"), (2, 0, "-128"), (3, 10, "version 3")])
+def test_minus_128_is_refused_in_version_1_and_in_band_correlations(version, at, reason):
+    codes = np.zeros(3 + 84, np.int8)
+    codes[at] = -128
+    with pytest.raises(FrameError, match=reason):
+        decode_dependence(bytes([0x80, version, 6, 0b10]) + codes.tobytes(), [3], 3)

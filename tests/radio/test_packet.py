@@ -365,7 +365,7 @@ BAD = {
     "dependence section has 0 bytes": _blob(lambda b: b.__setitem__(10, b[10] | 0x80)),
     "no label has a measurement": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80" * 22),
     "dependence code -128": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x00\x80" + b"\x00" * 20),
-    "dependence section version 2": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80\x02\x06\x00"),
+    "dependence section version 3": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80\x03\x06\x00"),
     "no label has a record": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80\x01\x06\x00"),
     "radius outside 1..8": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80\x01\x09\x01"),
     "observed levels": _blob(lambda b: b.__setitem__(10, b[10] | 0x80), b"\x80\x01\x06\x01" + bytes([9, 9, 9, 1, 1, 1])),

@@ -69,11 +69,14 @@ def grain_of(dep: Dependence, maps: tuple[LevelMap, ...]) -> Grain:
         raise ValueError(f"a measured record of {len(maps)} band(s) is needed for correlated fields")
     with _BLAS.limit(limits=1, user_api="blas"):
         latent, reached = latent_bands(dep.matrix(), list(maps))
-        shared = dep.acf[0] if not dep.per_band else tuple(np.mean(dep.acf, axis=0).tolist())
-        rings = (ring_spectrum(dep.radius, shared, grain_curve(list(maps)), RING, RING),)
-        if dep.per_band:
-            rings = tuple(ring_spectrum(dep.radius, row, grain_curve([m]), RING, RING, reference=rings[0])
-                          for m, row in zip(maps, dep.acf))
+        if not dep.per_band:
+            rings = (ring_spectrum(dep.radius, dep.acf[0], grain_curve(list(maps)), RING, RING, dep.known(0)),)
+        else:  # each band refined from their shared spectrum (lags unmeasured in any band left out of it)
+            known = [dep.known(b) for b in range(len(maps))]
+            shared = ring_spectrum(dep.radius, tuple(np.mean(dep.acf, axis=0).tolist()), grain_curve(list(maps)),
+                                   RING, RING, np.logical_and.reduce(known))
+            rings = tuple(ring_spectrum(dep.radius, row, grain_curve([m]), RING, RING, k, reference=shared)
+                          for m, row, k in zip(maps, dep.acf, known))
     for r in rings:
         r.flags.writeable = False
     return Grain(latent, reached, rings)

@@ -44,17 +44,16 @@ def models_document(space: str, band_names: tuple[str, ...], levels: int, angle:
 
 
 def dependence_record(dependence: Dependences) -> dict:
-    """{"regions": [{"label", "radius", "corr", "acf"}]}: the document's dependence section."""
-    return {"regions": [{"label": int(lab), "radius": d.radius, "corr": list(d.corr),
-                         "acf": [list(row) for row in d.acf]}
+    """{"regions": [{"label", "radius", "corr", "acf"}]}: the document's dependence section (null
+    at a lag not measured)."""
+    return {"regions": [{"label": int(lab), "radius": d.radius, "corr": list(d.corr), "acf": d.acf_rows()}
                         for lab, d in sorted(dependence.items()) if d.measured]}
 
 
 def _grain(row: dict) -> tuple[int, Dependence]:
     label = int(row["label"])
     if "acf" in row:
-        return label, Dependence(tuple(float(v) for v in row["corr"]),
-                                 tuple(tuple(float(v) for v in r) for r in row["acf"]), int(row["radius"]))
+        return label, Dependence.from_rows(row["corr"], row["acf"], int(row["radius"]))
     return label, Dependence.from_lags(*(tuple(float(v) for v in row[k]) for k in ("corr", "dx", "dy")))
 
 

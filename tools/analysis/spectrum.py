@@ -20,6 +20,9 @@ non-negative power spectrum: what synthesis draws each field from (tools.analysi
    in frequency (`amplitude`): non-negative by construction; it multiplies the autocorrelation
    by about sinc^2(lag / RING), 0.996 at lag 8.
 
+Lags the robot could not measure (too few pixel pairs: `known`) take no part in the model's
+fit, the projections or the refit; the model and the spectrum continue them.
+
 So the spectrum is non-negative by clipping (the projections) and by construction (a square in
 the refit, linear interpolation of non-negative values); it is scaled to unit variance.
 """
@@ -67,12 +70,14 @@ def _model(p: np.ndarray, lags: np.ndarray) -> np.ndarray:
     return out
 
 
-def _fit_model(radius: int, latent: np.ndarray) -> np.ndarray:
-    """The two-exponential model's parameters fitted to the window (lag 0 left out)."""
+def _fit_model(radius: int, latent: np.ndarray, known: np.ndarray | None = None) -> np.ndarray:
+    """The two-exponential model's parameters fitted to the window's known lags (lag 0 left out)."""
     lags = np.array(window(radius), dtype=np.float64)
     r1 = float(np.clip(np.max(latent[:2]), 0.05, 0.95))
     fast, slow = np.log(-np.log(r1) + 1e-3), np.log(-np.log(0.999) * 4)
     p0 = np.array([2.0, 0.0, fast, 0.0, fast, slow, 0.0, slow])
+    if known is not None:
+        lags, latent = lags[known], latent[known]
     return least_squares(lambda p: _model(p, lags) - latent, p0, method="trf", max_nfev=400).x
 
 
@@ -83,11 +88,13 @@ def _ring_lags(ny: int, nx: int) -> np.ndarray:
     return np.stack([yy.ravel(), xx.ravel()], axis=1).astype(np.float64)
 
 
-def _projected(radius: int, latent: np.ndarray, ny: int, nx: int) -> np.ndarray:
-    """Full ny x nx non-negative spectrum (mean 1) on a ring: window kept, the rest extended."""
+def _projected(radius: int, latent: np.ndarray, ny: int, nx: int, known: np.ndarray | None = None) -> np.ndarray:
+    """Full ny x nx non-negative spectrum (mean 1) on a ring: the window's known lags kept, the rest extended."""
     lags, vals = full_window(radius, latent)
+    if known is not None:
+        lags, vals = lags[_full_known(known)], vals[_full_known(known)]
     iy, ix = lags[:, 0] % ny, lags[:, 1] % nx
-    r = _model(_fit_model(radius, latent), _ring_lags(ny, nx)).reshape(ny, nx)
+    r = _model(_fit_model(radius, latent, known), _ring_lags(ny, nx)).reshape(ny, nx)
     r[iy, ix] = vals
     for _ in range(PROJECTIONS):
         r = sfft.ifft2(np.maximum(sfft.fft2(r).real, 0.0)).real
@@ -98,17 +105,19 @@ def _projected(radius: int, latent: np.ndarray, ny: int, nx: int) -> np.ndarray:
 
 
 def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray,
-           reference: np.ndarray | None = None) -> np.ndarray:
+           known: np.ndarray | None = None, reference: np.ndarray | None = None) -> np.ndarray:
     """The spectrum S = a^2 (so S >= 0 without bounds, which slow L-BFGS-B down by orders of
-    magnitude where many frequencies sit at zero) whose pixel autocorrelation over the window
-    comes nearest `target`; with a `reference` spectrum, the one nearest it (in sqrt S) among
-    those that meet the window about as well (see ring_spectrum)."""
+    magnitude where many frequencies sit at zero) whose pixel autocorrelation over the window's
+    known lags comes nearest `target`; with a `reference` spectrum, the one nearest it (in
+    sqrt S) among those that meet the window about as well (see ring_spectrum)."""
     ny, nx = start.shape
     lags, vals = full_window(radius, target)
     iy, ix = lags[:, 0] % ny, lags[:, 1] % nx
     slope = np.gradient(curve, GRID)
     weight = np.ones(len(lags))
     weight[0] = 100.0  # unit variance
+    if known is not None:
+        weight[~_full_known(known)] = 0.0
     n = ny * nx
 
     def loss(root: np.ndarray) -> tuple[float, np.ndarray]:
@@ -137,16 +146,25 @@ def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray
 
 
 def ring_spectrum(radius: int, pixel_acf: tuple[float, ...], curve: np.ndarray, ny: int, nx: int,
-                  reference: np.ndarray | None = None) -> np.ndarray:
+                  known: np.ndarray | None = None, reference: np.ndarray | None = None) -> np.ndarray:
     """The spectrum on a ring of ny x nx (at most RING each) for a measured pixel
-    autocorrelation row, through the bands' grain `curve`. A band of several is refined from
-    the bands' shared spectrum (`reference`) and held near it beyond what its own row asks:
-    fitted apart, two bands' spectra differed in detail no row measured, and bands that
-    correlate 0.98 cannot then reach it (their correlation is at most the spectra's overlap,
-    mean sqrt(S_i S_j), which fell to 0.86)."""
+    autocorrelation row, through the bands' grain `curve`; `known` (None: all) marks the lags
+    measured, the others left to the fit. With none known the pixels are independent. A band
+    of several is refined from the bands' shared spectrum (`reference`) and held near it
+    beyond what its own row asks: fitted apart, two bands' spectra differed in detail no row
+    measured, and bands that correlate 0.98 cannot then reach it (their correlation is at
+    most the spectra's overlap, mean sqrt(S_i S_j), which fell to 0.86)."""
     acf = np.asarray(pixel_acf, dtype=np.float64)
-    start = reference if reference is not None else _projected(radius, latent_acf(acf, curve), ny, nx)
-    return _refit(radius, acf, start, curve, reference)
+    if known is not None and not np.any(known):
+        return np.ones((ny, nx))
+    known = None if known is None or np.all(known) else np.asarray(known, dtype=bool)
+    start = reference if reference is not None else _projected(radius, latent_acf(acf, curve), ny, nx, known)
+    return _refit(radius, acf, start, curve, known, reference)
+
+
+def _full_known(known: np.ndarray) -> np.ndarray:
+    """`known` over full_window's lags: the origin, then the window and its mirror."""
+    return np.concatenate(([True], known, known))
 
 
 def _axis_weights(n: int, g: int) -> np.ndarray:

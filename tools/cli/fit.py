@@ -129,13 +129,14 @@ def _fit(args: argparse.Namespace, store: Store | None) -> int:
 
 def _print_dependence(section: dict | None, band_names: tuple[str, ...]) -> None:
     """One line per region: the autocorrelation at the nearest lags across, down and along both
-    diagonals (band average), and the band correlations."""
+    diagonals (band average; "?" where no band's lag was measured), and the band correlations."""
     if section is None:
         return
     pairs = [(a, b) for i, a in enumerate(band_names) for b in band_names[i + 1:]]
     for reg in section["regions"]:
         lags = window(reg["radius"])
-        mean = [sum(col) / len(col) for col in zip(*reg["acf"])]
-        grain = " ".join(f"{dy},{dx}:{mean[lags.index((dy, dx))]:.2f}" for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)))
+        known = [[v for v in col if v is not None] for col in zip(*reg["acf"])]  # None: not measured
+        mean = [f"{sum(col) / len(col):.2f}" if col else "?" for col in known]
+        grain = " ".join(f"{dy},{dx}:{mean[lags.index((dy, dx))]}" for dy, dx in ((0, 1), (1, 0), (1, 1), (1, -1)))
         colour = " ".join(f"{a}{b} {r:.2f}" for (a, b), r in zip(pairs, reg["corr"]))
         print(f"label {reg['label']:3d} grain dy,dx:r {grain}" + (f"  bands {colour}" if colour else ""))

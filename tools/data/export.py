@@ -101,8 +101,8 @@ def _dependence(d: Any, band: int) -> dict:
     if d is None:
         return {}
     seen = d.levels(band) if d.lo else (None, None)
-    grain = ({"dependence_corr": list(d.corr), "dependence_radius": d.radius, "dependence_acf": list(d.band_acf(band))}
-             if d.measured else {})
+    grain = ({"dependence_corr": list(d.corr), "dependence_radius": d.radius,
+              "dependence_acf": d.acf_rows()[band if d.per_band else 0]} if d.measured else {})
     return {"level_lo": seen[0], "level_hi": seen[1], **grain}
 
 

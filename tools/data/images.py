@@ -249,7 +249,7 @@ def fit_bands(feats: "FeatureFrame", pca: "PcaBasis | None", labels: np.ndarray,
     if dependence and results:
         deps = measure(feats.data, labels, {k: r.model for k, r in results.items()}, feats.levels,
                        max_anchors=HOST_ANCHORS, radius=HOST_RADIUS, levels_seen=seen,
-                       corr_points=HOST_CORR_POINTS)
+                       corr_points=HOST_CORR_POINTS, sparse_budget=HOST_ANCHORS // 2)
     else:
         deps = {lab: Dependence.observed(*seen[lab]) for lab in fitted if lab in seen}
     return FittedImage(feats, pca, labels, results, deps, fitter.counts)

@@ -428,8 +428,9 @@ class Store:
 
 
 def _dependence_row(d: Dependence) -> tuple:
-    """(corr, acf, radius, lo, hi) columns of a record (JSON lists; NULL what it lacks)."""
-    grain = (json.dumps(list(d.corr)), json.dumps([list(r) for r in d.acf]), d.radius) if d.measured else (None,) * 3
+    """(corr, acf, radius, lo, hi) columns of a record (JSON lists, null at a lag not measured;
+    NULL what it lacks)."""
+    grain = (json.dumps(list(d.corr)), json.dumps(d.acf_rows()), d.radius) if d.measured else (None,) * 3
     return (*grain, json.dumps(list(d.lo)) if d.lo else None, json.dumps(list(d.hi)) if d.hi else None)
 
 
@@ -437,7 +438,7 @@ def _dependence_of(corr, dx, dy, acf, radius, lo, hi) -> Dependence:
     """A stored record: the 2-D window, or the older layout's lags along rows and columns."""
     seen = (tuple(json.loads(lo)), tuple(json.loads(hi))) if lo is not None else ((), ())
     if acf is not None:
-        return Dependence(tuple(json.loads(corr)), tuple(tuple(r) for r in json.loads(acf)), int(radius), *seen)
+        return Dependence.from_rows(json.loads(corr), json.loads(acf), int(radius), *seen)
     if dx is not None:
         return Dependence.from_lags(*(tuple(json.loads(x)) for x in (corr, dx, dy)), *seen)
     return Dependence.observed(*seen)

@@ -30,7 +30,8 @@ def rocket():
     windows = []
     fit = spectrum._fit_model
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(spectrum, "_fit_model", lambda radius, latent: windows.append(latent) or fit(radius, latent))
+        patch.setattr(spectrum, "_fit_model",
+                      lambda radius, latent, known=None: windows.append(latent) or fit(radius, latent, known))
         fields.grain_of.cache_clear()
         synthesize(photo.labels, photo.models, np.random.default_rng(0), photo.levels,
                    {sky: photo.dependence[sky]})
