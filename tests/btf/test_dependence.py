@@ -7,7 +7,7 @@ import pytest
 from btf.dependence import LAGS, MAX_RADIUS, RADIUS, Dependence, window, window_size
 from btf.fit import anchors
 from btf.fit import dependence as onboard
-from btf.fit.dependence import MIN_PAIRS, measure, observed
+from btf.fit.dependence import MAX_ANCHORS, MIN_PAIRS, measure, observed
 from btf.fit.fitter import FrameFitter
 from btf.johnson import Johnson
 
@@ -242,10 +242,12 @@ def specks():
 def test_a_small_scattered_region_gets_enough_pairs_and_every_pairs_grain(specks, monkeypatch):
     img, labels, models = specks
     truth = _all_pairs(img[..., 0].astype(np.float64), labels == 2, RADIUS)
-    dep = measure(img, labels, models)[2]
+    dep = measure(img, labels, models, sparse_budget=MAX_ANCHORS // 2)[2]  # btf-host fit's share
     assert dep.unmeasured == ()
     assert np.abs(np.array(dep.acf[0]) - truth).max() < 0.1
     assert _at(dep, (1, 1)) == pytest.approx(0.8, abs=0.1)
+    robot = measure(img, labels, models)[2]  # an eighth of the anchors: coarser, every lag measured
+    assert robot.unmeasured == () and np.abs(np.array(robot.acf[0]) - truth).max() < 0.2
     monkeypatch.setattr(onboard, "SPARSE_PAIRS", 0)  # the lattice alone, as before the second pass
     alone = measure(img, labels, models)[2]
     assert len(alone.unmeasured[0]) > 10  # lags of fewer than MIN_PAIRS pairs
@@ -280,11 +282,11 @@ def test_several_sparse_regions_and_signed_labels_share_the_second_pass():
     labels[:, :40] = -1  # unlabelled pixels, never a region
     unsigned = np.where(labels < 0, 9, labels).astype(np.uint8)
     models = {k: m for k, m in _fits(img, unsigned)[0].items() if k[0] != 9}
-    deps = measure(img, labels, models)
+    deps = measure(img, labels, models, sparse_budget=MAX_ANCHORS // 2)
     for lab in (2, 3, 4):
         truth = _all_pairs(img[..., 0].astype(np.float64), labels == lab, RADIUS)
         assert deps[lab].unmeasured == () and np.abs(np.array(deps[lab].acf[0]) - truth).max() < 0.1
-    assert measure(img, unsigned, models) == deps
+    assert measure(img, unsigned, models, sparse_budget=MAX_ANCHORS // 2) == deps
 
 
 def test_the_second_pass_keeps_to_its_budget_and_off_the_lattice(specks, monkeypatch):
