@@ -34,6 +34,7 @@ from scipy.linalg import blas
 from threadpoolctl import ThreadpoolController
 
 from btf.dependence import MAX_RADIUS, Dependence
+from btf.fit.dependence import ROW_SPREAD
 from tools.analysis.imposed import MIN_PIXELS, impose, lag_acf
 from tools.analysis.latent import grain_curve, latent_bands
 from tools.analysis.levelmap import Z_SPAN, LevelMap
@@ -73,9 +74,12 @@ def grain_of(dep: Dependence, maps: tuple[LevelMap, ...]) -> Grain:
             rings = (ring_spectrum(dep.radius, dep.acf[0], grain_curve(list(maps)), RING, RING, dep.known(0)),)
         else:  # each band refined from their shared spectrum (lags unmeasured in any band left out of it)
             known = [dep.known(b) for b in range(len(maps))]
-            shared = ring_spectrum(dep.radius, tuple(np.mean(dep.acf, axis=0).tolist()), grain_curve(list(maps)),
-                                   RING, RING, np.logical_and.reduce(known))
-            rings = tuple(ring_spectrum(dep.radius, row, grain_curve([m]), RING, RING, k, reference=shared)
+            mean = np.mean(dep.acf, axis=0)
+            shared = ring_spectrum(dep.radius, tuple(mean.tolist()), grain_curve(list(maps)), RING, RING,
+                                   np.logical_and.reduce(known))
+            # a band within ROW_SPREAD of the bands' mean at every lag it measured takes the shared spectrum
+            rings = tuple(shared if np.abs(np.asarray(row) - mean)[k].max(initial=0.0) <= ROW_SPREAD else
+                          ring_spectrum(dep.radius, row, grain_curve([m]), RING, RING, k, reference=shared)
                           for m, row, k in zip(maps, dep.acf, known))
     for r in rings:
         r.flags.writeable = False
