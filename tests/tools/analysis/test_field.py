@@ -170,3 +170,17 @@ def test_a_region_scattered_over_its_box_gets_the_grain_over_its_own_pairs():
         g = draw(grain, inside.shape, np.random.default_rng(seed))[0]
         cut.append(np.abs(acf2d(g, inside, 6) - target).max())
     assert np.mean(imposed) < 0.04 and np.mean(imposed) < 0.6 * np.mean(cut)
+
+
+@settings(max_examples=6, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1), st.lists(st.floats(-0.99, 0.99), min_size=3, max_size=3),
+       st.floats(0.05, 0.9))
+def test_any_own_grain_band_matrix_and_splintered_region_draw_finite_fields_of_exact_moments(seed, corr, share):
+    rng = np.random.default_rng(seed)
+    rows = tuple(tuple(rng.uniform(-1, 1, len(window(2))).tolist()) for _ in range(3))
+    inside = rng.random((60, 70)) < share  # specks: every region pixel apart from the next
+    fields = draw(grain_of(Dependence(tuple(corr), rows, 2), NORMALS), inside.shape, rng, inside=inside)
+    assert all(np.all(np.isfinite(f)) for f in fields)
+    if inside.sum() >= 64:
+        v = np.stack([f[inside] for f in fields]).astype(np.float64)
+        assert np.allclose(v.mean(axis=1), 0, atol=1e-3) and np.allclose(v.std(axis=1), 1, atol=1e-3)
