@@ -138,7 +138,7 @@ def robot_cost(ctx: Context) -> list[str]:
     return lines + ["", "Capture time: features, the 16-label fitter, the levels from its histograms, the dependence "
                     "pass (with the grain) and the MODELS body; the scene's true mask (or the grid) stands for "
                     f"segmentation. Best of paired rounds. Window: radius 6, {len(window(6))} lags, one row shared "
-                    "by the bands."]
+                    "by the bands, or one per band where their grains differ (the robot's choice)."]
 
 
 def run(ctx: Context = Context()) -> list[str]:
