@@ -275,10 +275,10 @@ def correction(now: np.ndarray, want: np.ndarray, least_mixing: bool = False) ->
     triangular one built on a nearly singular matrix mixed them wholesale and took up to 0.19
     off a band's autocorrelation."""
     b = len(now)
-    ridge = 1e-12 * np.eye(b) * max(1.0, float(np.trace(now)))
+    ridge = lambda m: 1e-9 * max(float(np.trace(m)) / b, 1e-300) * np.eye(b)  # noqa: E731 (relative: any units)
     if not least_mixing:
-        return np.linalg.cholesky(want + 1e-9 * np.eye(b)) @ np.linalg.inv(np.linalg.cholesky(now + ridge))
-    vals, vecs = np.linalg.eigh(now + ridge)
+        return np.linalg.cholesky(want + ridge(want)) @ np.linalg.inv(np.linalg.cholesky(now + ridge(now)))
+    vals, vecs = np.linalg.eigh(now + ridge(now))
     root = (vecs * np.sqrt(np.maximum(vals, 1e-12))) @ vecs.T
     inv_root = (vecs / np.sqrt(np.maximum(vals, 1e-12))) @ vecs.T
     vals, vecs = np.linalg.eigh(root @ want @ root)
