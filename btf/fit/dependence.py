@@ -14,9 +14,9 @@ frame by R so every partner exists). Each anchor's whole window of partners is r
 a strided view of the frame; a pair counts only when both pixels carry the anchor's label, so a
 mask edge never mixes regions. A region the lattice leaves with few pairs (its median lag under
 SPARSE_PAIRS: a small or scattered region) gets a second pass on its own pixels off the
-lattice, at most max_anchors // SPARSE_SHARE in all, its sums added to the first's; the other regions'
-values are those of the lattice alone (a small region whose bands differ in grain beyond its
-noise may give the frame rows per band). A lag still under MIN_PAIRS pairs is reported
+lattice, at most max_anchors // SPARSE_SHARE in all, its sums added to the first's; the
+other regions' values are those of the lattice alone (a small region whose bands differ in
+grain beyond its noise may give the frame rows per band). A lag still under MIN_PAIRS pairs is reported
 unmeasured (the record's `unmeasured`, its value 0.0), not independent. Values are centred on
 the region's median (from its models) before the float32 products, which keeps 8-bit products
 exact and 16-bit ones accurate. Per region, lag and band the pass keeps the pair count and the
