@@ -188,8 +188,8 @@ def measure(
     shared = [g[keep].mean(axis=0) if keep.any() else np.zeros(g.shape[1]) for g, keep in zip(grains, live)]
     if per_band is None:
         per_band = n_bands > 1 and any(
-            keep.any() and bool((np.abs(g[keep] - mean) > ROW_SPREAD + _noise(sums, j, radius)).any())
-            for j, (g, keep, mean) in enumerate(zip(grains, live, shared)))
+            keep.any() and bool((np.abs(g[keep] - mean) > ROW_SPREAD + _noise(n, radius)).any())
+            for g, keep, mean, n in zip(grains, live, shared, pairs))
     out = {}
     for j, lab in enumerate(regions):
         corr, grain = corrs[j], grains[j]
@@ -314,11 +314,11 @@ def _band_correlations(data: np.ndarray, labels: np.ndarray, index: np.ndarray, 
     return np.array(out)
 
 
-def _noise(sums: _Sums, region: int, radius: int) -> np.ndarray:
-    """Per window lag, three standard errors of a correlation from its pairs (at most 1 / sqrt(n)
-    each): the most that bands alike in grain differ by over the window from sampling alone."""
-    n = _window(sums.anchor_side[:1, region], radius)[0]
-    return 3.0 / np.sqrt(np.maximum(n, 1.0))
+def _noise(n: np.ndarray, radius: int) -> np.ndarray:
+    """Per window lag, from a region's pair counts per window position `n`: three standard
+    errors of a correlation (at most 1 / sqrt(n) each), the most that bands alike in grain
+    differ by over the window from sampling alone."""
+    return 3.0 / np.sqrt(np.maximum(_window(n[None], radius)[0], 1.0))
 
 
 def _window(r: np.ndarray, radius: int, n: np.ndarray | None = None) -> np.ndarray:
