@@ -49,15 +49,27 @@ class ControlServer:
         self._tasks: set[asyncio.Task] = set()
 
     async def start(self) -> None:
-        """Listen at `path` (a stale socket file there is replaced: the caller holds the lock)."""
+        """Listen at `path` (a stale socket file there is replaced: the caller holds the lock).
+
+        The new socket is bound beside it and renamed over it, so a client retrying across a
+        restart always finds a file there: the killed station's, then this one's."""
         check_path(self.path)
-        with suppress(FileNotFoundError):
-            self.path.unlink()
+        fresh = self.path.with_name(self.path.name + ".new")
+        if len(os.fsencode(fresh)) > MAX_PATH:
+            fresh = self.path  # no room for the name beside it: replace in place
+        sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         old = os.umask(0o177)  # the socket is created 0600: only this user commands the robot
         try:
-            self._server = await asyncio.start_unix_server(self._client, path=str(self.path), limit=LINE_LIMIT)
+            with suppress(FileNotFoundError):
+                fresh.unlink()
+            sock.bind(str(fresh))
+            os.replace(fresh, self.path)
+        except BaseException:
+            sock.close()
+            raise
         finally:
             os.umask(old)
+        self._server = await asyncio.start_unix_server(self._client, sock=sock, limit=LINE_LIMIT)
 
     async def close(self) -> None:
         if self._server is not None:
