@@ -39,9 +39,11 @@ from tools.analysis.imposed import MIN_PIXELS, impose, lag_acf
 from tools.analysis.latent import grain_curve, latent_bands
 from tools.analysis.levelmap import Z_SPAN, LevelMap
 from tools.analysis.spectrum import RING, amplitude, ring_spectrum
+from tools.analysis.tiles import in_parallel
 
 _PHASES = np.exp(2j * np.pi * np.arange(256) / 256).astype(np.complex64)
 _PHASES.flags.writeable = False
+PHASE_CHUNK = 1 << 16  # coefficients given their random bits at a time; a multiple of 8
 MIN_EXACT = 64  # fewer region pixels than this: the moments are left to chance
 KEEP_BYTES = 64 << 20  # a workspace up to this size stays for the next call (no page faults)
 _WORK = threading.local()
@@ -167,9 +169,12 @@ def _phases(rng: np.random.Generator, e: np.ndarray) -> None:
     """e (ny x nc) <- unit phasors with uniform phase; the columns irfft keeps real made
     Hermitian in themselves."""
     ny, nc = e.shape
-    # 8 random bits a coefficient, straight from the bit generator (twice as fast as rng.bytes)
-    bits = rng.bit_generator.random_raw((ny * nc + 7) // 8).view(np.uint8)[:ny * nc]
-    _PHASES.take(bits, out=e.reshape(-1), mode="wrap")  # "raise" would buffer `out`
+    flat = e.reshape(-1)
+    for start in range(0, flat.size, PHASE_CHUNK):
+        part = flat[start:start + PHASE_CHUNK]
+        # 8 random bits a coefficient, straight from the bit generator (twice as fast as rng.bytes)
+        bits = rng.bit_generator.random_raw((part.size + 7) // 8).view(np.uint8)[:part.size]
+        _PHASES.take(bits, out=part, mode="wrap")  # "raise" would buffer `out`
     k = np.arange(1, (ny + 1) // 2)
     for c in ((0, nc - 1) if nc > 1 else (0,)):
         e[ny - k, c] = np.conj(e[k, c])
@@ -232,13 +237,15 @@ def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale:
     shaping = _shaping(grain, grid, float(scale))
     n_bands = grain.n_bands
     spectra, fields = _workspace(n_bands, ny, nx)
-    for b in range(n_bands):
+    for b in range(n_bands):  # one stream in band order: a seed gives one field on any threads
         _phases(rng, spectra[b])
     if shaping.mixing is not None:
         _fold(spectra, shaping.mixing)
-    for b in range(n_bands):
+
+    def shape(b: int) -> None:
         spectra[b] *= shaping.amps[b if len(shaping.amps) > 1 else 0]
         spectra[b, 0, 0] = 0.0
+    in_parallel(shape, n_bands, ny * nx)
     whole = inside is None and grid == (h, w)
     own = shaping.mixing is not None  # bands of their own spectra: any correction mixes them
     low = np.linalg.cholesky(grain.latent + 1e-9 * np.eye(n_bands))
@@ -254,11 +261,13 @@ def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale:
     keep = [s.copy() for s in spectra] if fragmented else None
     out = [fields[b, :h, :w] for b in range(n_bands)]
 
+    def inverse(b: int) -> None:
+        # the inverse real FFT in two steps, both into the workspace (irfft2 allocates twice)
+        rows = sfft.ifft(spectra[b], axis=0, overwrite_x=True, workers=1)
+        np.fft.irfft(rows, n=nx, axis=1, out=fields[b])
+
     def redraw() -> None:
-        for b in range(n_bands):
-            # the inverse real FFT in two steps, both into the workspace (irfft2 allocates twice)
-            rows = sfft.ifft(spectra[b], axis=0, overwrite_x=True, workers=1)
-            np.fft.irfft(rows, n=nx, axis=1, out=fields[b])
+        in_parallel(inverse, n_bands, ny * nx)
         if not whole:
             exact_moments(out, inside, grain.latent * (scale * scale), offset, own)
 

@@ -23,7 +23,7 @@ from btf.johnson import Johnson
 from tools.analysis.fields import Grain, blend, draw, grain_of, index_units, remix
 from tools.analysis.latent import corrected
 from tools.analysis.levelmap import LevelMap, level_map, quantile, uniform_table, z_bits, z_table
-from tools.analysis.tiles import Draws, Region, label_counts, region
+from tools.analysis.tiles import Draws, Region, in_parallel, label_counts, region, split_rows, threads
 
 Models = Mapping[tuple[int, int], Johnson]
 Dependences = Mapping[int, Dependence]  # per label; labels without one are drawn independently
@@ -203,7 +203,11 @@ def _fill_correlated(out: np.ndarray, mask: np.ndarray, where: Region, maps: tup
     fields = region_fields(grain, maps, measured, (h, w), inside, rng, levels)
     tables = [z_table(m, z_bits(levels)) for m in maps]
     r0 = where.rows.start
-    for r in where.tiles:
+
+    parts = [part for r in where.tiles for part in split_rows(r, threads())]
+
+    def tile(i: int) -> None:  # every band of one part of a row tile: threads never share a row
+        r = parts[i]
         sel = None if inside is None else inside[r.start - r0:r.stop - r0]
         full = sel is None or bool(sel.all())
         for b, (field, table) in enumerate(zip(fields, tables)):
@@ -212,6 +216,7 @@ def _fill_correlated(out: np.ndarray, mask: np.ndarray, where: Region, maps: tup
                 out[r, where.cols, b] = table.take(rows.astype(np.int32), mode="clip")
             elif sel.any():
                 out[r, where.cols, b][sel] = table.take(rows[sel].astype(np.int32), mode="clip")
+    in_parallel(tile, len(parts), h * w)
 
 
 def blend_pixels(weighted: list[tuple[float, Johnson]], levels: int) -> Callable[[np.ndarray], np.ndarray]:

@@ -7,12 +7,48 @@ would get in one whole-image pass, and results do not depend on the tile size.
 """
 from __future__ import annotations
 
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 TILE_PIXELS = 1 << 18  # temporaries of a few MB per tile
 DRAW_CHUNK = 1 << 18  # random numbers drawn at a time; even (see Draws)
+# Work on at least this many pixels is spread over threads (numpy and scipy.fft let go of
+# the GIL in their loops); less is not worth a thread's hand-over.
+PARALLEL_PIXELS = 1 << 16
+MAX_THREADS = 4
+_POOL: list[ThreadPoolExecutor] = []
+_POOL_LOCK = threading.Lock()
+
+
+def threads() -> int:
+    """How many threads `in_parallel` spreads work over."""
+    return max(1, min(MAX_THREADS, os.cpu_count() or 1))
+
+
+def split_rows(rows: slice, parts: int) -> list[slice]:
+    """`rows` in up to `parts` blocks, in order: a tile shared by threads holds one tile's
+    temporaries in all."""
+    step = max(1, -(-(rows.stop - rows.start) // parts))
+    return [slice(r, min(r + step, rows.stop)) for r in range(rows.start, rows.stop, step)]
+
+
+def in_parallel(work: Callable[[int], None], count: int, pixels: int) -> None:
+    """work(i) for i in range(count), each on its own memory: over the pool's threads when
+    there are several parts of `pixels` pixels in all to share, else one after the other here."""
+    if min(threads(), count) < 2 or pixels < PARALLEL_PIXELS or threading.current_thread().name.startswith("tiles"):
+        for i in range(count):
+            work(i)
+        return
+    with _POOL_LOCK:
+        if not _POOL:
+            _POOL.append(ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="tiles"))
+    for part in [_POOL[0].submit(work, i) for i in range(count)]:
+        part.result()
 
 
 def row_tiles(height: int, width: int, tile_pixels: int | None = None, start: int = 0) -> list[slice]:

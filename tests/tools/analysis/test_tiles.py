@@ -1,12 +1,15 @@
 """Tiling changes memory, not results: compare, synth, pdfs and mask in tiles of a few pixels
-give what one whole-image pass gives (bit for bit; correlation to float tolerance)."""
+give what one whole-image pass gives (bit for bit; correlation to float tolerance), and
+synthesis spread over threads what it gives on one."""
+import threading
+
 import numpy as np
 import pytest
 
 from benchmarks.scenes import field, voronoi_labels
 from btf.dependence import Dependence
 from btf.fit.fitter import FrameFitter, fit_histogram
-from tools.analysis import metrics, pdfs, synth, tiles
+from tools.analysis import fields, metrics, pdfs, synth, tiles
 from tools.analysis.fields import grain_of, index_units
 from tools.analysis.levelmap import uniform_table, z_bits, z_table
 from tools.analysis.interpolation import synthesize_blend
@@ -104,6 +107,24 @@ def test_correlated_synthesis_in_tiles_equals_whole_regions(tiny_tiles):
     deps = {1: DEP, 3: DEP}
     got = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
     assert np.array_equal(got, _whole_synthesize(mask, models, np.random.default_rng(5), deps))
+
+
+@pytest.mark.parametrize("deps", [{1: DEP, 3: DEP}, {k: DEP for k in range(4)}])
+def test_correlated_synthesis_on_threads_is_the_synthesis_on_one(tiny_tiles, monkeypatch, deps):
+    _, mask, models = _scene()
+    alone = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
+    threads = set()
+    inverse = fields.sfft.ifft
+
+    def watched(*args, **kwargs):
+        threads.add(threading.current_thread().name)
+        return inverse(*args, **kwargs)
+    monkeypatch.setattr(fields.sfft, "ifft", watched)
+    monkeypatch.setattr(tiles, "PARALLEL_PIXELS", 1)
+    monkeypatch.setattr(tiles.os, "cpu_count", lambda: 4)
+    shared = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
+    assert any(t.startswith("tiles") for t in threads), threads  # the bands' transforms ran on the pool
+    assert np.array_equal(shared, alone)
 
 
 def test_interpolation_and_direction_blending_do_not_depend_on_the_tile_size(monkeypatch):
