@@ -11,8 +11,8 @@ from btf.dependence import Dependence
 from btf.fit.fitter import FrameFitter, fit_histogram
 from tools.analysis import fields, metrics, pdfs, synth, tiles
 from tools.analysis.fields import grain_of, index_units
-from tools.analysis.levelmap import uniform_table, z_bits, z_table
 from tools.analysis.interpolation import synthesize_blend
+from tools.analysis.levelmap import uniform_table, z_bits, z_table
 from tools.data import masks
 
 DEP = Dependence.from_lags((0.5, 0.3, 0.6), (0.8, 0.6, 0.4, 0.2), (0.7, 0.5, 0.3, 0.1))
