@@ -237,8 +237,10 @@ def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale:
     shaping = _shaping(grain, grid, float(scale))
     n_bands = grain.n_bands
     spectra, fields = _workspace(n_bands, ny, nx)
-    for b in range(n_bands):  # one stream in band order: a seed gives one field on any threads
-        _phases(rng, spectra[b])
+    # a stream per band, seeded from the caller's: a seed gives one field on any number of threads
+    streams = [np.random.Generator(type(rng.bit_generator)(seed))
+               for seed in np.random.SeedSequence(rng.bit_generator.random_raw(4).tolist()).spawn(n_bands)]
+    in_parallel(lambda b: _phases(streams[b], spectra[b]), n_bands, ny * nx)
     if shaping.mixing is not None:
         _fold(spectra, shaping.mixing)
 
