@@ -20,6 +20,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from btf.dependence import MAX_RADIUS, window
+from tools.analysis.tiles import in_parallel
 
 ROUNDS = 1  # a second round gained nothing measurable on the benchmark's regions
 FLOOR = 0.05  # a frequency keeps at least this share of its power
@@ -58,21 +59,26 @@ def impose(spectra: np.ndarray, keep: list[np.ndarray], out: list[np.ndarray], i
     ny = spectra.shape[1]
     c0 = targets[0].shape[0] // 2
     ahead, back = lags[:, None, :] + lags[None, :, :], lags[:, None, :] - lags[None, :, :]
-    cos_at = np.zeros((ny, nx))
+
+    def band(b: int) -> None:  # its own buffers: the bands run on threads
+        r = targets[b]
+        v = (out[b] - np.float32(offset)) * np.float32(1.0 / scale) * m
+        fv = sfft.rfft2(v, pad)
+        got = sfft.irfft2((fv * np.conj(fv)).real, pad)[lags[:, 0] % pad[0], lags[:, 1] % pad[1]] / n
+        miss = r[c0 + lags[:, 0], c0 + lags[:, 1]] - got / max(float((v * v).sum() / m.sum()), 1e-12)
+        # S'(k) = S(k) (1 + sum_h c_h 2 cos(2 pi k h)) moves r(h') by sum_h c_h (r(h' - h) + r(h' + h))
+        gram = r[c0 + back[..., 0], c0 + back[..., 1]] + r[c0 + ahead[..., 0], c0 + ahead[..., 1]]
+        c = np.linalg.solve(gram + RIDGE * np.eye(len(lags)), miss)
+        cos_at = np.zeros((ny, nx), np.float32)
+        cos_at[lags[:, 0] % ny, lags[:, 1] % nx] = c
+        cos_at[-lags[:, 0] % ny, -lags[:, 1] % nx] = c
+        factor = sfft.rfft2(cos_at, workers=1).real
+        factor += 1.0
+        np.sqrt(np.maximum(factor, FLOOR, out=factor), out=factor)
+        factor[0, 0] = 1.0
+        keep[b] *= factor
+        spectra[b] = keep[b]
+
     for _ in range(ROUNDS):
-        for b, r in enumerate(targets):
-            v = (out[b] - np.float32(offset)) * np.float32(1.0 / scale) * m
-            fv = sfft.rfft2(v, pad)
-            got = sfft.irfft2((fv * np.conj(fv)).real, pad)[lags[:, 0] % pad[0], lags[:, 1] % pad[1]] / n
-            miss = r[c0 + lags[:, 0], c0 + lags[:, 1]] - got / max(float((v * v).sum() / m.sum()), 1e-12)
-            # S'(k) = S(k) (1 + sum_h c_h 2 cos(2 pi k h)) moves r(h') by sum_h c_h (r(h' - h) + r(h' + h))
-            gram = r[c0 + back[..., 0], c0 + back[..., 1]] + r[c0 + ahead[..., 0], c0 + ahead[..., 1]]
-            c = np.linalg.solve(gram + RIDGE * np.eye(len(lags)), miss)
-            cos_at[:] = 0.0
-            cos_at[lags[:, 0] % ny, lags[:, 1] % nx] = c
-            cos_at[-lags[:, 0] % ny, -lags[:, 1] % nx] = c
-            factor = np.sqrt(np.maximum(1.0 + sfft.rfft2(cos_at).real, FLOOR))
-            factor[0, 0] = 1.0
-            keep[b] *= factor.astype(np.float32)
-            spectra[b] = keep[b]
+        in_parallel(band, len(targets), h * w)
         redraw()
