@@ -25,6 +25,16 @@ _POOL: list[ThreadPoolExecutor] = []
 _POOL_LOCK = threading.Lock()
 
 
+def _forget_pool() -> None:
+    """In a forked child: none of the parent's threads came along, so a pool starts afresh."""
+    global _POOL_LOCK
+    _POOL.clear()
+    _POOL_LOCK = threading.Lock()
+
+
+os.register_at_fork(after_in_child=_forget_pool)
+
+
 def threads() -> int:
     """How many threads `in_parallel` spreads work over."""
     return max(1, min(MAX_THREADS, os.cpu_count() or 1))
@@ -47,7 +57,8 @@ def in_parallel(work: Callable[[int], None], count: int, pixels: int) -> None:
     with _POOL_LOCK:
         if not _POOL:
             _POOL.append(ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="tiles"))
-    for part in [_POOL[0].submit(work, i) for i in range(count)]:
+        pool = _POOL[0]
+    for part in [pool.submit(work, i) for i in range(count)]:
         part.result()
 
 

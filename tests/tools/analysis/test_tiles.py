@@ -1,6 +1,7 @@
 """Tiling changes memory, not results: compare, synth, pdfs and mask in tiles of a few pixels
 give what one whole-image pass gives (bit for bit; correlation to float tolerance), and
 synthesis spread over threads what it gives on one."""
+import multiprocessing
 import threading
 
 import numpy as np
@@ -125,6 +126,30 @@ def test_correlated_synthesis_on_threads_is_the_synthesis_on_one(tiny_tiles, mon
     shared = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
     assert any(t.startswith("tiles") for t in threads), threads  # the bands' transforms ran on the pool
     assert np.array_equal(shared, alone)
+
+
+def _synthesize_in_child(queue) -> None:
+    _, mask, models = _scene()
+    queue.put(synth.synthesize(mask, models, np.random.default_rng(5), dependence={1: DEP, 3: DEP}))
+
+
+def test_a_process_forked_after_a_threaded_synthesis_synthesizes_on_threads_of_its_own(monkeypatch):
+    monkeypatch.setattr(tiles, "PARALLEL_PIXELS", 1)
+    monkeypatch.setattr(tiles.os, "cpu_count", lambda: 4)
+    _, mask, models = _scene()
+    here = synth.synthesize(mask, models, np.random.default_rng(5), dependence={1: DEP, 3: DEP})
+    assert tiles._POOL  # the parent's pool is up
+    fork = multiprocessing.get_context("fork")
+    queue = fork.Queue()
+    child = fork.Process(target=_synthesize_in_child, args=(queue,))
+    child.start()
+    try:
+        got = queue.get(timeout=60)  # the parent's pool, copied without its threads, would wait forever
+    finally:
+        child.join(10)
+        if child.is_alive():
+            child.kill()
+    assert np.array_equal(got, here)
 
 
 def test_interpolation_and_direction_blending_do_not_depend_on_the_tile_size(monkeypatch):
