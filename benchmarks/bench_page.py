@@ -145,7 +145,7 @@ def run(ctx: Context | None = None) -> Section:
     ctx = ctx or Context()
     if not available():
         return Section("Operator page", ["Not run: Debian's chromium is missing (`make browser` installs it)."])
-    captures, rounds, poses = ctx.pick(500, 50), ctx.pick(7, 2), ctx.pick(30, 4)
+    captures, rounds, poses = ctx.pick(500, 50), ctx.pick(7, 1), ctx.pick(30, 4)
     with tempfile.TemporaryDirectory(prefix="bench-page-") as tmp:
         load = load_times(Path(tmp), captures, rounds)
         lat = latencies(Path(tmp), poses)

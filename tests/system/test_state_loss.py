@@ -3,6 +3,7 @@ again: as a new incarnation, whose captures the host keeps, while it still refus
 duplicate. A damaged outbox is moved aside, not restarted over and over."""
 import json
 import shutil
+import signal
 import sqlite3
 import subprocess
 import sys
@@ -32,15 +33,18 @@ def _sweep_into(tmp_path: Path, db: Path) -> list[dict]:
             [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())", "run",
              "--config", str(tmp_path / "robot.toml"), "--port", bridge.paths[0], "--exit-when-idle",
              "--max-seconds", "90"], cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        listen = subprocess.run(
+        listen = subprocess.Popen(
             [sys.executable, "-c", "import sys; from tools.cli import main; sys.exit(main())", "listen",
              "--port", bridge.paths[1], "--db", str(db), "--key", str(tmp_path / "robot.key"),
-             "--until-idle", "5", "--json"], cwd=ROOT, capture_output=True, text=True, timeout=120)
-        err = robot.communicate(timeout=60)[1].decode()
+             "--until-idle", "60", "--json"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        err = robot.communicate(timeout=120)[1].decode()
+        # the robot ends once every packet is acknowledged, so stored: listen has heard it all
+        listen.send_signal(signal.SIGTERM)
+        out, listen_err = listen.communicate(timeout=60)
     finally:
         bridge.close()
-    assert robot.returncode == 0 and listen.returncode == 0, (err, listen.stderr)
-    return [json.loads(line) for line in listen.stdout.splitlines()]
+    assert robot.returncode == 0 and listen.returncode == 0, (err, listen_err)
+    return [json.loads(line) for line in out.splitlines()]
 
 
 def test_a_wiped_state_with_a_rotated_key_has_every_new_capture_stored(tmp_path, capsys):

@@ -51,17 +51,17 @@ def add_station_options(p: argparse.ArgumentParser, required: bool = True, log: 
 
 def page_options(args: argparse.Namespace, default: str | None = None):
     """The page's options from --http, --http-public, --http-host and --robot-config (None: no page)."""
-    # heavy (OpenCV, scipy): loaded to run, not for --help
-    from tools.page.guard import host_name
-    from tools.page.server import PageOptions, parse_http
-    from tools.report.capture_views import Frames
-
     given = args.http or default
     if given is None:
         if args.http_public or args.robot_config or args.http_host:
             raise CliError("--http-public, --http-host and --robot-config are options of the page: "
                            "give --http [ADDR:]PORT")
         return None
+    # heavy (OpenCV, scipy): loaded to serve the page, not for --help or a station without one
+    from tools.page.guard import host_name
+    from tools.page.server import PageOptions, parse_http
+    from tools.report.capture_views import Frames
+
     try:
         host, port = parse_http(given)
         hosts = tuple(host_name(name) for name in args.http_host)

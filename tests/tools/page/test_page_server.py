@@ -70,11 +70,10 @@ def test_a_public_page_is_watched_without_the_token_but_commands_still_need_it(r
     assert rig.stop(station) == 0
 
 
-def test_page_options_are_checked_before_the_station_starts(rig, tmp_path):
-    def station(*argv):
-        out = subprocess.run([*python("tools.cli"), "station", "--port", rig.cable.paths[1], "--db", str(rig.db),
-                              "--key", str(rig.key), *argv], cwd=ROOT, capture_output=True, text=True, timeout=60)
-        return out.returncode, out.stderr.strip().splitlines()
+def test_page_options_are_checked_before_the_station_starts(rig, tmp_path, host):
+    def station(*argv):  # in this process: the checks refuse before any port or database is opened
+        code, _, err = host("station", "--port", rig.cable.paths[1], "--db", rig.db, "--key", rig.key, *argv)
+        return code, err.strip().splitlines()
 
     not_fake = tmp_path / "real.toml"
     not_fake.write_text('[hal]\nbody = "real"\n')
@@ -89,9 +88,10 @@ def test_page_options_are_checked_before_the_station_starts(rig, tmp_path):
         assert code == 2 and len(err) == 1 and words in err[0], (argv, err)
     taken = rig.station("--http", "127.0.0.1:0")
     url = urlsplit(page_address(rig.where / f"station-{rig.stations}.err"))
-    code, err = station("--port", rig.cable.paths[0], "--db", str(tmp_path / "other.db"), "--http",
-                        f"127.0.0.1:{url.port}")
-    assert code == 2 and "cannot listen there" in err[-1]
+    out = subprocess.run([*python("tools.cli"), "station", "--port", rig.cable.paths[0], "--db",
+                          str(tmp_path / "other.db"), "--key", str(rig.key), "--http", f"127.0.0.1:{url.port}"],
+                         cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2 and "cannot listen there" in out.stderr.strip().splitlines()[-1]
     assert rig.stop(taken) == 0
 
 
