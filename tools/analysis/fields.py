@@ -39,7 +39,7 @@ from tools.analysis.imposed import MIN_PIXELS, impose, lag_acf
 from tools.analysis.latent import grain_curve, latent_bands
 from tools.analysis.levelmap import Z_SPAN, LevelMap
 from tools.analysis.spectrum import RING, amplitude, ring_spectrum
-from tools.analysis.tiles import in_parallel
+from tools.analysis.tiles import in_parallel, split_rows, threads, workers
 
 _PHASES = np.exp(2j * np.pi * np.arange(256) / 256).astype(np.complex64)
 _PHASES.flags.writeable = False
@@ -187,36 +187,46 @@ def _gram(spectra: np.ndarray, weights: np.ndarray, n: int, diagonal: np.ndarray
     """Covariance over the grid of the fields the half-grid spectra stand for (Parseval);
     `diagonal`, when known (random phases under one amplitude), is not summed again."""
     b = len(spectra)
-    g = np.empty((b, b))
     edges = sorted({0, len(weights) - 1})
-    for i in range(b):
-        for j in range(i + 1):
-            if i == j and diagonal is not None:
-                g[i, i] = diagonal[i]
-                continue
-            whole = 2.0 * float(np.vdot(spectra[j], spectra[i]).real)
-            edge = sum((2.0 - weights[c]) * float(np.vdot(spectra[j][:, c], spectra[i][:, c]).real) for c in edges)
-            g[i, j] = g[j, i] = (whole - edge) / (n * n)
+    blocks = split_rows(slice(0, spectra[0].shape[0]), threads())
+    sums = np.zeros((len(blocks), b, b))
+
+    def block(k: int) -> None:  # a block of rows, summed on a thread
+        part = [s[blocks[k]] for s in spectra]
+        for i in range(b):
+            for j in range(i + 1):
+                if i != j or diagonal is None:
+                    edge = sum((2.0 - weights[c]) * float(np.vdot(part[j][:, c], part[i][:, c]).real) for c in edges)
+                    sums[k, i, j] = 2.0 * float(np.vdot(part[j], part[i]).real) - edge
+    in_parallel(block, len(blocks), spectra[0].size)
+    g = np.tril(sums.sum(axis=0)) / (n * n)
+    g = g + np.tril(g, -1).T
+    if diagonal is not None:
+        g[np.diag_indices(b)] = diagonal
     return g
 
 
 def _fold(spectra: list[np.ndarray], t: np.ndarray) -> None:
     """spectra <- t spectra, in place from the last band down (lower-triangular t), through
     copies of the originals for a full t."""
-    if np.triu(t, 1).any():
-        originals = [s.copy() for s in spectra]
-        for i in range(len(spectra)):
-            flat = spectra[i].reshape(-1)
-            flat *= np.complex64(t[i, i])
-            for j in range(len(spectra)):
-                if j != i:
-                    blas.caxpy(originals[j].reshape(-1), flat, a=np.complex64(t[i, j]))
-        return
-    for i in range(len(spectra) - 1, -1, -1):
-        flat = spectra[i].reshape(-1)
-        flat *= np.complex64(t[i, i])
-        for j in range(i):
-            blas.caxpy(spectra[j].reshape(-1), flat, a=np.complex64(t[i, j]))
+    full = bool(np.triu(t, 1).any())
+    blocks = split_rows(slice(0, spectra[0].shape[0]), threads())
+
+    def block(k: int) -> None:  # a block of rows on a thread: rows never mix
+        flats = [s[blocks[k]].reshape(-1) for s in spectra]
+        if full:
+            originals = [f.copy() for f in flats]
+            for i, flat in enumerate(flats):
+                flat *= np.complex64(t[i, i])
+                for j in range(len(flats)):
+                    if j != i:
+                        blas.caxpy(originals[j], flat, a=np.complex64(t[i, j]))
+            return
+        for i in range(len(flats) - 1, -1, -1):
+            flats[i] *= np.complex64(t[i, i])
+            for j in range(i):
+                blas.caxpy(flats[j], flats[i], a=np.complex64(t[i, j]))
+    in_parallel(block, len(blocks), spectra[0].size)
 
 
 def draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale: float = 1.0,
@@ -263,13 +273,17 @@ def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale:
     keep = [s.copy() for s in spectra] if fragmented else None
     out = [fields[b, :h, :w] for b in range(n_bands)]
 
-    def inverse(b: int) -> None:
-        # the inverse real FFT in two steps, both into the workspace (irfft2 allocates twice)
-        rows = sfft.ifft(spectra[b], axis=0, overwrite_x=True, workers=1)
-        np.fft.irfft(rows, n=nx, axis=1, out=fields[b])
+    # the inverse real FFT in two steps, both into the workspace (irfft2 allocates twice): the
+    # columns of every band at once, then blocks of rows, so no thread waits on a third band
+    blocks = split_rows(slice(0, ny), threads())
 
     def redraw() -> None:
-        in_parallel(inverse, n_bands, ny * nx)
+        columns = sfft.ifft(spectra, axis=1, overwrite_x=True, workers=workers(ny * nx))
+
+        def rows(i: int) -> None:
+            b, r = divmod(i, len(blocks))
+            np.fft.irfft(columns[b, blocks[r]], n=nx, axis=1, out=fields[b, blocks[r]])
+        in_parallel(rows, n_bands * len(blocks), ny * nx)
         if not whole:
             exact_moments(out, inside, grain.latent * (scale * scale), offset, own)
 

@@ -115,14 +115,14 @@ def test_correlated_synthesis_on_threads_is_the_synthesis_on_one(tiny_tiles, mon
     _, mask, models = _scene()
     alone = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
     threads = set()
-    inverse = fields.sfft.ifft
+    inverse = fields.np.fft.irfft
 
     def watched(*args, **kwargs):
         threads.add(threading.current_thread().name)
         return inverse(*args, **kwargs)
-    monkeypatch.setattr(fields.sfft, "ifft", watched)
+    monkeypatch.setattr(fields.np.fft, "irfft", watched)
     monkeypatch.setattr(tiles, "PARALLEL_PIXELS", 1)
-    monkeypatch.setattr(tiles.os, "cpu_count", lambda: 4)
+    monkeypatch.setattr(tiles, "CORES", 4)
     shared = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
     assert any(t.startswith("tiles") for t in threads), threads  # the bands' transforms ran on the pool
     assert np.array_equal(shared, alone)
@@ -135,7 +135,7 @@ def _synthesize_in_child(queue) -> None:
 
 def test_a_process_forked_after_a_threaded_synthesis_synthesizes_on_threads_of_its_own(monkeypatch):
     monkeypatch.setattr(tiles, "PARALLEL_PIXELS", 1)
-    monkeypatch.setattr(tiles.os, "cpu_count", lambda: 4)
+    monkeypatch.setattr(tiles, "CORES", 4)
     _, mask, models = _scene()
     here = synth.synthesize(mask, models, np.random.default_rng(5), dependence={1: DEP, 3: DEP})
     assert tiles._POOL  # the parent's pool is up
