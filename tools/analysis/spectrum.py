@@ -28,6 +28,8 @@ the refit, linear interpolation of non-negative values); it is scaled to unit va
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import scipy.fft as sfft
 from scipy.optimize import least_squares, minimize
@@ -39,6 +41,7 @@ RING = 128
 MAX_ASPECT = 4.0  # an exponential's long axis over its short one
 PROJECTIONS = 15
 REFIT_ITERATIONS = 150
+LOG_BOUND = 150.0  # a log-rate's reach: its rate squared twice (e^600) still fits a float
 TIE = 0.3  # a band's pull to the bands' shared spectrum, against its window's squared misses
 
 
@@ -48,25 +51,31 @@ def full_window(radius: int, values: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return np.concatenate(([[0, 0]], half, -half)), np.concatenate(([1.0], values, values))
 
 
-def bounded_rates(m: np.ndarray) -> np.ndarray:
-    """The inverse squared lengths M'M of one exponential, raised so that no length exceeds
-    RING and the long axis is at most sqrt(1 + MAX_ASPECT^2) times the short one (the floor
-    is the fastest rate over MAX_ASPECT^2). Six lags cannot tell a long length: left free, a
-    window a little longer one way sends that length to thousands of pixels, all the
-    component's power on one line of the spectrum (streaks along that axis)."""
-    q = m.T @ m
-    fastest = 0.5 * np.trace(q) + np.sqrt(0.25 * (q[0, 0] - q[1, 1]) ** 2 + q[0, 1] ** 2)
-    return q + (1.0 / RING ** 2 + fastest / MAX_ASPECT ** 2) * np.eye(2)
+def bounded_rates(c: np.ndarray) -> tuple[float, float, float]:
+    """The inverse squared lengths Q = M'M of one exponential, M = [[e^c0, 0], [c1, e^c2]],
+    as (Q00, Q01, Q11), raised so that no length exceeds RING and the long axis is at most
+    sqrt(1 + MAX_ASPECT^2) times the short one (the floor is the fastest rate over
+    MAX_ASPECT^2). Six lags cannot tell a long length: left free, a window a little longer
+    one way sends that length to thousands of pixels, all the component's power on one line of
+    the spectrum (streaks along that axis). Scalar arithmetic: the model's fit calls it a
+    thousand times a record."""
+    clamp = lambda v: min(max(float(v), -LOG_BOUND), LOG_BOUND)  # noqa: E731
+    a, b, e = math.exp(clamp(c[0])), float(c[1]), math.exp(clamp(c[2]))
+    q00, q01, q11 = a * a + b * b, b * e, e * e
+    half_gap = 0.5 * (q00 - q11)
+    fastest = 0.5 * (q00 + q11) + math.sqrt(half_gap * half_gap + q01 * q01)
+    floor = 1.0 / RING ** 2 + fastest / MAX_ASPECT ** 2
+    return q00 + floor, q01, q11 + floor
 
 
 def _model(p: np.ndarray, lags: np.ndarray) -> np.ndarray:
-    share, split = 1 / (1 + np.exp(-p[0])), 1 / (1 + np.exp(-p[1]))
+    share, split = 0.5 * (1.0 + math.tanh(0.5 * p[0])), 0.5 * (1.0 + math.tanh(0.5 * p[1]))  # logistic, no overflow
+    y, x = lags[:, 0], lags[:, 1]
+    yy, xy, xx = y * y, 2.0 * x * y, x * x
     out = np.zeros(len(lags))
     for i, weight in enumerate((share * split, share * (1 - split))):
-        c = p[2 + 3 * i:5 + 3 * i]
-        q = bounded_rates(np.array([[np.exp(c[0]), 0.0], [c[1], np.exp(c[2])]]))
-        d = np.sqrt(np.maximum(np.einsum("ni,ij,nj->n", lags, q, lags), 0.0))
-        out += weight * np.exp(-d)
+        q00, q01, q11 = bounded_rates(p[2 + 3 * i:5 + 3 * i])
+        out += weight * np.exp(-np.sqrt(np.maximum(q00 * yy + q01 * xy + q11 * xx, 0.0)))
     return out
 
 
