@@ -39,7 +39,7 @@ from tools.analysis.imposed import MIN_PIXELS, impose, lag_acf
 from tools.analysis.latent import grain_curve, latent_bands
 from tools.analysis.levelmap import Z_SPAN, LevelMap
 from tools.analysis.spectrum import RING, amplitude, ring_spectrum
-from tools.analysis.tiles import in_parallel, split_rows, threads, workers
+from tools.analysis.tiles import MAX_THREADS, in_parallel, split_rows, workers
 
 _PHASES = np.exp(2j * np.pi * np.arange(256) / 256).astype(np.complex64)
 _PHASES.flags.writeable = False
@@ -188,7 +188,8 @@ def _gram(spectra: np.ndarray, weights: np.ndarray, n: int, diagonal: np.ndarray
     `diagonal`, when known (random phases under one amplitude), is not summed again."""
     b = len(spectra)
     edges = sorted({0, len(weights) - 1})
-    blocks = split_rows(slice(0, spectra[0].shape[0]), threads())
+    # as many blocks on any machine: the sums, and so the draw, do not depend on the core count
+    blocks = split_rows(slice(0, spectra[0].shape[0]), MAX_THREADS)
     sums = np.zeros((len(blocks), b, b))
 
     def block(k: int) -> None:  # a block of rows, summed on a thread
@@ -210,7 +211,7 @@ def _fold(spectra: list[np.ndarray], t: np.ndarray) -> None:
     """spectra <- t spectra, in place from the last band down (lower-triangular t), through
     copies of the originals for a full t."""
     full = bool(np.triu(t, 1).any())
-    blocks = split_rows(slice(0, spectra[0].shape[0]), threads())
+    blocks = split_rows(slice(0, spectra[0].shape[0]), MAX_THREADS)  # BLAS rounds a block's tail its own way
 
     def block(k: int) -> None:  # a block of rows on a thread: rows never mix
         flats = [s[blocks[k]].reshape(-1) for s in spectra]
@@ -274,8 +275,9 @@ def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale:
     out = [fields[b, :h, :w] for b in range(n_bands)]
 
     # the inverse real FFT in two steps, both into the workspace (irfft2 allocates twice): the
-    # columns of every band at once, then blocks of rows, so no thread waits on a third band
-    blocks = split_rows(slice(0, ny), threads())
+    # columns of every band at once, then blocks of rows, so no thread waits on a third band;
+    # as many blocks on any machine, so a seed draws one field whatever the core count
+    blocks = split_rows(slice(0, ny), MAX_THREADS)
 
     def redraw() -> None:
         columns = sfft.ifft(spectra, axis=1, overwrite_x=True, workers=workers(ny * nx))

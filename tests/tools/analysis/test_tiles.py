@@ -110,9 +110,23 @@ def test_correlated_synthesis_in_tiles_equals_whole_regions(tiny_tiles):
     assert np.array_equal(got, _whole_synthesize(mask, models, np.random.default_rng(5), deps))
 
 
-@pytest.mark.parametrize("deps", [{1: DEP, 3: DEP}, {k: DEP for k in range(4)}])
-def test_correlated_synthesis_on_threads_is_the_synthesis_on_one(tiny_tiles, monkeypatch, deps):
-    _, mask, models = _scene()
+def _quadrants(h=160, w=200):
+    """Four regions that fill their boxes (80 x 100, fast FFT lengths): drawn whole, their band
+    covariance summed over the grid."""
+    mask = np.zeros((h, w), np.uint8)
+    mask[h // 2:] += 2
+    mask[:, w // 2:] += 1
+    frame, _ = field(h, w)
+    f = FrameFitter(4, 3)
+    f.add(frame, mask)
+    return frame, mask, {k: r.model for k, r in f.fit().items()}
+
+
+@pytest.mark.parametrize("scene,deps", [(_scene, {1: DEP, 3: DEP}), (_scene, {k: DEP for k in range(4)}),
+                                        (_quadrants, {k: DEP for k in range(4)})])
+def test_correlated_synthesis_on_threads_is_the_synthesis_on_one(tiny_tiles, monkeypatch, scene, deps):
+    _, mask, models = scene()
+    monkeypatch.setattr(tiles, "CORES", 1)
     alone = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
     threads = set()
     inverse = fields.np.fft.irfft
