@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from typing import Callable
 
@@ -71,7 +71,9 @@ def in_parallel(work: Callable[[int], None], count: int, pixels: int) -> None:
         if not _POOL:
             _POOL.append(ThreadPoolExecutor(max_workers=threads(), thread_name_prefix="tiles"))
         pool = _POOL[0]
-    for part in [pool.submit(work, i) for i in range(count)]:
+    parts = [pool.submit(work, i) for i in range(count)]
+    wait(parts)  # every part ended before any error is raised: none still writes after the call
+    for part in parts:
         part.result()
 
 

@@ -142,6 +142,22 @@ def test_correlated_synthesis_on_threads_is_the_synthesis_on_one(tiny_tiles, mon
     assert np.array_equal(shared, alone)
 
 
+def test_a_part_that_fails_is_raised_once_every_other_part_has_ended(monkeypatch):
+    monkeypatch.setattr(tiles, "PARALLEL_PIXELS", 1)
+    monkeypatch.setattr(tiles, "CORES", 4)
+    ended = threading.Event()
+
+    def work(i):
+        if i == 0:
+            raise ValueError("part 0")
+        ended.wait(0.2)  # still running when part 0 has failed
+        ended.set()
+
+    with pytest.raises(ValueError, match="part 0"):
+        tiles.in_parallel(work, 2, 1 << 20)
+    assert ended.is_set()
+
+
 def _synthesize_in_child(queue) -> None:
     _, mask, models = _scene()
     queue.put(synth.synthesize(mask, models, np.random.default_rng(5), dependence={1: DEP, 3: DEP}))
