@@ -59,7 +59,7 @@ def impose(spectra: np.ndarray, keep: list[np.ndarray], out: list[np.ndarray], i
     c0 = targets[0].shape[0] // 2
     ahead, back = lags[:, None, :] + lags[None, :, :], lags[:, None, :] - lags[None, :, :]
 
-    def band(b: int) -> None:  # one at a time: on threads, two bands' temporaries of the box at once (+13 B a pixel)
+    def band(b: int) -> None:  # its temporaries of the box go with the call, before the redraw makes its own
         r = targets[b]
         v = (out[b] - np.float32(offset)) * np.float32(1.0 / scale) * m
         fv = sfft.rfft2(v, pad)

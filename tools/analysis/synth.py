@@ -168,6 +168,8 @@ def _drawn_corr(fields: list[np.ndarray], tables: list[np.ndarray], inside: np.n
     # that fills a third of it, and check every pixel of a small box that it fills
     count = h * w if inside is None else int(np.count_nonzero(inside))
     step = max(1, round(np.sqrt(count / CHECKED)))
+    if inside is not None and np.count_nonzero(inside[::step, ::step]) < 2:
+        step = 1  # a region the lattice misses (every other row, say) is read whole
     keep = None if inside is None else inside[::step, ::step]
     cols = None
     for b, (f, table) in enumerate(zip(fields, tables)):
