@@ -140,3 +140,16 @@ def test_store_keeps_the_records_and_synth_cli_uses_them_unless_independent(tmp_
     assert acf_gap(img, outs[False], inside, RADIUS) <= 0.1
     assert acf_gap(np.zeros_like(img), outs[True], inside) < 0.05
     assert all(outside(img, o, labels == lab) == 0.0 for o in outs.values() for lab in deps)
+
+
+def test_a_region_on_every_other_row_has_its_drawn_band_correlation_read():
+    from tools.analysis.synth import _drawn_corr
+
+    inside = np.zeros((600, 600), bool)
+    inside[1::2] = True  # 180,000 pixels: the check's lattice (every other row and column) misses them all
+    rng = np.random.default_rng(0)
+    base = rng.normal(30000, 3000, inside.shape).astype(np.float32)
+    fields = [base, (0.6 * base + 0.8 * rng.normal(30000, 3000, inside.shape)).astype(np.float32)]
+    tables = [np.arange(65536, dtype=np.uint16)] * 2
+    got = _drawn_corr(fields, tables, inside)
+    assert np.allclose(np.diag(got), 1.0) and got[0, 1] == pytest.approx(0.6, abs=0.01)
