@@ -31,7 +31,6 @@ from functools import lru_cache
 import numpy as np
 import scipy.fft as sfft
 from scipy.linalg import blas
-from threadpoolctl import ThreadpoolController
 
 from btf.dependence import MAX_RADIUS, Dependence
 from btf.fit.dependence import ROW_SPREAD
@@ -39,7 +38,7 @@ from tools.analysis.imposed import MIN_PIXELS, impose, lag_acf
 from tools.analysis.latent import grain_curve, latent_bands
 from tools.analysis.levelmap import Z_SPAN, LevelMap
 from tools.analysis.spectrum import RING, amplitude, ring_spectrum
-from tools.analysis.tiles import MAX_THREADS, in_parallel, split_rows, workers
+from tools.analysis.tiles import MAX_THREADS, in_parallel, one_blas_thread, split_rows, streams, workers
 
 _PHASES = np.exp(2j * np.pi * np.arange(256) / 256).astype(np.complex64)
 _PHASES.flags.writeable = False
@@ -47,9 +46,6 @@ PHASE_CHUNK = 1 << 16  # coefficients given their random bits at a time; a multi
 MIN_EXACT = 64  # fewer region pixels than this: the moments are left to chance
 KEEP_BYTES = 64 << 20  # a workspace up to this size stays for the next call (no page faults)
 _WORK = threading.local()
-# One BLAS thread: the small solves of the setup and the vector steps of a draw ran 10 to 30
-# times slower when OpenBLAS spread them over the cores of a machine other work was using.
-_BLAS = ThreadpoolController()
 
 
 @dataclass(frozen=True, eq=False)
@@ -70,7 +66,7 @@ def grain_of(dep: Dependence, maps: tuple[LevelMap, ...]) -> Grain:
     """A measured record through its bands' maps: latent band matrix and grain spectra."""
     if not dep.measured or dep.n_bands != len(maps):
         raise ValueError(f"a measured record of {len(maps)} band(s) is needed for correlated fields")
-    with _BLAS.limit(limits=1, user_api="blas"):
+    with one_blas_thread():
         latent, reached = latent_bands(dep.matrix(), list(maps))
         if not dep.per_band:
             rings = (ring_spectrum(dep.radius, dep.acf[0], grain_curve(list(maps)), RING, RING, dep.known(0)),)
@@ -236,7 +232,7 @@ def draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale: 
     z * scale + offset (z standard normal); sample moments exact over the pixels `inside`
     (an h x w mask; None: the whole box). The fields are views of this thread's workspace:
     valid until its next call."""
-    with _BLAS.limit(limits=1, user_api="blas"):
+    with one_blas_thread():
         return _draw(grain, shape, rng, scale, offset, inside)
 
 
@@ -248,10 +244,8 @@ def _draw(grain: Grain, shape: tuple[int, int], rng: np.random.Generator, scale:
     shaping = _shaping(grain, grid, float(scale))
     n_bands = grain.n_bands
     spectra, fields = _workspace(n_bands, ny, nx)
-    # a stream per band, seeded from the caller's: a seed gives one field on any number of threads
-    streams = [np.random.Generator(type(rng.bit_generator)(seed))
-               for seed in np.random.SeedSequence(rng.bit_generator.random_raw(4).tolist()).spawn(n_bands)]
-    in_parallel(lambda b: _phases(streams[b], spectra[b]), n_bands, ny * nx)
+    bands = streams(rng, n_bands)  # a stream per band: a seed gives one field on any number of threads
+    in_parallel(lambda b: _phases(bands[b], spectra[b]), n_bands, ny * nx)
     if shaping.mixing is not None:
         _fold(spectra, shaping.mixing)
 
@@ -365,7 +359,7 @@ def exact_moments(fields: list[np.ndarray], inside: np.ndarray | None, target: n
 def remix(fields: list[np.ndarray], old: np.ndarray, new: np.ndarray, offset: float, least_mixing: bool = False) -> None:
     """Fields drawn with latent band correlation `old` (each z * scale + offset) made to carry
     `new` in place: z <- T z (`correction`)."""
-    with _BLAS.limit(limits=1, user_api="blas"):
+    with one_blas_thread():
         t = correction(old, new, least_mixing)
         _affine(fields, t, offset * (1.0 - t.sum(axis=1)))
 

@@ -14,16 +14,28 @@ family differs between the two angles, where blending raw parameters is not.
 from __future__ import annotations
 
 import warnings
+from dataclasses import dataclass
 from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
 from btf.dependence import Dependence
 from btf.johnson import Johnson
+from tools.analysis import tiles
 from tools.analysis.fields import Grain, blend, draw, grain_of, index_units, remix
 from tools.analysis.latent import corrected
 from tools.analysis.levelmap import LevelMap, level_map, quantile, uniform_table, z_bits, z_table
-from tools.analysis.tiles import Draws, Region, in_parallel, label_counts, region, split_rows, threads
+from tools.analysis.tiles import (
+    Draws,
+    Region,
+    in_parallel,
+    label_counts,
+    one_blas_thread,
+    region,
+    split_rows,
+    streams,
+    threads,
+)
 
 Models = Mapping[tuple[int, int], Johnson]
 Dependences = Mapping[int, Dependence]  # per label; labels without one are drawn independently
@@ -122,10 +134,11 @@ def synthesize(mask: np.ndarray, models: Models, rng: np.random.Generator, level
     levels, with the region's grain and band correlation (correlated fields) when its record
     has them and not `independent`, else pixel by pixel. Works region by region in row tiles:
     beyond the mask and the image it holds a region's fields (B float32 per pixel of its box)
-    or a few tiles."""
+    or a few tiles, and a few small regions' fields at once where they are drawn on threads."""
     n_bands = _bands(models)
     out = _output(mask, n_bands, levels)
     missed: list[str] = []
+    correlated: list[_Correlated] = []
     for label in _check(mask, models, n_bands):
         where = region(mask, label)
         dep = _record(dependence, label, n_bands)
@@ -133,14 +146,46 @@ def synthesize(mask: np.ndarray, models: Models, rng: np.random.Generator, level
         if dep is not None and dep.measured and not independent and where.count:
             grain = grain_of(dep, maps)
             missed += _missed(label, dep, grain)
-            _fill_correlated(out, mask, where, maps, grain, rng, levels, dep.matrix())
+            # a stream per region: a seed gives one image however the regions share the threads
+            correlated.append(_Correlated(where, maps, grain, streams(rng, 1)[0], dep.matrix()))
         else:
             for b, m in enumerate(maps):
                 fill(out, b, mask, where, _from_stream(Draws(_independent(m, rng, levels), where.count)))
+    _fill_all(out, mask, correlated, levels)
     if missed:
         warnings.warn("band correlation beyond what the models can reach: " + "; ".join(missed)
                       + " (the observed levels of the bands cannot couple closer)", ReachWarning, stacklevel=2)
     return out
+
+
+@dataclass(frozen=True)
+class _Correlated:
+    """A region to be drawn as correlated fields, with its own random stream."""
+
+    where: Region
+    maps: tuple[LevelMap, ...]
+    grain: Grain
+    rng: np.random.Generator
+    measured: np.ndarray
+
+    @property
+    def box(self) -> int:
+        return (self.where.rows.stop - self.where.rows.start) * (self.where.cols.stop - self.where.cols.start)
+
+
+def _fill_all(out: np.ndarray, mask: np.ndarray, regions: list[_Correlated], levels: int) -> None:
+    """Large regions one after another, each spread over the threads; small ones (whose own
+    transforms are too short to share) a whole region per thread, largest first."""
+    small = sorted((r for r in regions if r.box < tiles.PARALLEL_PIXELS), key=lambda r: -r.box)
+    for r in regions:
+        if r.box >= tiles.PARALLEL_PIXELS:
+            _fill_correlated(out, mask, r.where, r.maps, r.grain, r.rng, levels, r.measured)
+
+    def one(i: int) -> None:
+        r = small[i]
+        _fill_correlated(out, mask, r.where, r.maps, r.grain, r.rng, levels, r.measured)
+    with one_blas_thread():
+        in_parallel(one, len(small), sum(r.box for r in small))
 
 
 def _missed(label: int, dep: Dependence, grain: Grain) -> list[str]:

@@ -7,13 +7,15 @@ would get in one whole-image pass, and results do not depend on the tile size.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, ContextManager
 
 import numpy as np
+from threadpoolctl import ThreadpoolController
 
 TILE_PIXELS = 1 << 18  # temporaries of a few MB per tile
 DRAW_CHUNK = 1 << 18  # random numbers drawn at a time; even (see Draws)
@@ -24,6 +26,9 @@ PARALLEL_PIXELS = 1 << 19
 MAX_THREADS = 4
 _POOL: list[ThreadPoolExecutor] = []
 _POOL_LOCK = threading.Lock()
+# One BLAS thread: the small solves of the setup and the vector steps of a draw ran 10 to 30
+# times slower when OpenBLAS spread them over the cores of a machine other work was using.
+_BLAS: list[ThreadpoolController] = []  # made at first use: it inspects the loaded libraries
 
 
 def _forget_pool() -> None:
@@ -53,6 +58,29 @@ def workers(pixels: int) -> int:
     return threads() if pixels >= PARALLEL_PIXELS else 1
 
 
+def in_pool() -> bool:
+    """Whether this is one of `in_parallel`'s threads (work here runs on it alone)."""
+    return threading.current_thread().name.startswith("tiles")
+
+
+def one_blas_thread() -> ContextManager:
+    """BLAS held to one thread for the block. In the pool's threads the caller of `in_parallel`
+    already holds it: the library's setting is global, and limits set and restored from several
+    threads at once could leave it at one for the whole process."""
+    if in_pool():
+        return contextlib.nullcontext()
+    if not _BLAS:
+        _BLAS.append(ThreadpoolController())
+    return _BLAS[0].limit(limits=1, user_api="blas")
+
+
+def streams(rng: np.random.Generator, count: int) -> list[np.random.Generator]:
+    """`count` independent generators seeded from `rng` (four of its words): work split over
+    them gives the same numbers on any number of threads."""
+    seeds = np.random.SeedSequence(rng.bit_generator.random_raw(4).tolist()).spawn(count)
+    return [np.random.Generator(type(rng.bit_generator)(seed)) for seed in seeds]
+
+
 def split_rows(rows: slice, parts: int) -> list[slice]:
     """`rows` in up to `parts` blocks, in order: a tile shared by threads holds one tile's
     temporaries in all."""
@@ -63,7 +91,7 @@ def split_rows(rows: slice, parts: int) -> list[slice]:
 def in_parallel(work: Callable[[int], None], count: int, pixels: int) -> None:
     """work(i) for i in range(count), each on its own memory: over the pool's threads when
     there are several parts of `pixels` pixels in all to share, else one after the other here."""
-    if min(threads(), count) < 2 or pixels < PARALLEL_PIXELS or threading.current_thread().name.startswith("tiles"):
+    if min(threads(), count) < 2 or pixels < PARALLEL_PIXELS or in_pool():
         for i in range(count):
             work(i)
         return

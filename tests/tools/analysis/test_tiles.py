@@ -71,7 +71,8 @@ def test_compare_in_tiles_equals_the_whole_image_metrics(tiny_tiles):
 
 
 def _whole_synthesize(mask, models, rng, dependence=None, levels=256):
-    """Synthesis the way it runs without tiles: whole regions, one draw per region and band."""
+    """Synthesis the way it runs without tiles or threads: whole regions in label order, one draw
+    per region and band, a correlated region from a stream of its own taken from `rng`."""
     out = np.zeros(mask.shape + (3,), np.uint8 if levels <= 256 else np.uint16)
     bits = z_bits(levels)
     scale, offset = index_units(bits)
@@ -82,7 +83,7 @@ def _whole_synthesize(mask, models, rng, dependence=None, levels=256):
             rows, cols = np.flatnonzero(sel.any(axis=1)), np.flatnonzero(sel.any(axis=0))
             box = sel[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]
             fields = synth.region_fields(grain_of(dependence[label], maps), maps, dependence[label].matrix(),
-                                         box.shape, None if box.all() else box, rng, levels)
+                                         box.shape, None if box.all() else box, tiles.streams(rng, 1)[0], levels)
             for b in range(3):
                 out[sel, b] = z_table(maps[b], bits).take(fields[b][box].astype(np.int32), mode="clip")
             continue
@@ -140,6 +141,32 @@ def test_correlated_synthesis_on_threads_is_the_synthesis_on_one(tiny_tiles, mon
     shared = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
     assert any(t.startswith("tiles") for t in threads), threads  # the bands' transforms ran on the pool
     assert np.array_equal(shared, alone)
+
+
+@pytest.mark.parametrize("scene", [_scene, _quadrants])
+def test_small_regions_drawn_a_region_per_thread_are_the_synthesis_on_one(tiny_tiles, monkeypatch, scene):
+    _, mask, models = scene()
+    deps = {k: DEP for k in range(4)}
+    monkeypatch.setattr(tiles, "CORES", 1)
+    alone = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
+    boxes = [r.box for r in _correlated_regions(mask, models, deps)]
+    drawn_on = []
+    fill = synth._fill_correlated
+
+    def watched(out, mask, where, *args):
+        drawn_on.append((where.label, threading.current_thread().name))
+        return fill(out, mask, where, *args)
+    monkeypatch.setattr(synth, "_fill_correlated", watched)
+    monkeypatch.setattr(tiles, "PARALLEL_PIXELS", max(boxes) + 1)  # every box small, all of them not
+    monkeypatch.setattr(tiles, "CORES", 2)
+    shared = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
+    assert sorted(label for label, _ in drawn_on) == [0, 1, 2, 3]
+    assert all(name.startswith("tiles") for _, name in drawn_on), drawn_on  # whole regions on the pool
+    assert np.array_equal(shared, alone)
+
+
+def _correlated_regions(mask, models, deps):
+    return [synth._Correlated(w, (), None, None, None) for w in (tiles.region(mask, k) for k in deps)]
 
 
 def test_a_part_that_fails_is_raised_once_every_other_part_has_ended(monkeypatch):
