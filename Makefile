@@ -3,9 +3,9 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed-stamp
-# The tests run in two processes where there are two cores (pytest-xdist); a module marked
-# xdist_group runs on one of them, so its module fixture is set up once.
-PYTEST_ARGS ?= -n auto --maxprocesses 2 --dist loadgroup
+# The tests run in two processes where there are two cores (pytest-xdist), a module's tests
+# in one of them, so a module's fixture is set up once.
+PYTEST_ARGS ?= -n auto --maxprocesses 2 --dist loadscope
 
 .PHONY: setup demo test browser bench bench-peers stress fuzz clean
 

@@ -15,8 +15,6 @@ from benchmarks.stability_grid import SATURATIONS, Point, Saturation, curve, gri
 from benchmarks.stability_score import METHODS, Cause, Size, Truth, diagnose, evaluate, fit_and_score, score
 from btf.johnson import Family, Johnson
 
-pytestmark = pytest.mark.xdist_group("benchmarks")  # its module fixture is set up once, on one worker
-
 EXPECTED = {"bracketing", "core", "dependence", "hostile", "hostmem", "ingest", "onboard", "page", "peers", "runtime", "sampling", "scene", "stability",
             "startup",
             "subsample", "synth", "texture", "wire", "link", "failsafe"}

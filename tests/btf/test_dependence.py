@@ -11,8 +11,6 @@ from btf.fit.dependence import MAX_ANCHORS, MIN_PAIRS, measure, observed
 from btf.fit.fitter import FrameFitter
 from btf.johnson import Johnson
 
-pytestmark = pytest.mark.xdist_group("dependence")  # its module fixture is set up once, on one worker
-
 
 def _fits(image: np.ndarray, labels: np.ndarray):
     f = FrameFitter(int(labels.max()) + 1, image.shape[2], bins=256)

@@ -12,8 +12,6 @@ from hal.scene.projection import MARGIN, PaddedPlate, seen_cells
 from hal.scene.sensor import unit_normal
 from hal.scene.surface import build_surface
 
-pytestmark = pytest.mark.xdist_group("scene_projection")  # its module fixture is set up once, on one worker
-
 
 def ray_march(height: np.ndarray, view: ViewAngles, h: int, w: int) -> np.ndarray:
     """Flat index of the cell each pixel sees: every ray sampled cell by cell in float64, each

@@ -7,8 +7,6 @@ from radio.link import Link
 from tests.support.browser import report_layout
 from tools.demo.end_to_end import DemoConfig, run_demo
 
-pytestmark = pytest.mark.xdist_group("demo")  # its module fixture is set up once, on one worker
-
 
 @pytest.fixture(scope="module")
 def first_run(tmp_path_factory):

@@ -29,6 +29,8 @@ the refit, linear interpolation of non-negative values); it is scaled to unit va
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import scipy.fft as sfft
@@ -130,13 +132,50 @@ def _projected(radius: int, latent: np.ndarray, ny: int, nx: int, known: np.ndar
     return s / total if total > 0 else np.ones_like(s)
 
 
+@dataclass(frozen=True)
+class _HalfPlane:
+    """A real spectrum with S(k) = S(-k) on an ny x nx ring, held once per pair k, -k: the
+    entries of an rfft2 half (ny x (nx // 2 + 1)) less the mirrored halves of its self-mirrored
+    columns (kx = 0, and nx / 2 for even nx). `count` is how many of the ring's frequencies
+    each entry stands for (1 or 2)."""
+
+    entries: np.ndarray  # flat indices into the rfft2 half
+    count: np.ndarray
+    mirror_to: np.ndarray  # flat indices into the half filled from `mirror_from`
+    mirror_from: np.ndarray
+    full: np.ndarray  # flat indices into the ring of each entry ...
+    full_mirror: np.ndarray  # ... and of its mirror -k
+
+
+@lru_cache(maxsize=8)
+def _half_plane(ny: int, nx: int) -> _HalfPlane:
+    nh = nx // 2 + 1
+    ky, kx = np.meshgrid(np.arange(ny), np.arange(nh), indexing="ij")
+    mirrored_column = (kx == 0) | ((nx % 2 == 0) & (kx == nx // 2))
+    keep = ~mirrored_column | (ky <= ny // 2)
+    self_mirror = mirrored_column & ((ky == 0) | ((ny % 2 == 0) & (ky == ny // 2)))
+    entries = np.flatnonzero(keep)
+    drop = np.flatnonzero(~keep)
+    my, mx = ky.ravel(), kx.ravel()
+    return _HalfPlane(entries, np.where(self_mirror.ravel()[entries], 1.0, 2.0), drop,
+                      ((-my[drop]) % ny) * nh + mx[drop],
+                      my[entries] * nx + mx[entries], ((-my[entries]) % ny) * nx + (-mx[entries]) % nx)
+
+
 def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray,
            known: np.ndarray | None = None, reference: np.ndarray | None = None) -> np.ndarray:
     """The spectrum S = a^2 (so S >= 0 without bounds, which slow L-BFGS-B down by orders of
     magnitude where many frequencies sit at zero) whose pixel autocorrelation over the window's
     known lags comes nearest `target`; with a `reference` spectrum, the one nearest it (in
-    sqrt S) among those that meet the window about as well (see ring_spectrum)."""
+    sqrt S) among those that meet the window about as well (see ring_spectrum).
+
+    S is real and even, so it is fitted on one half of the frequencies (_HalfPlane) through
+    real transforms, half the unknowns and half the transform work of the whole ring. Each
+    unknown is u = sqrt(count) a: the loss and its gradient in u are those over the whole ring,
+    so the fit takes the steps it would take there."""
     ny, nx = start.shape
+    n = ny * nx
+    plane = _half_plane(ny, nx)
     lags, vals = full_window(radius, target)
     iy, ix = lags[:, 0] % ny, lags[:, 1] % nx
     slope = np.gradient(curve, GRID)
@@ -144,29 +183,40 @@ def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray
     weight[0] = 100.0  # unit variance
     if known is not None:
         weight[~_full_known(known)] = 0.0
-    n = ny * nx
+    root_count = np.sqrt(plane.count)
+    half = np.zeros((ny, nx // 2 + 1))
 
-    def loss(root: np.ndarray) -> tuple[float, np.ndarray]:
-        r = sfft.ifft2((root * root).reshape(ny, nx)).real[iy, ix]
+    def loss(u: np.ndarray) -> tuple[float, np.ndarray]:
+        a = u / root_count
+        half.flat[plane.entries] = a * a
+        half.flat[plane.mirror_to] = half.flat[plane.mirror_from]
+        r = sfft.irfft2(half, s=(ny, nx))[iy, ix]
         p, dp = np.interp(r, GRID, curve), np.interp(r, GRID, slope)
         p[0], dp[0] = r[0], 1.0  # lag 0 stays latent
         res = p - vals
         grad = np.zeros((ny, nx))
         np.add.at(grad, (iy, ix), 2 * weight * res * dp)
-        # d r(h) / d S_k = cos(2 pi k h) / n, d S_k / d a_k = 2 a_k
-        value, slope_a = float(weight @ res ** 2), 2.0 * root * sfft.fft2(grad).real.ravel() / n
+        # d r(h) / d S_k = cos(2 pi k h) / n over the ring, S_k = a_k^2 at `count` frequencies
+        ring_slope = sfft.rfft2(grad).real.ravel()[plane.entries] / n
+        value, slope_u = float(weight @ res ** 2), 2.0 * a * ring_slope * root_count
         if anchor is not None:
-            away = root - anchor
+            away = u - anchor
             value += TIE * float(away @ away) / n
-            slope_a += 2.0 * TIE * away / n
-        return value, slope_a
+            slope_u += 2.0 * TIE * away / n
+        return value, slope_u
 
-    anchor = None if reference is None else np.sqrt(np.maximum(reference, 0.0)).ravel()
+    def on_half(ring: np.ndarray) -> np.ndarray:
+        flat = ring.ravel()
+        return 0.5 * (flat[plane.full] + flat[plane.full_mirror])
+
+    anchor = None if reference is None else np.sqrt(np.maximum(on_half(reference), 0.0)) * root_count
     # a floor under the start: a frequency at exactly zero would have no gradient to grow by
-    first = np.sqrt(start + 1e-3).ravel() if anchor is None else anchor + 1e-3
+    first = np.sqrt(on_half(start) + 1e-3) * root_count if anchor is None else anchor + 1e-3 * root_count
     fit = minimize(loss, first, jac=True, method="L-BFGS-B", options={"maxiter": REFIT_ITERATIONS})
-    s = (fit.x * fit.x).reshape(ny, nx)
-    s = 0.5 * (s + s[(-np.arange(ny)) % ny][:, (-np.arange(nx)) % nx])  # r real: S(k) = S(-k)
+    a = fit.x / root_count
+    s = np.empty(n)
+    s[plane.full], s[plane.full_mirror] = a * a, a * a
+    s = s.reshape(ny, nx)
     mean = s.mean()
     return s / mean if mean > 0 else np.ones_like(s)
 

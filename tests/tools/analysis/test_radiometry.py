@@ -19,8 +19,6 @@ from tools.data.images import read_image, write_image, write_mask
 from tools.station.receiver import Receiver
 from tools.store.database import Store
 
-pytestmark = pytest.mark.xdist_group("radiometry")  # its module fixture is set up once, on one worker
-
 SIZE = (240, 320)
 VIEW = ViewAngles(90.0)
 

@@ -19,8 +19,6 @@ from tools.cli import main
 from tools.data.images import feature_bands, fit_bands, stretched_8bit, three_bands, write_image
 from tools.data.masks import segment
 
-pytestmark = pytest.mark.xdist_group("spaces")  # its module fixture is set up once, on one worker
-
 PHOTOS = public_photos()
 SPACES = {"astronaut": "rgb,hsv,pca", "coffee": "rgb,pca", "chelsea": "rgb,pca", "immunohistochemistry": "rgb,pca",
           "camera": "gray", "coins": "gray", "mri16": "gray"}

@@ -15,8 +15,6 @@ from tools.analysis import fields, spectrum
 from tools.analysis.grain_metrics import empirical_autocorrelation
 from tools.analysis.synth import synthesize
 
-pytestmark = pytest.mark.xdist_group("spectrum_extension")  # its module fixture is set up once, on one worker
-
 RADIUS = 6
 # Measured on rocket's lighter sky, mean over seeds 0-3 of the (vertical - horizontal) lag-32
 # correlation: photograph 0.03, bounded extension -0.04, unbounded 0.20.

@@ -16,8 +16,6 @@ from tests.support.robots import IDLE, LINKED, robot_toml
 from tools.cli import main
 from tools.demo.pty_cable import PtyCable
 
-pytestmark = pytest.mark.xdist_group("host_link_cli")  # its module fixture is set up once, on one worker
-
 
 @pytest.fixture
 def key(tmp_path):

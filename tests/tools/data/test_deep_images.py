@@ -18,8 +18,6 @@ from tests.support.databases import older_database
 from tools.data.images import read_image, write_image, write_mask
 from tools.store.database import Store
 
-pytestmark = pytest.mark.xdist_group("deep_images")  # its module fixture is set up once, on one worker
-
 
 def thermal_camera(scene: str = "mixed", size=(480, 640), seed: int = 1) -> tuple[np.ndarray, np.ndarray]:
     view = render(scene, ViewAngles(60.0, 0.0), size, seed=seed, bands="multispectral")

@@ -14,8 +14,6 @@ from tools.data.images import read_image, read_mask
 from tools.data.ingest import IngestError, dataset_robot, ingest
 from tools.store.database import Store
 
-pytestmark = pytest.mark.xdist_group("ingest")  # its module fixture is set up once, on one worker
-
 VIEWS = [Angles(el, az, lel, 0.0) for el in (30.0, 60.0, 90.0) for az in (0.0, 90.0) for lel in (40.0, 70.0)]
 
 

@@ -18,8 +18,6 @@ from tools.report.capture_views import Frames
 from tools.report.document import write_report
 from tools.store.database import Store
 
-pytestmark = pytest.mark.xdist_group("report_summary")  # its module fixture is set up once, on one worker
-
 
 def demo_result(db, missed_angle=None):
     """A demo's result as run_demo fills it; `missed_angle` makes the mixed plate miss its bar there."""
