@@ -158,7 +158,7 @@ def synthesize(mask: np.ndarray, models: Models, rng: np.random.Generator, level
     return out
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _Correlated:
     """A region to be drawn as correlated fields, with its own random stream."""
 

@@ -149,7 +149,7 @@ def test_small_regions_drawn_a_region_per_thread_are_the_synthesis_on_one(tiny_t
     deps = {k: DEP for k in range(4)}
     monkeypatch.setattr(tiles, "CORES", 1)
     alone = synth.synthesize(mask, models, np.random.default_rng(5), dependence=deps)
-    boxes = [r.box for r in _correlated_regions(mask, models, deps)]
+    boxes = [(r.rows.stop - r.rows.start) * (r.cols.stop - r.cols.start) for r in (tiles.region(mask, k) for k in deps)]
     drawn_on = []
     fill = synth._fill_correlated
 
@@ -163,10 +163,6 @@ def test_small_regions_drawn_a_region_per_thread_are_the_synthesis_on_one(tiny_t
     assert sorted(label for label, _ in drawn_on) == [0, 1, 2, 3]
     assert all(name.startswith("tiles") for _, name in drawn_on), drawn_on  # whole regions on the pool
     assert np.array_equal(shared, alone)
-
-
-def _correlated_regions(mask, models, deps):
-    return [synth._Correlated(w, (), None, None, None) for w in (tiles.region(mask, k) for k in deps)]
 
 
 def test_a_part_that_fails_is_raised_once_every_other_part_has_ended(monkeypatch):
