@@ -296,7 +296,9 @@ def correction(now: np.ndarray, want: np.ndarray, least_mixing: bool = False) ->
     triangular one built on a nearly singular matrix mixed them wholesale and took up to 0.19
     off a band's autocorrelation."""
     b = len(now)
-    ridge = lambda m: 1e-9 * max(float(np.trace(m)) / b, 1e-300) * np.eye(b)  # noqa: E731 (relative: any units)
+
+    def ridge(m: np.ndarray) -> np.ndarray:  # relative to the matrix: any units
+        return 1e-9 * max(float(np.trace(m)) / b, 1e-300) * np.eye(b)
     if not least_mixing:
         return np.linalg.cholesky(want + ridge(want)) @ np.linalg.inv(np.linalg.cholesky(now + ridge(now)))
     vals, vecs = np.linalg.eigh(now + ridge(now))

@@ -176,16 +176,15 @@ class _Correlated:
 def _fill_all(out: np.ndarray, mask: np.ndarray, regions: list[_Correlated], levels: int) -> None:
     """Large regions one after another, each spread over the threads; small ones (whose own
     transforms are too short to share) a whole region per thread, largest first."""
+    def one(r: _Correlated) -> None:
+        _fill_correlated(out, mask, r.where, r.maps, r.grain, r.rng, levels, r.measured)
+
     small = sorted((r for r in regions if r.box < tiles.PARALLEL_PIXELS), key=lambda r: -r.box)
     for r in regions:
         if r.box >= tiles.PARALLEL_PIXELS:
-            _fill_correlated(out, mask, r.where, r.maps, r.grain, r.rng, levels, r.measured)
-
-    def one(i: int) -> None:
-        r = small[i]
-        _fill_correlated(out, mask, r.where, r.maps, r.grain, r.rng, levels, r.measured)
+            one(r)
     with one_blas_thread():
-        in_parallel(one, len(small), sum(r.box for r in small))
+        in_parallel(lambda i: one(small[i]), len(small), sum(r.box for r in small))
 
 
 def _missed(label: int, dep: Dependence, grain: Grain) -> list[str]:
