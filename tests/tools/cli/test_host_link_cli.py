@@ -146,7 +146,7 @@ def robot_port(tmp_path_factory):
         robot = subprocess.Popen(
             [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())", "run",
              "--config", str(work / "robot.toml"), "--hal", "fake", "--port", bridge.paths[0],
-             "--max-seconds", "120"], cwd=ROOT,
+             "--max-seconds", "600"], cwd=ROOT,
             stdout=subprocess.DEVNULL, stderr=err)
     try:
         yield bridge.paths[1], key
