@@ -20,8 +20,10 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/btf-host demo --out demo-out
 
+# The tests start hundreds of Python processes (robots, stations, commands): each reads its
+# modules' cached bytecode, even where the environment turns the caching off.
 test: $(STAMP) browser
-	$(BIN)/python -m pytest -q $(PYTEST_ARGS)
+	env -u PYTHONDONTWRITEBYTECODE $(BIN)/python -m pytest -q $(PYTEST_ARGS)
 
 # The operator page's tests drive a real browser: Debian's chromium (root or sudo installs it).
 browser:
