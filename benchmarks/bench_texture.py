@@ -100,8 +100,11 @@ def _photo_row(name: str, ctx: Context) -> tuple[str, list[dict], dict]:
         row["acf_robot"] = float(np.mean([gm.acf_gap(photo.pixels, synthesize(
             robot.labels, robot.models, np.random.default_rng(s), levels, robot.dependence), inside) for s in SEEDS]))
     h, w, b = photo.pixels.shape
+    reach = [issubclass(c.category, ReachWarning) for c in caught]
     info = {"size": f"{w}x{h}", "bands": f"{b} x {'8' if levels == 256 else '16'}-bit", "ratio": t["cor"] / t["ind"],
-            "setup": setup, "warned": [str(c.message) for c in caught], "photo": photo, "synth": cors[0], "ind": ind}
+            "setup": setup, "warned": [str(c.message) for c, r in zip(caught, reach) if r],
+            "faults": [f"{c.category.__name__}: {c.message}" for c, r in zip(caught, reach) if not r],
+            "photo": photo, "synth": cors[0], "ind": ind}
     return name, rows, info
 
 
@@ -158,6 +161,10 @@ def _summary(results) -> list[str]:
     if warned:
         out += ["", "Warned (a band correlation the marginals cannot reach):"]
         out += [f"- {name}: {w}" for name, w in warned]
+    faults = [(name, w) for name, _, info in results for w in info["faults"]]
+    if faults:  # a numerical warning from synthesis is a defect to find, not a reach to name
+        out += ["", "Other warnings, raised while synthesizing (each one a defect to look into):"]
+        out += [f"- {name}: {w}" for name, w in faults]
     return out
 
 
