@@ -171,8 +171,9 @@ def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray
 
     def evaluate(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         r = sfft.irfft2(half_spectrum(c), s=(ny, nx))
-        p, dp = np.interp(r[at], GRID, curve), np.interp(r[at], GRID, slope)
-        p[0], dp[0] = r[at][0], 1.0  # lag 0 stays latent
+        at_lags = r[at]
+        p, dp = np.interp(at_lags, GRID, curve), np.interp(at_lags, GRID, slope)
+        p[0], dp[0] = at_lags[0], 1.0  # lag 0 stays latent
         res = weight * (p - goal)
         jac = (weight * dp)[:, None] * (0.5 * (r[plus] + r[minus]))
         return res, jac, float(res @ res + RIDGE * (c @ c))
