@@ -202,7 +202,7 @@ def _independent(m: LevelMap, rng: np.random.Generator, levels: int) -> Callable
     bits = z_bits(levels)
     table, (scale, offset) = z_table(m, bits), index_units(bits)
     return lambda size: table.take((rng.standard_normal(size, dtype=np.float32) * np.float32(scale)
-                                    + np.float32(offset)).astype(np.int32), mode="clip")
+                                    + np.float32(offset)).astype(np.intp), mode="clip")
 
 
 def _drawn_corr(fields: list[np.ndarray], tables: list[np.ndarray], inside: np.ndarray | None) -> np.ndarray:
@@ -218,7 +218,7 @@ def _drawn_corr(fields: list[np.ndarray], tables: list[np.ndarray], inside: np.n
     cols = None
     for b, (f, table) in enumerate(zip(fields, tables)):
         sub = f[::step, ::step] if keep is None else f[::step, ::step][keep]
-        levels = table.take(sub.astype(np.int32).ravel(), mode="clip")
+        levels = table.take(sub.astype(np.intp).ravel(), mode="clip")
         if cols is None:
             cols = np.empty((len(fields), levels.size), np.float32)
         cols[b] = levels
@@ -266,9 +266,9 @@ def _fill_correlated(out: np.ndarray, mask: np.ndarray, where: Region, maps: tup
         for b, (field, table) in enumerate(zip(fields, tables)):
             rows = field[r.start - r0:r.stop - r0]
             if full:
-                out[r, where.cols, b] = table.take(rows.astype(np.int32), mode="clip")
+                out[r, where.cols, b] = table.take(rows.astype(np.intp), mode="clip")
             elif sel.any():
-                out[r, where.cols, b][sel] = table.take(rows[sel].astype(np.int32), mode="clip")
+                out[r, where.cols, b][sel] = table.take(rows[sel].astype(np.intp), mode="clip")
     in_parallel(tile, len(parts), h * w)
 
 
