@@ -85,11 +85,12 @@ class Judgement:
 
 
 def spaces_of(image: np.ndarray) -> tuple[str, ...]:
-    """The feature spaces a photograph offers: gray alone for one band, rgb and gray at 16 bits."""
-    if default_space(image) == "gray":
-        return ("gray",)
+    """The feature spaces a photograph offers: gray alone for one band, its own bands alone for
+    other than one or three, rgb and gray at 16 bits."""
+    if default_space(image) != "rgb":
+        return (default_space(image),)
     if image.dtype == np.uint16:
-        return DEEP_SPACES
+        return tuple(s for s in DEEP_SPACES if s != "raw")  # raw would repeat rgb
     return ("rgb", "hsv", "gray", "pca")
 
 

@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         METRICS,
         compare_bands,
     )
-    from tools.data.images import ImageError, feature_bands, read_image, read_mask, three_bands
+    from tools.data.images import ImageError, default_space, feature_bands, read_image, read_mask, three_bands
 
     try:
         ref = read_image(args.ref)
@@ -67,7 +67,10 @@ def run(args: argparse.Namespace) -> int:
             raise ImageError(f"image {args.test}: size {test.shape[1]}x{test.shape[0]} differs from "
                              f"{args.ref}'s {ref.shape[1]}x{ref.shape[0]}")
         mask = read_mask(args.mask, ref.shape[:2]) if args.mask else None
-        space = args.space or ("gray" if ref.shape[2] == test.shape[2] == 1 else "rgb")
+        if ref.shape[2] != test.shape[2] and 1 < min(ref.shape[2], test.shape[2]):
+            raise ImageError(f"image {args.test}: {test.shape[2]} bands, {args.ref} has {ref.shape[2]}; "
+                             "compare images of the same bands")
+        space = args.space or (default_space(ref) if ref.shape[2] == test.shape[2] else "rgb")
         if ref.shape[2] != test.shape[2] and space != "gray":  # a one-band image against a colour one
             ref, test = three_bands(ref), three_bands(test)
         factors = None if args.reference_label is None else _normalise(ref, test, mask, args.reference_label, args.test)

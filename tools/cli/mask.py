@@ -38,15 +38,13 @@ def run(args: argparse.Namespace) -> int:
     from tools.data.images import (
         ImageError,
         read_image,
-        stretched_8bit,
-        three_bands,
+        segmentation_view,
         write_mask,
     )
 
     check_out(args.out, (args.image,), args.force, suffixes=(".png",))  # labels stay exact in PNG only
     try:
-        # 16-bit: segmented on its own range; one band: as gray RGB (the segmenters take colour)
-        image = three_bands(stretched_8bit(read_image(args.image)))
+        image = segmentation_view(read_image(args.image))
         if image.shape[0] * image.shape[1] < args.k:
             raise CliError(f"image {args.image}: fewer pixels than --k {args.k} classes")
         write_mask(args.out, segment(image, args.method, args.k, args.seed, args.scale, args.segments))

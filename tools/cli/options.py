@@ -10,7 +10,7 @@ from pathlib import Path
 from onboard.cli.runner import CliError, bounded
 
 # The feature spaces of tools.data.images.SPACES, named here so that building the parser needs no OpenCV.
-FEATURE_SPACES = ("rgb", "hsv", "gray", "pca")
+FEATURE_SPACES = ("rgb", "hsv", "gray", "pca", "raw")
 BAUD = bounded(int, 50, 4_000_000, "bits/s")  # a serial port's speed
 
 

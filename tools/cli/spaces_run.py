@@ -16,9 +16,9 @@ from tools.data.images import (
     ImageError,
     read_image,
     read_mask,
-    stretched_8bit,
-    three_bands,
+    segmentation_view,
     to_rgb,
+    view_rgb,
     write_image,
 )
 from tools.data.masks import segment
@@ -51,11 +51,10 @@ def table_lines(result: Judgement) -> list[str]:
     return lines
 
 
-def _view(bands: np.ndarray, space: str, pca, span: tuple[int, int] | None) -> np.ndarray:
-    """8-bit RGB of a synthesis or photograph in its feature space."""
+def _view(bands: np.ndarray, space: str, pca, photo: np.ndarray) -> np.ndarray:
+    """8-bit RGB of a synthesis in its feature space, stretched as its photograph is."""
     img = to_rgb(bands, space, pca)
-    img = img[..., None] if img.ndim == 2 else img
-    return three_bands(stretched_8bit(img, span))
+    return view_rgb(img[..., None] if img.ndim == 2 else img, photo)
 
 
 MIN_PANEL = 256  # a small photograph's panels are enlarged (pixel for pixel) to at least this width
@@ -72,12 +71,10 @@ def _titled(img: np.ndarray, title: str) -> np.ndarray:
 
 def picture(image: np.ndarray, result: Judgement) -> np.ndarray:
     """The photograph | the chosen synthesis | the worst one, titled, 8-bit RGB."""
-    span = None if image.dtype == np.uint8 else (int(image.min()), int(image.max()))
-    photo = three_bands(stretched_8bit(image, span))
     best, worst = result.chosen, result.worst
-    panels = [_titled(photo, "photograph")]
+    panels = [_titled(view_rgb(image), "photograph")]
     for what, r in (("chosen", best), ("worst", worst)):
-        panels.append(_titled(_view(r.synthesis, r.space, r.pca, span),
+        panels.append(_titled(_view(r.synthesis, r.space, r.pca, image),
                               f"{what}: {r.mask} {r.space} ({r.figures.error:.3f})"))
     gap = np.full((panels[0].shape[0], 6, 3), 255, np.uint8)
     return np.concatenate([panels[0], gap, panels[1], gap, panels[2]], axis=1)
@@ -152,7 +149,7 @@ def masks_of(args: argparse.Namespace, specs: list[tuple[str, str, int]], image:
         return {"mask": stored}
     if stored is not None and args.masks is None:
         return {"stored": stored}
-    view = three_bands(stretched_8bit(image))  # what `btf-host mask` segments
+    view = segmentation_view(image)  # what `btf-host mask` segments
     out = {}
     for name, method, k in specs:
         if image.shape[0] * image.shape[1] < k:

@@ -24,7 +24,7 @@ from tools.cli.options import (
     choose_source,
     elevation,
 )
-from tools.data.images import DEEP_SUFFIXES, ImageError, read_mask, to_rgb, write_image
+from tools.data.images import DEEP_SUFFIXES, TIFF_SUFFIXES, ImageError, read_mask, to_rgb, write_image
 from tools.store.database import CorruptDatabase, Store
 
 
@@ -90,8 +90,9 @@ def _from_json(path: str) -> tuple[dict, dict, str, int, dict | None]:
                        "never blended; keep one depth per models file")
     if type(levels) is not int or not 2 <= levels <= 65536:
         raise CliError(f"models {path}: levels {levels!r} is not an integer in 2..65536")
-    if levels > 256 and first.get("space") not in ("rgb", "gray"):
-        raise CliError(f"models {path}: {levels} levels in space {first.get('space')!r}; deep models are rgb or gray")
+    if levels > 256 and first.get("space") not in ("rgb", "gray", "raw"):
+        raise CliError(f"models {path}: {levels} levels in space {first.get('space')!r}; "
+                       "deep models are rgb, gray or raw")
     if parsed[0][0] is None:  # one document without an angle serves every angle
         by_angle, deps = {float("-inf"): parsed[0][1]}, {float("-inf"): found[0]}
     return by_angle, deps, str(first.get("space") or "rgb"), levels, first.get("pca")
@@ -225,6 +226,13 @@ def _check_depth(out: str, levels: int) -> None:
         raise CliError(f"image {out}: 16-bit pixels need a .png or .tif file (the models have {levels} levels)")
 
 
+def _check_bands(out: str, space: str, by_angle: dict) -> None:
+    """Refuses, before any work, a PNG for raw bands other than one or three."""
+    bands = 1 + max((b for models in by_angle.values() for _, b in models), default=0)
+    if space == "raw" and bands not in (1, 3) and Path(out).suffix.lower() not in TIFF_SUFFIXES:
+        raise CliError(f"image {out}: {bands} bands need a .tif file (PNG holds one or three)")
+
+
 def _warn(caught) -> None:
     for w in caught:
         print(f"btf-host: warning: {w.message}", file=sys.stderr)
@@ -263,6 +271,7 @@ def run(args: argparse.Namespace) -> int:
         by_angle, dependence, space, levels, pca_rec = _from_json(args.model)
         pca = PcaBasis.from_record(pca_rec) if pca_rec else None
     _check_depth(args.out, levels)
+    _check_bands(args.out, space, by_angle)
     mask = _read_mask(args.mask)
     angle = args.angle
     if float("-inf") in by_angle:  # one document without an angle: it serves any angle

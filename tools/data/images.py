@@ -1,10 +1,12 @@
 """Reading and writing images and label masks on the host, with one-line errors.
 
-Images are (H, W, 3) RGB or (H, W, 1) for one-band files (gray, thermal, elevation) in memory,
-at their sensor depth: uint8 (256 levels) or uint16 (65536 levels; 16-bit PNG and TIFF, and
-float images in 0..1 quantized to 16 bits). A one-band image stays one band: its default
-feature space is gray, fitted, synthesized and compared as the one band it is. Masks are label
-arrays (H, W) uint8, stored as single-channel PNG so every label value survives a round trip.
+Images are (H, W, 3) RGB, (H, W, 1) for one-band files (gray, thermal, elevation) or (H, W, N)
+for a TIFF of N bands (multi-spectral) in memory, at their sensor depth: uint8 (256 levels) or
+uint16 (65536 levels; 16-bit PNG and TIFF, and float images in 0..1 quantized to 16 bits). An
+alpha channel is not a band: it is left out. An image keeps its bands: a one-band image is
+fitted, synthesized and compared in gray, a colour one in rgb, any other count as its own bands
+(raw, B0..Bn-1), written back as TIFF. Masks are label arrays (H, W) uint8, stored as
+single-channel PNG so every label value survives a round trip.
 """
 from __future__ import annotations
 
@@ -68,16 +70,61 @@ def _as_levels(raw: np.ndarray, p: Path) -> np.ndarray:
     return np.rint(raw * (FLOAT_LEVELS - 1)).astype(np.uint16)
 
 
+TIFF_SUFFIXES = (".tif", ".tiff")
+_BAND_AXES = "SCQI"  # tifffile's names for an axis of samples, channels or pages that are bands
+_PNG_GRAY_ALPHA = 4  # the PNG colour type of gray with alpha (OpenCV reads it as BGRA)
+
+
+def _tiff_bands(p: Path) -> np.ndarray | None:
+    """A TIFF's bands as stored (H, W) or (H, W, N), alpha samples left out; None for a file
+    tifffile cannot decode (a compression it lacks), which OpenCV then tries."""
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(p) as tif:
+            series = tif.series[0]
+            axes, data = series.axes, series.asarray()
+            extra = [int(v) for v in (tif.pages[0].extrasamples or ())]
+    except (tifffile.TiffFileError, ValueError, KeyError, IndexError, NotImplementedError):
+        return None
+    if data.ndim == 2:
+        return data
+    if data.ndim != 3 or not (axes[-1] in _BAND_AXES or (axes[0] in _BAND_AXES and axes[1:] == "YX")):
+        raise ImageError(f"image {p}: a TIFF of axes {axes} {data.shape}; expected one image of bands "
+                         "(height, width and one axis of bands)")
+    bands = data if axes[-1] in _BAND_AXES else np.moveaxis(data, 0, -1)
+    n = bands.shape[2]  # extra samples are the last ones; 1 and 2 are associated and unassociated alpha
+    alpha = {n - len(extra) + k for k, v in enumerate(extra) if v in (1, 2)}
+    if alpha and len(alpha) < n:
+        bands = bands[:, :, [b for b in range(n) if b not in alpha]]
+    return np.ascontiguousarray(bands)
+
+
+def _png_color_type(p: Path) -> int | None:
+    with open(p, "rb") as f:
+        head = f.read(26)
+    return head[25] if len(head) == 26 and head.startswith(b"\x89PNG\r\n\x1a\n") else None
+
+
 def read_image(path: str | Path) -> np.ndarray:
-    """An image file as RGB (H, W, 3), or (H, W, 1) for a one-band file, uint8 or uint16 (float
-    images in 0..1 become uint16)."""
+    """An image file as RGB (H, W, 3), (H, W, 1) for a one-band file or (H, W, N) for a TIFF of
+    N bands, uint8 or uint16 (float images in 0..1 become uint16); alpha left out."""
     p = Path(path)
+    if p.suffix.lower() in TIFF_SUFFIXES and p.is_file():
+        bands = _tiff_bands(p)
+        if bands is not None:
+            if bands.size == 0:
+                raise ImageError(f"image {p}: no pixels")
+            bands = _as_levels(bands, p)
+            return bands[:, :, None] if bands.ndim == 2 else bands
     raw = _as_levels(_imread(p, "image"), p)
     if raw.ndim == 2:
         return raw[:, :, None]
     if raw.shape[2] == 1:
         return raw
     if raw.shape[2] == 4:
+        if p.suffix.lower() == ".png" and _png_color_type(p) == _PNG_GRAY_ALPHA:
+            return np.ascontiguousarray(raw[:, :, :1])  # gray and alpha: one band
         return cv2.cvtColor(raw, cv2.COLOR_BGRA2RGB)
     # In place: a copy would double the peak memory of a large image.
     return cv2.cvtColor(raw, cv2.COLOR_BGR2RGB, dst=raw)
@@ -138,19 +185,50 @@ def three_bands(image: np.ndarray) -> np.ndarray:
     return np.repeat(image, 3, axis=2) if image.ndim == 3 and image.shape[2] == 1 else image
 
 
+def band_count(image: np.ndarray) -> int:
+    return 1 if image.ndim == 2 else image.shape[2]
+
+
+def view_rgb(image: np.ndarray, reference: np.ndarray | None = None) -> np.ndarray:
+    """8-bit RGB for a person to look at, 16-bit stretched over the levels `reference` (the
+    photograph; default the image) occupies, so a synthesis and its photograph read alike: one
+    band as gray, colour over its bands' common range, other counts as false colour of their
+    first three bands (the first two and the first again for two), each over its own range."""
+    ref = image if reference is None else reference
+    if band_count(image) in (1, 3):
+        span = None if ref.dtype == np.uint8 else (int(ref.min()), int(ref.max()))
+        return three_bands(stretched_8bit(image, span))
+    picks = (0, 1, 2) if image.shape[2] >= 3 else (0, 1, 0)
+    return np.dstack([stretched_8bit(image[:, :, b:b + 1], (int(ref[..., b].min()), int(ref[..., b].max())))
+                      for b in picks])
+
+
+def segmentation_view(image: np.ndarray) -> np.ndarray:
+    """What `btf-host mask` segments: 8-bit, a one-band image as gray RGB, a colour one over
+    its bands' common range (their ratios kept), and other counts (multi-spectral: reflectance
+    beside a thermal band in centikelvin) each band over its own range."""
+    if band_count(image) in (1, 3):
+        return three_bands(stretched_8bit(image))
+    return np.dstack([stretched_8bit(image[:, :, b:b + 1]) for b in range(image.shape[2])])
+
+
 def default_space(image: np.ndarray) -> str:
     """The feature space an image is fitted and compared in unless asked otherwise: its own
-    bands, gray for a one-band image and rgb for a colour one."""
-    return "gray" if image.ndim == 2 or image.shape[2] == 1 else "rgb"
+    bands, gray for a one-band image, rgb for a colour one and raw for any other count."""
+    return {1: "gray", 3: "rgb"}.get(band_count(image), "raw")
 
 
 def write_image(path: str | Path, image: np.ndarray) -> None:
-    """Writes RGB (H, W, 3) or single-band (H, W) uint8 pixels, or uint16 as 16-bit PNG or TIFF."""
+    """Writes RGB (H, W, 3) or single-band (H, W) uint8 pixels, or uint16 as 16-bit PNG or TIFF;
+    any other number of bands (H, W, N) as a TIFF of N bands."""
     img = np.asarray(image)
     if img.dtype not in (np.uint8, np.uint16):
         raise ImageError(f"image {path}: {img.dtype} pixels; expected uint8 or uint16")
     if img.dtype == np.uint16 and Path(path).suffix.lower() not in DEEP_SUFFIXES:
         raise ImageError(f"image {path}: 16-bit pixels need a .png or .tif file")
+    if img.ndim == 3 and img.shape[2] not in (1, 3):
+        _write_bands(Path(path), img)
+        return
     if img.ndim == 3 and img.shape[2] == 3:
         img = img[:, :, ::-1]
     elif img.ndim == 3 and img.shape[2] == 1:
@@ -158,6 +236,20 @@ def write_image(path: str | Path, image: np.ndarray) -> None:
     elif img.ndim != 2:
         raise ImageError(f"image {path}: shape {img.shape}; expected (H, W) or (H, W, 3)")
     _write(Path(path), np.ascontiguousarray(img), "image")
+
+
+def _write_bands(p: Path, img: np.ndarray) -> None:
+    """N bands as one TIFF image of N samples (no colour, no alpha), which read_image reads back."""
+    import tifffile
+
+    if p.suffix.lower() not in TIFF_SUFFIXES:
+        raise ImageError(f"image {p}: {img.shape[2]} bands need a .tif file (PNG holds one or three)")
+    if p.parent and not p.parent.exists():
+        raise ImageError(f"image {p}: directory {p.parent} does not exist")
+    try:
+        tifffile.imwrite(p, np.ascontiguousarray(img), photometric="minisblack", planarconfig="contig")
+    except OSError as exc:
+        raise ImageError(f"image {p}: cannot write ({exc.strerror or exc})") from None
 
 
 def write_mask(path: str | Path, labels: np.ndarray) -> None:
@@ -173,18 +265,24 @@ def write_mask(path: str | Path, labels: np.ndarray) -> None:
     _write(p, lab.astype(np.uint8, copy=False), "mask")
 
 
-SPACES = ("rgb", "hsv", "gray", "pca")
-DEEP_SPACES = ("rgb", "gray")  # the spaces of 16-bit images
+SPACES = ("rgb", "hsv", "gray", "pca", "raw")
+DEEP_SPACES = ("rgb", "gray", "raw")  # the spaces of 16-bit images
 
 
 def feature_bands(image: np.ndarray, space: str | None = None, pca=None):
     """The robot's own feature bands of an image (btf.fit.features); `space` None follows the
     image (`default_space`); pca fits a basis if none is given. A one-band image in gray is its
-    own band at its own depth; a 16-bit image keeps its depth: rgb as it is, gray by OpenCV's
-    weights. Colour spaces of a one-band image see it repeated to RGB."""
+    own band at its own depth; a 16-bit image keeps its depth: rgb and raw as they are, gray by
+    OpenCV's weights. Colour spaces of a one-band image see it repeated to RGB; raw is any image's
+    own bands."""
     space = default_space(image) if space is None else space
     if space not in SPACES:
         raise ImageError(f"feature space {space!r}: expected one of {', '.join(SPACES)}")
+    if space == "raw":  # the bands as they are, at their depth
+        return compute(image, FeatureSpec(FeatureSpace.RAW)), None
+    if band_count(image) not in (1, 3):
+        raise ImageError(f"feature space {space}: the image has {band_count(image)} bands, and {space} is "
+                         "made from one or three; fit its own bands with the raw space")
     if image.ndim == 3 and image.shape[2] == 1 and space == "gray":
         return FeatureFrame(np.ascontiguousarray(image), ("Y",), levels_of(image), FeatureSpace.GRAY), None
     image = three_bands(image)
@@ -256,9 +354,9 @@ def fit_bands(feats: "FeatureFrame", pca: "PcaBasis | None", labels: np.ndarray,
 
 
 def to_rgb(bands: np.ndarray, space: str, pca=None) -> np.ndarray:
-    """Synthesized feature bands back to a viewable RGB (or single-band) image at their depth."""
-    if space == "rgb" or space == "gray":
-        return bands if space == "rgb" else bands[:, :, 0]
+    """Synthesized feature bands back to an image at their depth: RGB, one band, or raw bands."""
+    if space in ("rgb", "gray", "raw"):  # raw: the bands as they are (a TIFF for other than one or three)
+        return bands[:, :, 0] if bands.shape[2] == 1 else bands
     if space == "hsv":
         hsv = bands.copy()
         hsv[:, :, 0] = np.minimum(hsv[:, :, 0], 179)

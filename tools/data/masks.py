@@ -12,6 +12,7 @@ SLIC's class borders partly follow the tile borders where its superpixels are cu
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
@@ -58,7 +59,7 @@ def _kmeans(image: np.ndarray, k: int, seed: int) -> np.ndarray:
     import cv2
 
     cv2.setRNGSeed(seed)
-    px = image.reshape(-1, 3).astype(np.float32)  # what cv2.kmeans takes
+    px = image.reshape(-1, image.shape[2]).astype(np.float32)  # what cv2.kmeans takes
     crit = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 20, 0.5)
     _, lab, centres = cv2.kmeans(px, k, None, crit, 3, cv2.KMEANS_PP_CENTERS)
     del px
@@ -91,7 +92,9 @@ def _segment_tiles(image: np.ndarray, method: str, scale: float, segments: int, 
         for c0, c1 in zip(cols, cols[1:]):
             part = image[r0:r1, c0:c1]
             if method == "felzenszwalb":
-                seg = felzenszwalb(part, scale=scale, sigma=0.8, min_size=20)
+                with warnings.catch_warnings():  # more than three bands are meant: a multi-spectral image
+                    warnings.filterwarnings("ignore", "Got image with third dimension", RuntimeWarning)
+                    seg = felzenszwalb(part, scale=scale, sigma=0.8, min_size=20)
             else:  # superpixels of the whole image's size
                 share = max(1, round(segments * (r1 - r0) * (c1 - c0) / (h * w)))
                 seg = slic(part, n_segments=share, compactness=10, start_label=0)
@@ -106,12 +109,13 @@ def _merge_segments(image: np.ndarray, segments: np.ndarray, k: int, seed: int) 
 
     n = int(segments.max()) + 1
     counts = np.zeros(n)
-    sums = np.zeros((n, 3))
+    bands = image.shape[2]
+    sums = np.zeros((n, bands))
     for r in row_tiles(*segments.shape):
         seg = segments[r].ravel()
         counts += np.bincount(seg, minlength=n)
-        px = image[r].reshape(-1, 3)
-        for c in range(3):  # integer sums: exact in any order
+        px = image[r].reshape(-1, bands)
+        for c in range(bands):  # integer sums: exact in any order
             sums[:, c] += np.bincount(seg, px[:, c].astype(np.float64), n)
     means = sums / np.maximum(counts, 1)[:, None]
     present = counts > 0
@@ -130,8 +134,9 @@ def _merge_segments(image: np.ndarray, segments: np.ndarray, k: int, seed: int) 
 
 def segment(image: np.ndarray, method: str, k: int, seed: int = 0, scale: float = 100.0,
             segments: int = 400, tile: int | None = None) -> np.ndarray:
-    """A uint8 mask of `image` (H x W x 3 uint8) with classes 0..K-1, darkest first;
-    Felzenszwalb and SLIC segment tiles of at most `tile` (default SEGMENT_TILE) pixels a side."""
+    """A uint8 mask of `image` (H x W x bands uint8: three for colour, or a multi-spectral
+    image's own) with classes 0..K-1, darkest first; Felzenszwalb and SLIC segment tiles of at
+    most `tile` (default SEGMENT_TILE) pixels a side."""
     if method == "isodata":
         return _isodata(image, k, seed)
     if method == "kmeans":

@@ -1,7 +1,9 @@
 """What a stored capture looks like: its label map, the view synthesized from its models
 (independent pixels, and correlated when it carries dependence; hsv and pca ones turned back
-into RGB, pca through the scene's stored basis), the measured frame where the host has it, and the histograms with the Johnson curves. The static report and the operator's
-page both draw captures with these (`tools.report.look` lays them out).
+into RGB, pca through the scene's stored basis, raw bands as false colour of their first
+three), the measured frame where the host has it, and the histograms with the Johnson curves.
+The static report and the operator's page both draw captures with these (`tools.report.look`
+lays them out).
 
 Measured frames are not in the database (the robot sends models, not pixels): `Frames` finds
 them where the host can, a fake robot's render (its config names scene, size and seed) or the
@@ -26,7 +28,7 @@ from onboard.config import load
 from tools.analysis.level_bins import Grid
 from tools.analysis.radiometry import adjusted
 from tools.analysis.synth import MissingModels, ReachWarning, synthesize
-from tools.data.images import ImageError, read_image, stretched_8bit, to_rgb
+from tools.data.images import ImageError, read_image, stretched_8bit, to_rgb, view_rgb
 from tools.station.receiver import mask_key
 from tools.store.database import Store, StoredCapture
 
@@ -62,14 +64,16 @@ def capture_mask(store: Store, cap: StoredCapture) -> np.ndarray | None:
 
 
 def shown(cap: StoredCapture, image: np.ndarray) -> bool:
-    """Whether a synthesized image of this capture can be shown as a picture (rgb, gray)."""
-    return (cap.space == "rgb" and image.shape[2] == 3) or (cap.space == "gray" and image.shape[2] == 1)
+    """Whether an image of this capture's bands can be shown as a picture (rgb, gray, and raw
+    bands as false colour)."""
+    return ((cap.space == "rgb" and image.shape[2] == 3) or (cap.space == "gray" and image.shape[2] == 1)
+            or (cap.space == "raw" and image.shape[2] == len(cap.band_names)))
 
 
 def picture(cap: StoredCapture, bands: np.ndarray, basis: PcaBasis | None) -> np.ndarray | None:
     """A synthesis of this capture as a picture to set beside the photograph: rgb and gray as
     drawn, hsv and pca turned back into RGB (pca through the scene's `basis`); None where its
-    bands make none (raw bands, some of a space's bands only, pca without its basis)."""
+    bands make none (some of a space's bands only, pca without its basis)."""
     if shown(cap, bands):
         return bands
     if cap.space == "hsv" and cap.band_names == BAND_NAMES[FeatureSpace.HSV]:
@@ -87,7 +91,7 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
     out = CaptureViews(cap, fitted, space_choice=store.space_choice(cap.id))
     real = measured(cap) if measured is not None else None
     if real is not None and shown(cap, real):
-        out.images["measured"] = stretched_8bit(real)
+        out.images["measured"] = view_rgb(real) if cap.space == "raw" else stretched_8bit(real)
     mask = capture_mask(store, cap)
     # each region at the capture's exposure (a bracketed region's models scaled back)
     models = dict(adjusted({k: m.model for k, m in fitted.items()}, cap.camera))
@@ -110,7 +114,11 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
         return out
     basis = store.pca_basis(cap.id) if cap.space == "pca" else None
     both = [picture(cap, a, basis) for a in ([syn] if corr is None else [syn, corr])]
-    if all(a is not None for a in both):
+    if all(a is not None for a in both) and cap.space == "raw":  # each band over its span in both
+        over = np.concatenate(both, axis=0)
+        for name, image in zip(("independent", "correlated"), both):
+            out.images[name] = view_rgb(image, over)
+    elif all(a is not None for a in both):
         span = (int(min(a.min() for a in both)), int(max(a.max() for a in both)))
         for name, image in zip(("independent", "correlated"), both):
             out.images[name] = stretched_8bit(image, span)

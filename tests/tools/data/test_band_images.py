@@ -1,0 +1,133 @@
+"""Images of other than one or three bands: a multi-spectral camera's TIFF through mask, fit,
+synth, compare and pdfs as its own bands, and alpha channels that are not bands.
+
+The multi-spectral case is the scene model's camera (hal.scene, bands="multispectral"): five
+spectral bands and a thermal one, 16-bit, written as one TIFF of six samples.
+"""
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+import tifffile
+from PIL import Image
+
+from hal.interfaces import ViewAngles
+from hal.scene import render
+from tools.data.images import read_image, write_image, write_mask
+
+
+@pytest.fixture(scope="module")
+def spectral(tmp_path_factory):
+    d = tmp_path_factory.mktemp("spectral")
+    view = render("mixed", ViewAngles(60.0, 0.0), (96, 128), seed=2, bands="multispectral")
+    tifffile.imwrite(d / "view.tif", view.image, photometric="minisblack", planarconfig="contig")
+    write_mask(d / "mask.png", view.mask)
+    return d, view.image, view.mask
+
+
+def test_a_six_band_tiff_is_fitted_synthesized_and_compared_as_its_six_bands(host, spectral, tmp_path):
+    d, image, mask = spectral
+    assert image.shape[2] == 6 and image.dtype == np.uint16
+    code, out, err = host("fit", d / "view.tif", "--mask", d / "mask.png", "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["space"] == "raw" and doc["bands"] == [f"B{k}" for k in range(6)] and doc["levels"] == 65536
+    (tmp_path / "m.json").write_text(out)
+    code, _, err = host("synth", "--model", tmp_path / "m.json", "--mask", d / "mask.png", "--out", tmp_path / "s.tif")
+    assert code == 0, err
+    synth = read_image(tmp_path / "s.tif")
+    assert synth.shape == image.shape and synth.dtype == np.uint16
+    for lab in np.unique(mask):
+        inside = mask == lab
+        for b in range(6):  # every band of every region within the levels it took
+            real, made = image[..., b][inside], synth[..., b][inside]
+            assert real.min() <= made.min() and made.max() <= real.max(), (lab, b)
+            assert abs(float(made.mean()) - float(real.mean())) <= 0.05 * float(np.ptp(real)) + 1, (lab, b)
+    code, out, err = host("compare", d / "view.tif", tmp_path / "s.tif", "--mask", d / "mask.png", "--json")
+    assert code == 0, err
+    compared = json.loads(out)
+    assert compared["space"] == "raw" and sorted(compared["correlation"]) == [f"B{k}" for k in range(6)]
+    code, out, err = host("pdfs", d / "view.tif", "--mask", d / "mask.png")
+    assert code == 0, err
+    assert {line.split()[1] for line in out.splitlines()[1:] if line.split()} >= {f"B{k}" for k in range(6)}
+
+
+def test_a_multi_spectral_tiff_is_segmented_on_all_its_bands_each_over_its_own_range(host, spectral, tmp_path):
+    d, image, truth = spectral
+    for method in ("kmeans", "isodata", "felzenszwalb"):
+        code, _, err = host("mask", d / "view.tif", "--method", method, "--k", "2", "--out", tmp_path / f"{method}.png")
+        assert code == 0 and err == "", (method, err)
+        labels = cv2.imread(str(tmp_path / f"{method}.png"), cv2.IMREAD_UNCHANGED)
+        assert labels.shape == image.shape[:2]
+        if method == "isodata":  # splits up to 2 k; over one range for all bands the thermal one took it all (1 class)
+            assert 2 <= len(np.unique(labels)) <= 4
+        else:  # the scene's two materials, up to the order of the labels
+            agree = np.mean((labels == 0) == (truth == truth.min()))
+            assert max(agree, 1 - agree) >= 0.95, method
+
+
+def test_bands_png_cannot_hold_and_spaces_they_lack_are_one_line_and_exit_2(host, spectral, tmp_path):
+    d, _, _ = spectral
+    code, out, _ = host("fit", d / "view.tif", "--mask", d / "mask.png", "--json")
+    (tmp_path / "m.json").write_text(out)
+    code, _, err = host("synth", "--model", tmp_path / "m.json", "--mask", d / "mask.png", "--out", tmp_path / "s.png")
+    assert code == 2 and err.strip().endswith("6 bands need a .tif file (PNG holds one or three)")
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "s.png").exists()
+    code, _, err = host("fit", d / "view.tif", "--space", "rgb")
+    assert code == 2 and "the image has 6 bands" in err and "raw" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_planar_tiff_and_a_stack_of_pages_are_bands_and_alpha_is_not(tmp_path):
+    rng = np.random.default_rng(0)
+    bands = rng.integers(0, 256, (20, 30, 4), dtype=np.uint8)
+    tifffile.imwrite(tmp_path / "planar.tif", np.moveaxis(bands, -1, 0), photometric="minisblack",
+                     planarconfig="separate")
+    tifffile.imwrite(tmp_path / "pages.tif", np.moveaxis(bands, -1, 0), photometric="minisblack")
+    tifffile.imwrite(tmp_path / "rgba.tif", bands, photometric="rgb", extrasamples=["unassalpha"])
+    assert np.array_equal(read_image(tmp_path / "planar.tif"), bands)
+    assert np.array_equal(read_image(tmp_path / "pages.tif"), bands)
+    assert np.array_equal(read_image(tmp_path / "rgba.tif"), bands[..., :3])
+    Image.fromarray(bands[..., :2], "LA").save(tmp_path / "gray_alpha.png")
+    Image.fromarray(bands, "RGBA").save(tmp_path / "rgba.png")
+    assert np.array_equal(read_image(tmp_path / "gray_alpha.png"), bands[..., :1])
+    assert np.array_equal(read_image(tmp_path / "rgba.png"), bands[..., :3])
+
+
+@pytest.mark.parametrize("count", [2, 4, 7])
+def test_bands_written_read_back_exactly(tmp_path, count):
+    bands = np.random.default_rng(count).integers(0, 65536, (9, 11, count), dtype=np.uint16)
+    write_image(tmp_path / "b.tif", bands)
+    assert np.array_equal(read_image(tmp_path / "b.tif"), bands)
+
+
+def test_a_gray_and_alpha_png_is_fitted_as_one_band(host, tmp_path):
+    gray = np.random.default_rng(3).integers(40, 200, (40, 50), dtype=np.uint8)
+    Image.fromarray(np.dstack([gray, np.full_like(gray, 255)]), "LA").save(tmp_path / "ga.png")
+    code, out, err = host("fit", tmp_path / "ga.png", "--json")
+    assert code == 0, err
+    assert json.loads(out)["bands"] == ["Y"]
+
+
+def test_a_tiff_of_several_images_is_refused_in_one_line(host, tmp_path):
+    tifffile.imwrite(tmp_path / "series.tif", np.zeros((2, 3, 8, 8), np.uint8), photometric="minisblack")
+    code, _, err = host("fit", tmp_path / "series.tif")
+    assert code == 2 and "expected one image of bands" in err and len(err.strip().splitlines()) == 1
+
+
+def test_the_report_draws_a_multi_spectral_capture_as_false_colour(host, spectral, tmp_path):
+    d, image, mask = spectral
+    code, _, err = host("fit", d / "view.tif", "--mask", d / "mask.png", "--angle", 60, "--db", tmp_path / "ms.db")
+    assert code == 0, err
+    code, _, err = host("report", "--db", tmp_path / "ms.db", "--out", tmp_path / "rep", "--quiet")
+    assert code == 0, err
+    for name in ("synthetic", "correlated"):
+        drawn = read_image(tmp_path / "rep" / f"robothost_060.0_0_{name}.png")
+        assert drawn.shape == image.shape[:2] + (3,) and drawn.dtype == np.uint8
+        # the first three bands, each over its own levels: the two materials stay apart in each
+        for b in range(3):
+            means = [float(drawn[..., b][mask == lab].mean()) for lab in np.unique(mask)]
+            real = [float(image[..., b][mask == lab].mean()) for lab in np.unique(mask)]
+            assert (means[0] < means[1]) == (real[0] < real[1]) and abs(means[0] - means[1]) > 10, (name, b)
