@@ -16,9 +16,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("ref", help="the reference image (a photograph)")
     p.add_argument("test", help="the image compared with it (a synthesis), same size and depth")
     p.add_argument("--mask", help="label mask: histogram metrics per region")
-    p.add_argument("--space", choices=("rgb", "hsv", "gray"),
-                   help="hsv treats H as circular; gray compares one band (default: gray when both images have "
-                        "one band, e.g. thermal, else rgb)")
+    p.add_argument("--space", choices=("rgb", "hsv", "gray", "raw"),
+                   help="hsv treats H as circular; gray compares one band, raw the images' own bands (default: "
+                        "the images' own: gray for one band, e.g. thermal, rgb for colour, raw for other counts)")
     p.add_argument("--reference-label", type=bounded(int, 0, 255), metavar="L",
                    help="scale TEST's bands so its mean on mask label L (the grey reference card) matches REF's: "
                         "takes out a change of light or exposure between the two (needs --mask)")

@@ -20,8 +20,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("image", help="the photograph to fit (8- or 16-bit PNG, TIFF, JPEG)")
     p.add_argument("--mask", help="label mask PNG, same size as the image")
     p.add_argument("--space", choices=FEATURE_SPACES + ("auto",),
-                   help="feature space (default: the image's own: gray for a one-band image, rgb for colour); auto "
-                        "chooses it as btf-host spaces does (docs/spaces.md)")
+                   help="feature space (default: the image's own: gray for a one-band image, rgb for colour, "
+                        "raw for other counts); auto chooses it as btf-host spaces does (docs/spaces.md)")
     p.add_argument("--angle", type=float, help="view elevation in degrees (needed with --db)")
     p.add_argument("--db", help="store the models as a capture in this database, under --robot and --scene")
     p.add_argument("--robot", type=label, default=ROBOT_ID, metavar="NAME",

@@ -21,7 +21,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--db", required=True, help="the database to store into (created if missing; resumable)")
     p.add_argument("--mask", help="label mask PNG for every image, or a folder of <image stem>.png masks")
     p.add_argument("--space", choices=INGEST_SPACES,
-                   help="the bands fitted (default: each image's own, gray for one band, rgb for colour)")
+                   help="the bands fitted (default: each image's own: gray for one band, rgb for colour, "
+                        "raw for other counts)")
     p.add_argument("--table", help="angle table (curet: angles.txt, folder: angles.csv in DIR by default)")
     p.add_argument("--angle", type=float, default=NADIR,
                    help="view elevation for a folder without angles (default: 90, straight down)")

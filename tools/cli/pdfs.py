@@ -12,7 +12,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("image", help="the photograph (8- or 16-bit PNG, TIFF, JPEG)")
     p.add_argument("--mask", required=True, help="label mask PNG, same size as the image: one row per region")
     p.add_argument("--space", choices=FEATURE_SPACES,
-                   help="the bands compared (default: the image's own: gray for a one-band image, rgb for colour)")
+                   help="the bands compared (default: the image's own: gray for a one-band image, rgb for colour, "
+                        "raw for other counts)")
     p.add_argument("--seed", type=SEED, default=0, help="seed of the peers' samples (the same seed, the same table)")
     p.add_argument("--json", action="store_true", help="print the table as one JSON document")
 
