@@ -35,7 +35,7 @@ if TYPE_CHECKING:  # numpy and the fitter load with the first image, not with th
 BATCH_IMAGES = 64
 BATCH_SECONDS = 1.0
 # Feature spaces an ingest may store: pca needs a per-image basis the database does not hold.
-INGEST_SPACES = ("rgb", "hsv", "gray")
+INGEST_SPACES = ("rgb", "hsv", "gray", "raw")
 NADIR = 90.0
 
 
@@ -50,7 +50,7 @@ class Job:
     name: str
     path: str
     mask: str | None
-    space: str | None  # None: each image's own (gray for one band, rgb for colour)
+    space: str | None  # None: each image's own (gray for one band, rgb for colour, raw for other counts)
     dependence: bool = True  # measure grain and band correlation (btf.fit.dependence)
 
 
