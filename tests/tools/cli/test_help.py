@@ -75,7 +75,8 @@ def test_the_top_level_help_is_plain_text(prog):
 def test_fixed_vocabularies_are_choices():
     ingest = find("btf-host", ("ingest",))
     choices = {a.dest: a.choices for a in ingest._actions}
-    assert set(choices["layout"]) == {"curet", "utia", "folder"} and set(choices["space"]) == {"rgb", "hsv", "gray"}
+    assert set(choices["layout"]) == {"curet", "utia", "folder"}
+    assert set(choices["space"]) == {"rgb", "hsv", "gray", "raw"}
 
 
 def test_station_help_says_what_is_required_without_demo():

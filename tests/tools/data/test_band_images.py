@@ -131,3 +131,13 @@ def test_the_report_draws_a_multi_spectral_capture_as_false_colour(host, spectra
             means = [float(drawn[..., b][mask == lab].mean()) for lab in np.unique(mask)]
             real = [float(image[..., b][mask == lab].mean()) for lab in np.unique(mask)]
             assert (means[0] < means[1]) == (real[0] < real[1]) and abs(means[0] - means[1]) > 10, (name, b)
+
+
+def test_spaces_judges_a_multi_spectral_tiff_in_its_own_bands_and_draws_it(host, spectral, tmp_path):
+    d, image, _ = spectral
+    code, out, err = host("spaces", d / "view.tif", "--masks", "kmeans2", "--json", "--picture", tmp_path / "p.png")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert [r["space"] for r in doc["rows"]] == ["raw"] and doc["choice"]["space"] == "raw"
+    drawn = read_image(tmp_path / "p.png")
+    assert drawn.shape[2] == 3 and drawn.shape[0] >= image.shape[0]
