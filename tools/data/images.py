@@ -85,8 +85,10 @@ def _tiff_bands(p: Path) -> np.ndarray | None:
             series = tif.series[0]
             axes, data = series.axes, series.asarray()
             extra = [int(v) for v in (tif.pages[0].extrasamples or ())]
-    except (tifffile.TiffFileError, ValueError, KeyError, IndexError, NotImplementedError):
+    except Exception:  # any way tifffile fails to decode: OpenCV tries, and names what it cannot read
         return None
+    if data.dtype == np.bool_:  # a bilevel scan: black and white at 8 bits, as OpenCV reads it
+        data = data.astype(np.uint8) * np.uint8(255)
     if data.ndim == 2:
         return data
     if data.ndim != 3 or not (axes[-1] in _BAND_AXES or (axes[0] in _BAND_AXES and axes[1:] == "YX")):

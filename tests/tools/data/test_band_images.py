@@ -94,6 +94,9 @@ def test_a_planar_tiff_and_a_stack_of_pages_are_bands_and_alpha_is_not(tmp_path)
     Image.fromarray(bands, "RGBA").save(tmp_path / "rgba.png")
     assert np.array_equal(read_image(tmp_path / "gray_alpha.png"), bands[..., :1])
     assert np.array_equal(read_image(tmp_path / "rgba.png"), bands[..., :3])
+    scan = bands[..., 0] > 127  # a bilevel TIFF: one band of black and white at 8 bits
+    tifffile.imwrite(tmp_path / "bilevel.tif", scan)
+    assert np.array_equal(read_image(tmp_path / "bilevel.tif"), np.where(scan, 255, 0).astype(np.uint8)[..., None])
 
 
 @pytest.mark.parametrize("count", [2, 4, 7])
