@@ -10,6 +10,8 @@ single-channel PNG so every label value survives a round trip.
 """
 from __future__ import annotations
 
+import logging
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -71,26 +73,36 @@ def _as_levels(raw: np.ndarray, p: Path) -> np.ndarray:
 
 
 TIFF_SUFFIXES = (".tif", ".tiff")
+MAX_PIXELS = 1 << 30  # OpenCV's own limit (CV_IO_MAX_IMAGE_PIXELS): a header cannot make us allocate more
 _BAND_AXES = "SCQI"  # tifffile's names for an axis of samples, channels or pages that are bands
 _PNG_GRAY_ALPHA = 4  # the PNG colour type of gray with alpha (OpenCV reads it as BGRA)
 
 
-def _tiff_bands(p: Path) -> np.ndarray | None:
-    """A TIFF's bands as stored (H, W) or (H, W, N), alpha samples left out; None for a file
-    tifffile cannot decode (a compression it lacks), which OpenCV then tries."""
+def _tiff_bands(p: Path) -> tuple[np.ndarray | None, str]:
+    """(a TIFF's bands as stored (H, W) or (H, W, N), alpha samples left out; "") or (None, why
+    tifffile cannot decode it: a damaged file, a compression it lacks), which OpenCV then tries."""
     import tifffile
 
+    # its notes on odd tags would be lines of their own on stderr; what is wrong is said once, in ours
+    logging.getLogger("tifffile").disabled = True
     try:
         with tifffile.TiffFile(p) as tif:
             series = tif.series[0]
-            axes, data = series.axes, series.asarray()
+            axes = series.axes
+            pixels = math.prod(n for a, n in zip(axes, series.shape) if a in "YX")
+            if pixels > MAX_PIXELS:
+                raise ImageError(f"image {p}: {pixels} pixels, more than the {MAX_PIXELS} an image may have "
+                                 "(OpenCV's limit too); cut it into tiles")
+            data = series.asarray()
             extra = [int(v) for v in (tif.pages[0].extrasamples or ())]
-    except Exception:  # any way tifffile fails to decode: OpenCV tries, and names what it cannot read
-        return None
+    except ImageError:
+        raise
+    except Exception as exc:  # any way tifffile fails to decode: OpenCV tries
+        return None, " ".join(str(exc).split())[:120] or type(exc).__name__
     if data.dtype == np.bool_:  # a bilevel scan: black and white at 8 bits, as OpenCV reads it
         data = data.astype(np.uint8) * np.uint8(255)
     if data.ndim == 2:
-        return data
+        return data, ""
     if data.ndim != 3 or not (axes[-1] in _BAND_AXES or (axes[0] in _BAND_AXES and axes[1:] == "YX")):
         raise ImageError(f"image {p}: a TIFF of axes {axes} {data.shape}; expected one image of bands "
                          "(height, width and one axis of bands)")
@@ -99,7 +111,7 @@ def _tiff_bands(p: Path) -> np.ndarray | None:
     alpha = {n - len(extra) + k for k, v in enumerate(extra) if v in (1, 2)}
     if alpha and len(alpha) < n:
         bands = bands[:, :, [b for b in range(n) if b not in alpha]]
-    return np.ascontiguousarray(bands)
+    return np.ascontiguousarray(bands), ""
 
 
 def _png_color_type(p: Path) -> int | None:
@@ -112,14 +124,20 @@ def read_image(path: str | Path) -> np.ndarray:
     """An image file as RGB (H, W, 3), (H, W, 1) for a one-band file or (H, W, N) for a TIFF of
     N bands, uint8 or uint16 (float images in 0..1 become uint16); alpha left out."""
     p = Path(path)
+    tiff_said = ""
     if p.suffix.lower() in TIFF_SUFFIXES and p.is_file():
-        bands = _tiff_bands(p)
+        bands, tiff_said = _tiff_bands(p)
         if bands is not None:
             if bands.size == 0:
                 raise ImageError(f"image {p}: no pixels")
             bands = _as_levels(bands, p)
             return bands[:, :, None] if bands.ndim == 2 else bands
-    raw = _as_levels(_imread(p, "image"), p)
+    try:
+        raw = _as_levels(_imread(p, "image"), p)
+    except ImageError as exc:
+        if tiff_said and str(exc).endswith("not a readable image file"):  # neither reader: say why tifffile could not
+            raise ImageError(f"{exc} ({tiff_said}; copy or export it again)") from None
+        raise
     if raw.ndim == 2:
         return raw[:, :, None]
     if raw.shape[2] == 1:

@@ -6,7 +6,12 @@ spectral bands and a thermal one, 16-bit, written as one TIFF of six samples.
 """
 from __future__ import annotations
 
+import io
 import json
+import random
+import subprocess
+import sys
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -16,7 +21,7 @@ from PIL import Image
 
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from tools.data.images import read_image, write_image, write_mask
+from tools.data.images import ImageError, read_image, write_image, write_mask
 
 
 @pytest.fixture(scope="module")
@@ -144,3 +149,53 @@ def test_spaces_judges_a_multi_spectral_tiff_in_its_own_bands_and_draws_it(host,
     assert [r["space"] for r in doc["rows"]] == ["raw"] and doc["choice"]["space"] == "raw"
     drawn = read_image(tmp_path / "p.png")
     assert drawn.shape[2] == 3 and drawn.shape[0] >= image.shape[0]
+
+
+def _small_tiff() -> bytes:
+    buf = io.BytesIO()
+    tifffile.imwrite(buf, np.arange(6 * 7 * 5, dtype=np.uint16).reshape(6, 7, 5), photometric="minisblack",
+                     planarconfig="contig")
+    return buf.getvalue()
+
+
+SMALL_TIFF = _small_tiff()
+
+
+DAMAGED_RUN = """
+import sys
+from tools.cli import main
+for path in sys.argv[1:]:
+    code = main(["fit", path, "--independent-only"])
+    print(f"@@ {code}", file=sys.stderr, flush=True)
+"""
+
+
+def test_damaged_tiffs_are_fitted_or_refused_in_one_line_in_a_process_of_their_own(tmp_path):
+    # a process of its own: pytest's log capture would hide lines a reader logs to stderr
+    rng = random.Random(3)
+    paths = []
+    for k in range(60):
+        data = bytearray(SMALL_TIFF)
+        for _ in range(rng.randint(1, 6)):
+            data[rng.randrange(len(data))] = rng.randrange(256)
+        paths.append(tmp_path / f"damaged{k}.tif")
+        paths[-1].write_bytes(bytes(data[:rng.randint(8, len(data))]))
+    run = subprocess.run([sys.executable, "-c", DAMAGED_RUN, *map(str, paths)], capture_output=True, text=True,
+                         timeout=300, cwd=Path(__file__).resolve().parents[3])
+    assert run.returncode == 0, run.stderr[-2000:]
+    rest, refused = run.stderr, 0
+    for path in paths:  # each file's stderr is what comes before its marker
+        said, _, rest = rest.partition("@@ ")
+        code, _, rest = rest.partition("\n")
+        lines = [line for line in said.splitlines() if line.strip()]
+        assert (code == "0" and lines == []) or (code == "2" and len(lines) == 1 and str(path) in lines[0]), \
+            (code, lines)
+        refused += code == "2"
+    assert refused >= len(paths) // 2  # most of the damage is found, and said in one line
+
+
+def test_a_tiff_whose_header_claims_more_pixels_than_an_image_may_have_is_refused_before_reading(tmp_path):
+    with tifffile.TiffWriter(tmp_path / "huge.tif") as tif:  # a header of 40000 x 40000, no pixels behind it
+        tif.write(shape=(40000, 40000), dtype=np.uint8)
+    with pytest.raises(ImageError, match="more than the 1073741824 an image may have"):
+        read_image(tmp_path / "huge.tif")
