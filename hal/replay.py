@@ -1,16 +1,17 @@
-"""A camera that plays image files as its frames: a folder or a glob of PNG and JPEG files.
+"""A camera that plays image files as its frames: a folder or a glob of PNG, JPEG and TIFF files.
 
 Chosen with `hal.camera = "replay:DIR_OR_GLOB"` under the fake and emulated bodies: the arm
 and the tracker stay the body's own, only the frames come from the files. A folder plays
-its .png, .jpg and .jpeg files, a glob the files it matches with those endings, in natural
-order (frame_2 before frame_10). Each file is read with OpenCV as it is stored: 8 or 16
-bits, colour in RGB order (an alpha channel dropped), one band kept one band (H x W x 1).
+its .png, .jpg, .jpeg, .tif and .tiff files, a glob the files it matches with those endings, in
+natural order (frame_2 before frame_10). Each file is read as it is stored: 8 or 16 bits,
+colour in RGB order (an alpha channel dropped), one band kept one band (H x W x 1), and a
+TIFF's bands as stored (a multi-spectral camera's five or six: `features.space = "raw"`).
 
 Frames are played at their own size, never resized or cropped: `hal.size` must be the first
 file's size (the robot refuses to start otherwise), and a later file of another size, or one
-that does not decode, is a camera error naming it (the retry plays the next file). After the last file the camera starts over
-when it loops, else every capture is `ReplayEnded`, a camera error: the robot skips the
-pose with that reason. `last_source`, and the `source` of the settings it reports after a
+that does not decode, is a camera error naming it (the retry plays the next file). After the
+last file the camera starts over when it loops, else every capture is `ReplayEnded`, a camera
+error: the robot skips the pose with that reason. `last_source`, and the `source` of the settings it reports after a
 frame, name the file the frame came from.
 
 The files were taken with whatever settings they were taken with, so the controls change
@@ -27,9 +28,10 @@ import cv2
 import numpy as np
 
 from hal.controls import EXACT, with_lock_check
+from hal.image_files import TIFF_SUFFIXES, ImageFileError, gray_with_alpha, tiff_bands
 from hal.interfaces import CameraControls, CameraSettings, DeviceSpent, HalError
 
-SUFFIXES = (".png", ".jpg", ".jpeg")
+SUFFIXES = (".png", ".jpg", ".jpeg") + TIFF_SUFFIXES
 STANDING = CameraSettings(10_000.0, 1.0, white_balance_kelvin=5500.0)  # what it reports before any controls
 
 
@@ -55,23 +57,38 @@ def replay_files(spec: str) -> list[Path]:
         raise ValueError(f"replay camera: {spec} is neither a folder nor a glob that matches files")
     files = sorted((p for p in found if p.suffix.lower() in SUFFIXES), key=_natural)
     if not files:
-        raise ValueError(f"replay camera: no PNG or JPEG files in {spec}")
+        raise ValueError(f"replay camera: no PNG, JPEG or TIFF files in {spec}")
     return files
 
 
 def read_frame(path: Path) -> np.ndarray:
-    """The image in `path` as H x W x C RGB (C = 3) or one band (C = 1), uint8 or uint16."""
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    """The image in `path` as H x W x C: RGB (C = 3), one band (C = 1), or a TIFF's bands as
+    stored (a multi-spectral camera's, C of any count), uint8 or uint16; alpha left out."""
+    image = None
+    if path.suffix.lower() in TIFF_SUFFIXES:
+        try:
+            image, _ = tiff_bands(path)
+        except ImageFileError as exc:
+            raise HalError(f"replay camera: {exc}") from None
+        if image is not None and image.ndim == 3:  # bands as stored, never reordered
+            return _depth_checked(image, path)
     if image is None:
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if image is None or image.size == 0:
         raise HalError(f"replay camera: cannot read {path} as an image")
-    if image.dtype not in (np.uint8, np.uint16):
-        raise HalError(f"replay camera: {path} holds {image.dtype} pixels; frames are 8 or 16 bits")
+    image = _depth_checked(image, path)
     if image.ndim == 2:
         return image[..., None]
     bands = image.shape[2]
-    if bands <= 2:  # gray, or gray and alpha
+    if bands <= 2 or gray_with_alpha(path):  # gray, or gray and alpha (OpenCV makes that four channels)
         return np.ascontiguousarray(image[..., :1])
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB if bands == 3 else cv2.COLOR_BGRA2RGB)
+
+
+def _depth_checked(image: np.ndarray, path: Path) -> np.ndarray:
+    if image.dtype not in (np.uint8, np.uint16):
+        raise HalError(f"replay camera: {path} holds {image.dtype} pixels; frames are 8 or 16 bits")
+    return image
 
 
 class ReplayCamera:

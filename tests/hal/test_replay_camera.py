@@ -7,10 +7,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+import tifffile
+from PIL import Image
 
 from hal.factory import HalConfigError, build_hal
-from hal.interfaces import CameraControls, HalError
+from hal.interfaces import CameraControls, HalError, ViewAngles
 from hal.replay import ReplayCamera, ReplayEnded, read_frame, replay_files
+from hal.scene import render
 from onboard import config
 from radio import packets as pk
 from tests.support.replay import ELEVATIONS, H, W, models, rgb_frame, robot_text, run_sweep, write_rgb, write_shots
@@ -57,6 +60,22 @@ def test_sixteen_bit_one_band_files_stay_one_band_under_the_emulated_body(fake_r
     assert all({b for _, b in p.models} == {0} for p in measured)
 
 
+def test_a_multi_spectral_camera_s_tiffs_are_replayed_as_their_six_bands(fake_robot, tmp_path):
+    folder = tmp_path / "spectral"
+    folder.mkdir()
+    for i, elevation in enumerate((90.0, 80.0, 70.0)):  # the scene model's five spectral bands and thermal
+        view = render("mixed", ViewAngles(elevation, 0.0), (H, W), seed=i, bands="multispectral")
+        tifffile.imwrite(folder / f"v{i}.tif", view.image, photometric="minisblack", planarconfig="contig")
+    raw = {"features": {"space": "raw"}, "sweep": {"start": 90, "stop": 70}}
+    packets, sources = run_sweep(fake_robot, robot_text(f"replay:{folder}", False, "fake", raw))
+    measured = models(packets)
+    assert [round(p.commanded[0]) for p in measured] == [90, 80, 70]
+    assert list(sources.values()) == ["v0.tif", "v1.tif", "v2.tif"]
+    assert all(p.bands == tuple(f"B{k}" for k in range(6)) and p.levels == 65536 for p in measured)
+    thermal = [m for p in measured for (_, b), m in p.models.items() if b == 5]
+    assert all(28_000 < float(m.ppf(0.5)) < 32_000 for m in thermal)  # centikelvin, band 5 kept where it was
+
+
 def test_frames_are_rgb_in_order_and_one_band_stays_one_band(tmp_path):
     rgb = rgb_frame(7)
     assert np.array_equal(read_frame(write_rgb(tmp_path / "c.png", rgb)), rgb)
@@ -68,6 +87,9 @@ def test_frames_are_rgb_in_order_and_one_band_stays_one_band(tmp_path):
     cv2.imwrite(str(tmp_path / "d.png"), deep)
     got = read_frame(tmp_path / "d.png")
     assert got.shape == (H, W, 1) and got.dtype == np.uint16 and np.array_equal(got[..., 0], deep)
+    gray = rgb[..., 0]
+    Image.fromarray(np.dstack([gray, np.full_like(gray, 200)]), "LA").save(tmp_path / "la.png")
+    assert np.array_equal(read_frame(tmp_path / "la.png"), gray[..., None])  # gray and alpha: one band
     write_rgb(tmp_path / "j.jpg", rgb)
     jpeg = read_frame(tmp_path / "j.jpg").astype(float)
     assert jpeg.shape == (H, W, 3) and np.abs(jpeg - rgb).mean() < 8  # lossy, but red stays red
@@ -82,8 +104,8 @@ def test_a_folder_or_a_glob_names_the_files(shots):
 @pytest.mark.parametrize(("camera", "message"), [
     ("replay:", "name a folder or a glob"),
     ("replay:{shots}/missing", "neither a folder nor a glob"),
-    ("replay:{shots}/*.tif", "no PNG or JPEG files"),
-    ("replay:{shots}/../", "no PNG or JPEG files"),
+    ("replay:{shots}/*.txt", "no PNG, JPEG or TIFF files"),
+    ("replay:{shots}/../", "no PNG, JPEG or TIFF files"),
 ])
 def test_bad_paths_are_one_line_naming_the_key(shots, camera, message):
     with pytest.raises(HalConfigError, match=message) as err:

@@ -10,8 +10,6 @@ single-channel PNG so every label value survives a round trip.
 """
 from __future__ import annotations
 
-import logging
-import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -23,6 +21,7 @@ from btf.dependence import MAX_RADIUS, Dependence
 from btf.fit.dependence import measure, observed
 from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from btf.fit.fitter import FrameFitter
+from hal.image_files import TIFF_SUFFIXES, ImageFileError, gray_with_alpha, tiff_bands
 from tools.analysis.tiles import row_tiles
 from tools.data.decoders import complaint, damage_said, native_stderr, png_problem
 
@@ -72,61 +71,16 @@ def _as_levels(raw: np.ndarray, p: Path) -> np.ndarray:
     return np.rint(raw * (FLOAT_LEVELS - 1)).astype(np.uint16)
 
 
-TIFF_SUFFIXES = (".tif", ".tiff")
-MAX_PIXELS = 1 << 30  # OpenCV's own limit (CV_IO_MAX_IMAGE_PIXELS): a header cannot make us allocate more
-_BAND_AXES = "SCQI"  # tifffile's names for an axis of samples, channels or pages that are bands
-_PNG_GRAY_ALPHA = 4  # the PNG colour type of gray with alpha (OpenCV reads it as BGRA)
-
-
-def _tiff_bands(p: Path) -> tuple[np.ndarray | None, str]:
-    """(a TIFF's bands as stored (H, W) or (H, W, N), alpha samples left out; "") or (None, why
-    tifffile cannot decode it: a damaged file, a compression it lacks), which OpenCV then tries."""
-    import tifffile
-
-    # its notes on odd tags would be lines of their own on stderr; what is wrong is said once, in ours
-    logging.getLogger("tifffile").disabled = True
-    try:
-        with tifffile.TiffFile(p) as tif:
-            series = tif.series[0]
-            axes = series.axes
-            pixels = math.prod(n for a, n in zip(axes, series.shape) if a in "YX")
-            if pixels > MAX_PIXELS:
-                raise ImageError(f"image {p}: {pixels} pixels, more than the {MAX_PIXELS} an image may have "
-                                 "(OpenCV's limit too); cut it into tiles")
-            data = series.asarray()
-            extra = [int(v) for v in (tif.pages[0].extrasamples or ())]
-    except ImageError:
-        raise
-    except Exception as exc:  # any way tifffile fails to decode: OpenCV tries
-        return None, " ".join(str(exc).split())[:120] or type(exc).__name__
-    if data.dtype == np.bool_:  # a bilevel scan: black and white at 8 bits, as OpenCV reads it
-        data = data.astype(np.uint8) * np.uint8(255)
-    if data.ndim == 2:
-        return data, ""
-    if data.ndim != 3 or not (axes[-1] in _BAND_AXES or (axes[0] in _BAND_AXES and axes[1:] == "YX")):
-        raise ImageError(f"image {p}: a TIFF of axes {axes} {data.shape}; expected one image of bands "
-                         "(height, width and one axis of bands)")
-    bands = data if axes[-1] in _BAND_AXES else np.moveaxis(data, 0, -1)
-    n = bands.shape[2]  # extra samples are the last ones; 1 and 2 are associated and unassociated alpha
-    alpha = {n - len(extra) + k for k, v in enumerate(extra) if v in (1, 2)}
-    if alpha and len(alpha) < n:
-        bands = bands[:, :, [b for b in range(n) if b not in alpha]]
-    return np.ascontiguousarray(bands), ""
-
-
-def _png_color_type(p: Path) -> int | None:
-    with open(p, "rb") as f:
-        head = f.read(26)
-    return head[25] if len(head) == 26 and head.startswith(b"\x89PNG\r\n\x1a\n") else None
-
-
 def read_image(path: str | Path) -> np.ndarray:
     """An image file as RGB (H, W, 3), (H, W, 1) for a one-band file or (H, W, N) for a TIFF of
     N bands, uint8 or uint16 (float images in 0..1 become uint16); alpha left out."""
     p = Path(path)
     tiff_said = ""
     if p.suffix.lower() in TIFF_SUFFIXES and p.is_file():
-        bands, tiff_said = _tiff_bands(p)
+        try:
+            bands, tiff_said = tiff_bands(p)
+        except ImageFileError as exc:
+            raise ImageError(f"image {exc}") from None
         if bands is not None:
             if bands.size == 0:
                 raise ImageError(f"image {p}: no pixels")
@@ -143,8 +97,8 @@ def read_image(path: str | Path) -> np.ndarray:
     if raw.shape[2] == 1:
         return raw
     if raw.shape[2] == 4:
-        if p.suffix.lower() == ".png" and _png_color_type(p) == _PNG_GRAY_ALPHA:
-            return np.ascontiguousarray(raw[:, :, :1])  # gray and alpha: one band
+        if gray_with_alpha(p):
+            return np.ascontiguousarray(raw[:, :, :1])
         return cv2.cvtColor(raw, cv2.COLOR_BGRA2RGB)
     # In place: a copy would double the peak memory of a large image.
     return cv2.cvtColor(raw, cv2.COLOR_BGR2RGB, dst=raw)
