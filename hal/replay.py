@@ -11,8 +11,8 @@ Frames are played at their own size, never resized or cropped: `hal.size` must b
 file's size (the robot refuses to start otherwise), and a later file of another size, or one
 that does not decode, is a camera error naming it (the retry plays the next file). After the
 last file the camera starts over when it loops, else every capture is `ReplayEnded`, a camera
-error: the robot skips the pose with that reason. `last_source`, and the `source` of the settings it reports after a
-frame, name the file the frame came from.
+error: the robot skips the pose with that reason. `last_source`, and the `source` of the
+settings it reports after a frame, name the file the frame came from.
 
 The files were taken with whatever settings they were taken with, so the controls change
 nothing; the camera grants what it is asked (auto where asked auto), as a device would.
@@ -64,23 +64,22 @@ def replay_files(spec: str) -> list[Path]:
 def read_frame(path: Path) -> np.ndarray:
     """The image in `path` as H x W x C: RGB (C = 3), one band (C = 1), or a TIFF's bands as
     stored (a multi-spectral camera's, C of any count), uint8 or uint16; alpha left out."""
-    image = None
     if path.suffix.lower() in TIFF_SUFFIXES:
         try:
-            image, _ = tiff_bands(path)
+            stored, _ = tiff_bands(path)
         except ImageFileError as exc:
             raise HalError(f"replay camera: {exc}") from None
-        if image is not None and image.ndim == 3:  # bands as stored, never reordered
-            return _depth_checked(image, path)
-    if image is None:
-        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+        if stored is not None and stored.size:  # bands as stored, never reordered
+            stored = _depth_checked(stored, path)
+            return stored if stored.ndim == 3 else stored[..., None]
+    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None or image.size == 0:
         raise HalError(f"replay camera: cannot read {path} as an image")
     image = _depth_checked(image, path)
     if image.ndim == 2:
         return image[..., None]
     bands = image.shape[2]
-    if bands <= 2 or gray_with_alpha(path):  # gray, or gray and alpha (OpenCV makes that four channels)
+    if bands <= 2 or (bands == 4 and gray_with_alpha(path)):  # gray, or gray and alpha (OpenCV reads four)
         return np.ascontiguousarray(image[..., :1])
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB if bands == 3 else cv2.COLOR_BGRA2RGB)
 

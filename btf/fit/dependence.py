@@ -19,8 +19,8 @@ other regions' values are those of the lattice alone (a small region whose bands
 grain beyond its noise may give the frame rows per band). A lag still under MIN_PAIRS pairs
 is reported unmeasured (the record's `unmeasured`, its value 0.0), not independent. Values are
 centred on the region's median (from its models) before the float32 products, which keeps 8-bit
-products exact and 16-bit ones accurate. Per region, lag and band the pass keeps the pair count and the
-sums of a, b, a^2, b^2 and a b (anchor a, partner b): per window row, the partners' planes
+products exact and 16-bit ones accurate. Per region, lag and band the pass keeps the pair count
+and the sums of a, b, a^2, b^2 and a b (anchor a, partner b): per window row, the partners' planes
 (bands apart) masked to the anchor's label, then one-hot matrix products small enough for one
 BLAS thread; the Pearson correlation of the pairs follows. The lags (0, dx) are read on both
 sides of the anchor, doubling their pairs.
