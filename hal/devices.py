@@ -21,6 +21,11 @@ class Hal:
     size: tuple[int, int]
     _cleanup: tuple[Callable[[], None], ...] = field(default=(), repr=False)
     ground_truth: GroundTruth | None = None
+    pixel_format: str = "BGR3"  # what `open_camera` asks the camera for
+
+    def open_camera(self) -> None:
+        """Open the camera at the configured size and pixel format."""
+        self.camera.open(self.size[1], self.size[0], self.pixel_format)
 
     def close(self) -> None:
         for closer in (self.camera.close, self.tracker.close, self.servo_bus.close, *self._cleanup):

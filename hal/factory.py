@@ -20,6 +20,7 @@ from hal.devices import Hal
 from hal.emulators.bno055 import EmulatedSMBus
 from hal.emulators.dxl import DxlEmulator
 from hal.fakes import Faults
+from hal.fakes.camera import FORMATS as FAKE_FORMATS
 from hal.fakes.camera import FakeCamera
 from hal.fakes.servo import FakeServoBus
 from hal.fakes.tracker import FakeTracker
@@ -160,14 +161,38 @@ def build_hal(config: Mapping[str, Any] | Any | None = None, env: Mapping[str, s
         raise HalConfigError("hal.camera replay: plays files under the fake and emulated bodies only "
                              "(a real arm would file recorded frames under its live poses)")
     replay = _replay(options, size)
+    fmt = pixel_format(options, body, replay is not None)
     if body is not Body.REAL:
         if options.get("scene", "black") not in SCENES:
             raise HalConfigError(f"unknown scene {options['scene']!r}; choose from {', '.join(SCENES)}")
     builder = {Body.FAKE: _fake, Body.EMULATED: _emulated, Body.REAL: _real}[body]
     try:
-        return builder(options, calibration, size, world, replay)
+        return dataclasses.replace(builder(options, calibration, size, world, replay), pixel_format=fmt)
     except (TypeError, ValueError) as exc:  # a device constructor refused an option
         raise HalConfigError(f"{body.value} HAL: {exc}") from None
+
+
+def pixel_format(options: Mapping[str, Any], body: Body, replay: bool) -> str:
+    """`pixel_format`: the four-character code the camera opens in ("" is BGR3), checked against
+    what the body's camera can give; a real device answers for itself when it opens."""
+    text = str(options.get("pixel_format") or "")
+    if not text:
+        return "BGR3"
+    if len(text) != 4 or not text.isascii():
+        raise HalConfigError(f"hal.pixel_format must be a four-character code such as 'BGR3', 'Y16 ' or 'MSP6', "
+                             f"got {text!r}")
+    if replay:
+        raise HalConfigError(f"hal.pixel_format {text!r}: the replay camera plays its files' own bands; "
+                             "leave pixel_format unset")
+    if body is Body.FAKE:
+        known = [f for formats in FAKE_FORMATS.values() for f in formats]
+        if text not in known:
+            raise HalConfigError(f"hal.pixel_format {text!r}: the fake camera gives {', '.join(known)} "
+                                 "(MSP6: five spectral bands and thermal, 16-bit)")
+    elif body is Body.EMULATED and text != "BGR3":
+        raise HalConfigError(f"hal.pixel_format {text!r}: the emulated camera replays 8-bit RGB renders (BGR3); "
+                             "the fake body's camera gives MSP6")
+    return text
 
 
 def _replay(options: Mapping[str, Any], size: tuple[int, int]) -> Camera | None:
@@ -218,7 +243,9 @@ def _fake(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
                           mount=_tracker_mount(options), remap=tracker_remap(options))
     if replay is not None:  # frames from files: no scene, so no ground truth
         return Hal(Body.FAKE, bus, arm, tracker, replay, size)
-    camera = FakeCamera(str(options.get("scene", "black")), true_view, seed=seed, size=size,
+    fmt = pixel_format(options, Body.FAKE, False)
+    bands = next(name for name, formats in FAKE_FORMATS.items() if fmt in formats)
+    camera = FakeCamera(str(options.get("scene", "black")), true_view, seed=seed, size=size, bands=bands,
                         faults=_faults(options), reference=bool(options.get("reference", False)),
                         honours_lock=bool(options.get("camera_honours_lock", True)))
     return Hal(Body.FAKE, bus, arm, tracker, camera, size, ground_truth=camera)

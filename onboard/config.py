@@ -50,6 +50,9 @@ class HalConfig:
     tracker_remap: str = ""  # BNO055 axis remap, P0..P7 or "0x24/0x03"; `btf-robot calibrate tracker` names it
     reference: bool = False  # fake and emulated scenes: lay the grey reference card (label 7) in the plate
     replay_loop: bool = False  # replay camera: start over after the last file; false: the poses after it are skipped
+    # the camera's pixel format, a V4L2 four-character code: "Y16 " a 16-bit thermal camera, "MSP6" the
+    # fake body's multi-spectral camera (five spectral bands and thermal); "": the camera's own (BGR3)
+    pixel_format: str = ""
 
 
 @dataclass(frozen=True, slots=True)

@@ -34,7 +34,7 @@ def fake_robot(tmp_path):
         cfg = config.load(where / "robot.toml")
         if hal is None:
             hal = build_hal(cfg.hal)
-            hal.camera.open(cfg.hal.size[1], cfg.hal.size[0])
+            hal.open_camera()
         if quota is not None:
             cfg.state_dir.mkdir(parents=True, exist_ok=True)
             runtime_kw["outbox"] = Outbox(cfg.state_dir / "outbox.sqlite", quota_bytes=quota)

@@ -281,7 +281,8 @@ def _as_pixels(frame: np.ndarray, dtype: type, what: str) -> np.ndarray:
     if not isinstance(frame, np.ndarray) or frame.ndim != 3:
         raise ValueError(f"{what}: frame must be an H x W x C array, got shape {np.shape(frame)}")
     if frame.dtype != dtype:
-        raise ValueError(f"{what}: frame must be {np.dtype(dtype).name}, got {frame.dtype}")
+        raise ValueError(f"{what}: frame must be {np.dtype(dtype).name}, got {frame.dtype} "
+                         "(space raw fits a deeper camera's own bands)")
     if frame.shape[0] == 0 or frame.shape[1] == 0:
         raise ValueError(f"{what}: frame is empty ({frame.shape})")
     return frame.reshape(-1, frame.shape[2])
@@ -290,7 +291,8 @@ def _as_pixels(frame: np.ndarray, dtype: type, what: str) -> np.ndarray:
 def _rgb_pixels(frame: np.ndarray, spec: FeatureSpec) -> np.ndarray:
     x = _as_pixels(frame, np.uint8, spec.space.value)
     if x.shape[1] not in (3, 4):
-        raise ValueError(f"{spec.space.value}: frame needs 3 colour channels, got {x.shape[1]}")
+        raise ValueError(f"{spec.space.value}: frame needs 3 colour channels, got {x.shape[1]} "
+                         "(space raw fits the camera's own bands)")
     x = x[:, :3]
     return x[:, ::-1] if spec.bgr else x
 

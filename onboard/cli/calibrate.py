@@ -201,8 +201,7 @@ def _exposure(args: argparse.Namespace, hal: Hal, state_dir: Path) -> int:
     cfg = load(args.config) if args.config else Config()
     s: SweepConfig = cfg.sweep
     views = plan_extremes(SweepPlan(s.start, s.stop, s.step, s.azimuths))
-    h, w = hal.size
-    hal.camera.open(w, h)
+    hal.open_camera()
     lock = CameraLock(hal.camera, cfg.camera)
     granted = lock.apply(cfg.camera)
     if args.start_exposure is not None:

@@ -216,7 +216,7 @@ def run(args: argparse.Namespace) -> int:
     except HalError as exc:  # a device not there yet
         raise RetryLater(f"hal: {exc}") from None
     try:
-        hal.camera.open(cfg.hal.size[1], cfg.hal.size[0])
+        hal.open_camera()
         segment = Segmentation(cfg, hal)  # reads the palette kept in state_dir, writes nothing
         _check_state_dir(cfg.state_dir)  # the first thing made on disk
     except BaseException as exc:

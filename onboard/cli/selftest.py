@@ -151,7 +151,7 @@ def _camera(hal: Hal) -> str:
     automatics running would flatten the change with the view that a sweep measures."""
     cam = hal.camera
     h, w = hal.size
-    cam.open(w, h)
+    hal.open_camera()
     try:
         granted = cam.set_controls(hold(cam.settings()))
         frames = [cam.capture() for _ in range(LOCK_FRAMES)]

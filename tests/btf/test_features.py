@@ -155,6 +155,8 @@ def test_raw_bands_pass_through_and_select_by_name():
         (np.zeros((4, 4, 3), np.float32), FeatureSpec(FeatureSpace.HSV), "uint8"),
         (np.zeros((4, 4), np.uint8), FeatureSpec(FeatureSpace.RGB), "H x W x C"),
         (np.zeros((4, 4, 2), np.uint8), FeatureSpec(FeatureSpace.GRAY), "3 colour channels"),
+        (np.zeros((4, 4, 6), np.uint8), FeatureSpec(FeatureSpace.RGB), r"got 6 \(space raw fits the camera's own"),
+        (np.zeros((4, 4, 6), np.uint16), FeatureSpec(FeatureSpace.RGB), r"got uint16 \(space raw fits a deeper"),
         (np.zeros((0, 4, 3), np.uint8), FeatureSpec(FeatureSpace.RGB), "empty"),
         (np.zeros((4, 4, 3), np.int32), FeatureSpec(FeatureSpace.RAW), "uint8 or uint16"),
         (np.zeros((4, 4, 3), np.uint8), FeatureSpec(FeatureSpace.RAW, bands=("X",)), "unknown band"),

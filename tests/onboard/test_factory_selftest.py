@@ -36,6 +36,9 @@ def test_no_config_and_no_env_is_refused():
     ({"body": "fake", "size": (4, 4)}, "at least 8"),
     ({"body": "fake", "scene": "moon"}, "moon"),
     ({"body": "fake", "arm": {"yaw": {"servo_id": 1}}}, "arm calibration"),
+    ({"body": "fake", "pixel_format": "Y16 "}, r"fake camera gives BGR3, RGB3, MSP6"),
+    ({"body": "fake", "pixel_format": "MSP"}, "four-character code"),
+    ({"body": "emulated", "pixel_format": "MSP6"}, "emulated camera replays 8-bit RGB renders"),
 ])
 def test_bad_options_are_one_clear_error(options, match):
     with pytest.raises(HalConfigError, match=match):
@@ -48,6 +51,19 @@ def test_env_chooses_the_body_when_the_config_does_not():
         assert hal.body is Body.FAKE
     finally:
         hal.close()
+
+
+def test_the_configured_pixel_format_chooses_the_fake_cameras_bands_and_opens_the_camera():
+    multispectral = build_hal({"body": "fake", "size": (24, 32), "pixel_format": "MSP6"}, env={})
+    rgb = build_hal({"body": "fake", "size": (24, 32)}, env={})
+    try:
+        for hal, channels, dtype in ((multispectral, 6, np.uint16), (rgb, 3, np.uint8)):
+            hal.open_camera()
+            frame = hal.camera.capture()
+            assert frame.shape == (24, 32, channels) and frame.dtype == dtype
+    finally:
+        multispectral.close()
+        rgb.close()
 
 
 def test_arm_calibration_comes_from_the_config():

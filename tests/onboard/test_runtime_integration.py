@@ -11,7 +11,6 @@ import hal.fakes.camera as fake_camera
 import hal.scene
 from btf.fit.features import PcaBasis
 from hal.factory import build_hal
-from hal.fakes.camera import FakeCamera
 from hal.interfaces import HalError
 from onboard import config
 from onboard.capture.segmentation import Segmentation
@@ -194,13 +193,9 @@ def test_malformed_pca_extras_are_refused():
 
 def test_sixteen_bit_multispectral_bands_through_the_runtime(fake_robot, tmp_path):
     raw = {"space": "raw", "bands": ["B0", "B3"], "bins_16bit": 65536}
-    text = robot("mixed", {"features": raw})
-    cfg = load(tmp_path, text)
-    hal_ = build_hal(cfg.hal)
-    cam = FakeCamera("mixed", hal_.camera.true_view, size=(60, 80), bands="multispectral")
-    cam.open(80, 60, "MSP6")
-    hal_ = dataclasses.replace(hal_, camera=cam, ground_truth=cam)
-    rt, tr = fake_robot(text, hal=hal_)
+    text = robot("mixed", {"features": raw, "hal": {"pixel_format": "MSP6"}})
+    rt, tr = fake_robot(text)
+    cam = rt.hal.camera
     rt.boot()
     assert isinstance(command(rt, tr, 1, pk.CommandName.CAPTURE), pk.AckPacket)
     models = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
@@ -211,7 +206,7 @@ def test_sixteen_bit_multispectral_bands_through_the_runtime(fake_robot, tmp_pat
         lo, hi = np.percentile(values, [1, 99])
         med = float(model.ppf(0.5))
         assert np.isfinite(med) and lo - 32 <= med <= hi + 32  # within a bin of the data
-    rt_bad, tr_bad = fake_robot(robot("mixed", {"features": {**raw, "bands": ["B9"]}}), hal=hal_)
+    rt_bad, tr_bad = fake_robot(robot("mixed", {"features": {**raw, "bands": ["B9"]}, "hal": {"pixel_format": "MSP6"}}))
     nack = command(rt_bad, tr_bad, 2, pk.CommandName.CAPTURE)
     assert isinstance(nack, pk.NackPacket) and "unknown band" in nack.text
 
