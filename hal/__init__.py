@@ -1,7 +1,19 @@
 """Hardware seams: servo bus, orientation tracker, camera and arm, each with a real driver,
 an emulator beneath the real driver, and a behavioural fake. `hal.Hal` holds one body's
 devices (`hal.factory.build_hal` builds it)."""
-from hal.devices import Hal
-from hal.interfaces import Body, GroundTruth
+from __future__ import annotations
+
+from typing import Any
 
 __all__ = ["Body", "GroundTruth", "Hal"]
+
+
+def __getattr__(name: str) -> Any:
+    # loaded on first use: host commands that only read image files (hal.image_files) skip the devices
+    if name == "Hal":
+        from hal.devices import Hal
+        return Hal
+    if name in ("Body", "GroundTruth"):
+        from hal import interfaces
+        return getattr(interfaces, name)
+    raise AttributeError(f"module 'hal' has no attribute {name!r}")
