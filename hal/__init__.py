@@ -9,11 +9,10 @@ __all__ = ["Body", "GroundTruth", "Hal"]
 
 
 def __getattr__(name: str) -> Any:
-    # loaded on first use: host commands that only read image files (hal.image_files) skip the devices
     if name == "Hal":
-        from hal.devices import Hal
+        from hal.devices import Hal  # on first use: a host command reading image files skips the devices
         return Hal
     if name in ("Body", "GroundTruth"):
-        from hal import interfaces
+        from hal import interfaces  # on first use, as Hal
         return getattr(interfaces, name)
     raise AttributeError(f"module 'hal' has no attribute {name!r}")

@@ -67,6 +67,13 @@ def test_onboard_imports_nothing_from_the_host_side():
     assert not bad, f"onboard imported host-side or heavy modules: {bad}"
 
 
+def test_reading_image_files_loads_none_of_the_robots_devices():
+    code = "import json, sys\nimport hal.image_files\nprint(json.dumps(sorted(sys.modules)))\n"
+    out = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    loaded = json.loads(out.stdout.strip().splitlines()[-1])
+    assert not [m for m in loaded if m.startswith("hal.") and m != "hal.image_files"], loaded
+
+
 def test_the_shared_package_stands_on_numpy_and_the_standard_library_alone():
     code = (
         "import importlib, json, pkgutil, sys\n"
