@@ -277,12 +277,16 @@ class PcaBasis:
 
 
 # --- compute --------------------------------------------------------------------------
+def _remedy(frame: np.ndarray) -> str:
+    """The space that reads a frame the colour spaces cannot."""
+    return "space gray fits a one-band camera" if frame.shape[2] == 1 else "space raw fits the camera's own bands"
+
+
 def _as_pixels(frame: np.ndarray, dtype: type, what: str) -> np.ndarray:
     if not isinstance(frame, np.ndarray) or frame.ndim != 3:
         raise ValueError(f"{what}: frame must be an H x W x C array, got shape {np.shape(frame)}")
     if frame.dtype != dtype:
-        raise ValueError(f"{what}: frame must be {np.dtype(dtype).name}, got {frame.dtype} "
-                         "(space raw fits a deeper camera's own bands)")
+        raise ValueError(f"{what}: frame must be {np.dtype(dtype).name}, got {frame.dtype} ({_remedy(frame)})")
     if frame.shape[0] == 0 or frame.shape[1] == 0:
         raise ValueError(f"{what}: frame is empty ({frame.shape})")
     return frame.reshape(-1, frame.shape[2])
@@ -291,8 +295,7 @@ def _as_pixels(frame: np.ndarray, dtype: type, what: str) -> np.ndarray:
 def _rgb_pixels(frame: np.ndarray, spec: FeatureSpec) -> np.ndarray:
     x = _as_pixels(frame, np.uint8, spec.space.value)
     if x.shape[1] not in (3, 4):
-        raise ValueError(f"{spec.space.value}: frame needs 3 colour channels, got {x.shape[1]} "
-                         "(space raw fits the camera's own bands)")
+        raise ValueError(f"{spec.space.value}: frame needs 3 colour channels, got {x.shape[1]} ({_remedy(frame)})")
     x = x[:, :3]
     return x[:, ::-1] if spec.bgr else x
 
@@ -314,6 +317,8 @@ def compute(frame: np.ndarray, spec: FeatureSpec, pca: PcaBasis | None = None) -
         data = pca.apply(src, tuple(names.index(b) for b in want))
         return FeatureFrame(data, tuple(want), 256, space)
     want = spec.bands or BAND_NAMES[space]
+    if space is FeatureSpace.GRAY and isinstance(frame, np.ndarray) and frame.ndim == 3 and frame.shape[2] == 1:
+        return _one_band(frame)
     x = _rgb_pixels(frame, spec)
     h, w = frame.shape[:2]
     out = np.empty((h * w, len(want)), dtype=np.uint8)
@@ -329,6 +334,16 @@ def compute(frame: np.ndarray, spec: FeatureSpec, pca: PcaBasis | None = None) -
             else:
                 _hsv_chunk(chunk, tuple(want), out[a:a + CHUNK_PIXELS], cols)
     return FeatureFrame(out.reshape(h, w, len(want)), tuple(want), 256, space)
+
+
+def _one_band(frame: np.ndarray) -> FeatureFrame:
+    """A mono or thermal sensor's one band is its gray, at its own depth."""
+    if frame.dtype not in (np.uint8, np.uint16):
+        raise ValueError(f"gray: frame must be uint8 or uint16, got {frame.dtype}")
+    if frame.shape[0] == 0 or frame.shape[1] == 0:
+        raise ValueError(f"gray: frame is empty ({frame.shape})")
+    levels = 256 if frame.dtype == np.uint8 else 65536
+    return FeatureFrame(np.ascontiguousarray(frame), BAND_NAMES[FeatureSpace.GRAY], levels, FeatureSpace.GRAY)
 
 
 def _raw(frame: np.ndarray, spec: FeatureSpec) -> FeatureFrame:

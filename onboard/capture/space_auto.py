@@ -4,7 +4,8 @@ The criterion is the host's (btf.fit.space_choice, numpy only): each colour spac
 pca) is fitted under an ISODATA mask of the frame and judged by its Table-2 error at two seeds
 and by how much its bands correlate within regions. The robot judges a lattice of at most
 JUDGED_PIXELS pixels of the frame, so the one-off cost is bounded at any frame size. A one-band
-frame is gray; a 16-bit colour frame is rgb (hsv and pca are 8-bit spaces).
+frame is gray at its own depth; any other frame but 8-bit colour (16-bit colour, a multi-spectral
+camera's bands) is raw: the colour spaces read three 8-bit bands.
 """
 from __future__ import annotations
 
@@ -34,9 +35,11 @@ def resolve(frame: np.ndarray, classes: int, seed: int = 0) -> tuple[FeatureSpec
     if frame.ndim == 2 or frame.shape[2] == 1:
         spec = FeatureSpec(FeatureSpace.GRAY)
         return spec, space_choice.Choice("gray", "gray: the frame has one band", ("gray",))
-    if frame.dtype != np.uint8:
-        return FeatureSpec(FeatureSpace.RGB), space_choice.Choice(
-            "rgb", "rgb: a 16-bit colour frame (hsv and pca are 8-bit spaces)", ("rgb",))
+    if frame.dtype != np.uint8 or frame.shape[2] not in (3, 4):
+        depth = 8 * frame.dtype.itemsize
+        return FeatureSpec(FeatureSpace.RAW), space_choice.Choice(
+            "raw", f"raw: a frame of {frame.shape[2]} {depth}-bit bands (the colour spaces read three 8-bit bands)",
+            ("raw",))
     sub = lattice(frame[..., :3])
     labels = isodata(sub, IsodataParams(k=classes, seed=seed)).labels
     figures = []

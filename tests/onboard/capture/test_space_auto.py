@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from btf.fit import space_choice
+from btf.fit.features import compute
 from onboard import config
 from onboard.capture import space_auto
 from onboard.config import ConfigError
@@ -37,8 +38,26 @@ def test_a_colour_frame_is_judged_in_rgb_hsv_and_pca_and_a_one_band_or_deep_fram
     spec, choice = space_auto.resolve(photo, classes=4)
     assert spec.space.value == choice.space and choice.space in space_auto.COLOUR_SPACES
     assert choice.reason.startswith(choice.space)
-    assert space_auto.resolve(photo[..., :1], 4)[1].space == "gray"
-    assert space_auto.resolve(photo.astype(np.uint16) * 257, 4)[1].space == "rgb"
+    # every other frame gets a space that reads it, at its own depth: a mono or thermal camera's
+    # one band is gray, 16-bit colour and a multi-spectral camera's bands are raw
+    deep = photo.astype(np.uint16) * 257
+    cases = [(photo[..., :1], "gray", ("Y",), 256), (deep[..., :1], "gray", ("Y",), 65536),
+             (deep, "raw", ("B0", "B1", "B2"), 65536),
+             (np.dstack([photo, photo[..., :2]]), "raw", ("B0", "B1", "B2", "B3", "B4"), 256)]
+    for frame, space, bands, levels in cases:
+        spec, choice = space_auto.resolve(frame, 4)
+        features = compute(frame, spec)
+        assert (choice.space, features.band_names, features.levels) == (space, bands, levels), choice.reason
+        assert np.array_equal(features.data, frame) and choice.reason.startswith(space)
+
+
+def test_a_multi_spectral_camera_on_auto_sends_its_own_bands_and_says_why(fake_robot):
+    rt, tr = fake_robot(robot("mixed", AUTO, {"hal": {"pixel_format": "MSP6"}}))
+    rt.boot()
+    command(rt, tr, 1, pk.CommandName.CAPTURE)
+    (models,) = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
+    assert models.feature_space == "raw" and models.bands == tuple(f"B{k}" for k in range(6))
+    assert models.levels == 65536 and models.extras[space_choice.EXTRA_KEY].startswith("raw: a frame of 6 16-bit")
 
 
 def test_the_judged_lattice_is_bounded_at_any_frame_size():
