@@ -77,12 +77,35 @@ def latent_bands(measured: np.ndarray, maps: list[LevelMap]) -> tuple[np.ndarray
         return np.eye(n), np.eye(n)
     start = _nearest_valid(start)
 
+    slopes = {k: np.gradient(g, GRID) for k, g in curves.items()}
+    rows, cols = np.tril_indices(n)
+    at = np.full((n, n), -1)
+    at[rows, cols] = np.arange(len(rows))  # each parameter's place in its row of the factor
+
     def residual(p: np.ndarray) -> np.ndarray:
         r = _matrix(p, n)
         return np.array([np.interp(r[i, j], GRID, g) - measured[i, j] for (i, j), g in curves.items()])
 
+    def jacobian(p: np.ndarray) -> np.ndarray:
+        # r_ij = u_i . u_j with u the factor's rows made unit: d r_ij / d row_i = (u_j - r_ij u_i) / |row_i|;
+        # in closed form, one pass, where differences cost a residual per parameter (6 bands: 21)
+        low = np.zeros((n, n))
+        low[rows, cols] = p
+        norm = np.linalg.norm(low, axis=1)
+        u = low / norm[:, None]
+        jac = np.zeros((len(curves), len(p)))
+        for k, ((i, j), g) in enumerate(curves.items()):
+            r = float(u[i] @ u[j])
+            slope = float(np.interp(r, GRID, slopes[(i, j)]))
+            for a, b in ((i, j), (j, i)):
+                jac[k, at[a, :a + 1]] += slope * (u[b, :a + 1] - r * u[a, :a + 1]) / norm[a]
+        return jac
+
     p0 = np.linalg.cholesky(start + 1e-9 * np.eye(n))[np.tril_indices(n)]
-    fit = least_squares(residual, p0, method="trf", xtol=1e-10, ftol=1e-10, max_nfev=200 * len(p0))
+    # a matrix the marginals cannot reach (a multi-spectral camera's bands at 0.98 and more) leaves a
+    # flat valley the fit crawls along: 20 steps a parameter end within 1e-3 of where 200 do (6 bands:
+    # 0.5 s against 22 s with differenced slopes), and 3 colour bands settle in a few
+    fit = least_squares(residual, p0, jac=jacobian, method="trf", xtol=1e-10, ftol=1e-10, max_nfev=20 * len(p0))
     latent = _matrix(fit.x, n)
     for k in np.flatnonzero(~live):  # nothing to correlate with a constant band
         latent[k, :] = latent[:, k] = 0.0
