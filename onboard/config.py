@@ -21,7 +21,7 @@ from hal.controls import AUTO, FALLBACK_LOCK, hold, parse_controls
 from hal.bno055 import AxisRemap
 from hal.interfaces import CameraControls, CameraSettings
 from onboard.sweep.plan import SweepPlan
-from radio.packets.base import INT64, MAX_FRAME_PIXELS, MAX_FRAME_SIDE, UINT32
+from radio.packets.base import INT64, MAX_BANDS, MAX_FRAME_PIXELS, MAX_FRAME_SIDE, MAX_NAME, UINT32
 
 # A camera control: a number, "auto" (the camera's automatic) or "hold" (locked at what the
 # camera stands at when the robot starts). TOML gives it as a number or a string.
@@ -91,6 +91,9 @@ class FeatureConfig:
     space: str = "rgb"  # rgb | hsv | gray | pca | raw | auto (resolved per scene: onboard.capture.space_auto)
     bands: tuple[str, ...] = ()  # empty: every band of the space
     bins_16bit: int = 4096  # histogram bins over 0..65535 for 16-bit sensors (memory: labels x bands x bins)
+    # space raw: the camera's bands by name, in frame order (a view draws those named red, green and
+    # blue as colour); empty: B0..Bn-1
+    band_names: tuple[str, ...] = ()
     # also send grain and band correlation per region (btf.fit.dependence): on, it costs no more
     # than the fit and 87 bytes an RGB region (RESULTS.md "dependence"); without it the host
     # cannot reproduce grain or colour (each region's observed levels travel either way)
@@ -371,7 +374,28 @@ def check(cfg: Config) -> None:
     if cfg.features.space == "auto" and cfg.features.bands:
         raise ConfigError("features.bands names bands of one space; with features.space = 'auto' leave it empty "
                           "(every band of the space chosen)")
+    check_band_names(cfg)
     check_camera(cfg)
+
+
+def check_band_names(cfg: Config) -> None:
+    """features.band_names: a raw camera's bands, each a distinct name the MODELS packet can carry."""
+    f = cfg.features
+    if not f.band_names:
+        return
+    if f.space not in ("raw", "auto"):
+        raise ConfigError(f"features.band_names names a raw camera's bands; with features.space = '{f.space}' "
+                          "leave it empty (or set space = 'raw')")
+    if len(f.band_names) > MAX_BANDS:
+        raise ConfigError(f"features.band_names: {len(f.band_names)} names, a capture carries at most {MAX_BANDS}")
+    for name in f.band_names:
+        if not 1 <= len(name) <= MAX_NAME or not name.isprintable():
+            raise ConfigError(f"features.band_names: {name!r} must be 1 to {MAX_NAME} printable characters")
+    if len(set(f.band_names)) != len(f.band_names):
+        raise ConfigError(f"features.band_names: a name repeats in {list(f.band_names)}")
+    unknown = [b for b in f.bands if b not in f.band_names]
+    if unknown:
+        raise ConfigError(f"features.bands {unknown} not among features.band_names {list(f.band_names)}")
 
 
 def check_camera(cfg: Config) -> None:

@@ -115,7 +115,12 @@ def feature_spec(cfg: Config) -> FeatureSpec | None:
     scene's first frame)."""
     if cfg.features.space == "auto":
         return None
-    return FeatureSpec(FeatureSpace(cfg.features.space), cfg.features.bands or None)
+    return FeatureSpec(FeatureSpace(cfg.features.space), cfg.features.bands or None, raw_names(cfg))
+
+
+def raw_names(cfg: Config) -> tuple[str, ...] | None:
+    """The camera's band names for space raw (None: B0..Bn-1)."""
+    return cfg.features.band_names or None
 
 
 class Pipeline:
@@ -154,7 +159,9 @@ class Pipeline:
     def keep_space(self, chosen: tuple[str, str] | None) -> None:
         """The scene's automatic space, as chosen before a restart (None: choose from the next frame)."""
         if chosen is not None:
-            self.spec, self.space_choice = FeatureSpec(FeatureSpace(chosen[0])), chosen[1]
+            space = FeatureSpace(chosen[0])
+            names = raw_names(self.cfg) if space is FeatureSpace.RAW else None
+            self.spec, self.space_choice = FeatureSpec(space, names=names), chosen[1]
 
     @property
     def cfg(self) -> Config:
@@ -311,7 +318,7 @@ class Pipeline:
         t0 = clock()
         try:
             if self.spec is None:  # features.space auto: once per scene, from its first frame
-                self.spec, choice = space_auto.resolve(frame, cfg.segment.k)
+                self.spec, choice = space_auto.resolve(frame, cfg.segment.k, names=raw_names(cfg))
                 self.space_choice, self.choice_pending = choice.reason[:space_auto.MAX_REASON], True
             if self.spec.space is FeatureSpace.PCA and self.pca is None:
                 self.pca = PcaBasis.fit(frame)  # once per scene; sent with the scene

@@ -30,14 +30,16 @@ def lattice(frame: np.ndarray, pixels: int = JUDGED_PIXELS) -> np.ndarray:
     return np.ascontiguousarray(frame[::step, ::step])
 
 
-def resolve(frame: np.ndarray, classes: int, seed: int = 0) -> tuple[FeatureSpec, space_choice.Choice]:
-    """The feature spec to fit the scene in, and the criterion's choice with its reason."""
+def resolve(frame: np.ndarray, classes: int, seed: int = 0,
+            names: tuple[str, ...] | None = None) -> tuple[FeatureSpec, space_choice.Choice]:
+    """The feature spec to fit the scene in, and the criterion's choice with its reason;
+    `names`: the camera's band names, should it be raw."""
     if frame.ndim == 2 or frame.shape[2] == 1:
         spec = FeatureSpec(FeatureSpace.GRAY)
         return spec, space_choice.Choice("gray", "gray: the frame has one band", ("gray",))
     if frame.dtype != np.uint8 or frame.shape[2] not in (3, 4):
         depth = 8 * frame.dtype.itemsize
-        return FeatureSpec(FeatureSpace.RAW), space_choice.Choice(
+        return FeatureSpec(FeatureSpace.RAW, names=names), space_choice.Choice(
             "raw", f"raw: a frame of {frame.shape[2]} {depth}-bit bands (the colour spaces read three 8-bit bands)",
             ("raw",))
     sub = lattice(frame[..., :3])

@@ -69,6 +69,11 @@ def test_good_file_loads_into_frozen_records_with_paths_relative_to_the_file(tmp
         ("[segment]\nmethod = 'mask'\nmask = 'nowhere.png'", "no such file"),
         ("hal = 3", "[hal] must be a table"),
         ("[sweep]\nstop = 0\nstep = 0.02", "exceeds 4096"),
+        ("[features]\nband_names = ['nir']", "with features.space = 'rgb' leave it empty"),
+        ("[features]\nspace = 'raw'\nband_names = ['nir', 'nir']", "a name repeats"),
+        ("[features]\nspace = 'raw'\nband_names = ['near infrared 842nm']", "1 to 16 printable"),
+        ("[features]\nspace = 'raw'\nband_names = ['red', 'nir']\nbands = ['green']",
+         "features.bands ['green'] not among features.band_names"),
     ],
 )
 def test_each_bad_config_raises_one_line_naming_the_problem(tmp_path, text, words):

@@ -163,16 +163,28 @@ def band_count(image: np.ndarray) -> int:
     return 1 if image.ndim == 2 else image.shape[2]
 
 
-def view_rgb(image: np.ndarray, reference: np.ndarray | None = None) -> np.ndarray:
+COLOUR_NAMES = (("red", "r"), ("green", "g"), ("blue", "b"))  # band names a view draws as R, G and B
+
+
+def colour_bands(names: tuple[str, ...] | None) -> tuple[int, int, int] | None:
+    """The bands named red, green and blue (any case; or R, G, B), None unless all three are."""
+    lowered = [n.lower() for n in names or ()]
+    picks = [next((i for i, n in enumerate(lowered) if n in colour), None) for colour in COLOUR_NAMES]
+    return None if None in picks else (picks[0], picks[1], picks[2])
+
+
+def view_rgb(image: np.ndarray, reference: np.ndarray | None = None,
+             names: tuple[str, ...] | None = None) -> np.ndarray:
     """8-bit RGB for a person to look at, 16-bit stretched over the levels `reference` (the
     photograph; default the image) occupies, so a synthesis and its photograph read alike: one
-    band as gray, colour over its bands' common range, other counts as false colour of their
-    first three bands (the first two and the first again for two), each over its own range."""
+    band as gray, colour over its bands' common range, other counts as false colour, each band
+    over its own range: of the bands `names` calls red, green and blue, else of the first three
+    (the first two and the first again for two)."""
     ref = image if reference is None else reference
     if band_count(image) in (1, 3):
         span = None if ref.dtype == np.uint8 else (int(ref.min()), int(ref.max()))
         return three_bands(stretched_8bit(image, span))
-    picks = (0, 1, 2) if image.shape[2] >= 3 else (0, 1, 0)
+    picks = colour_bands(names) or ((0, 1, 2) if image.shape[2] >= 3 else (0, 1, 0))
     return np.dstack([stretched_8bit(image[:, :, b:b + 1], (int(ref[..., b].min()), int(ref[..., b].max())))
                       for b in picks])
 

@@ -1,7 +1,7 @@
 """What a stored capture looks like: its label map, the view synthesized from its models
 (independent pixels, and correlated when it carries dependence; hsv and pca ones turned back
-into RGB, pca through the scene's stored basis, raw bands as false colour of their first
-three), the measured frame where the host has it, and the histograms with the Johnson curves.
+into RGB, pca through the scene's stored basis, raw bands as false colour of those named red,
+green and blue, else of their first three), the measured frame where the host has it, and the histograms with the Johnson curves.
 The static report and the operator's page both draw captures with these (`tools.report.look`
 lays them out).
 
@@ -91,7 +91,7 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
     out = CaptureViews(cap, fitted, space_choice=store.space_choice(cap.id))
     real = measured(cap) if measured is not None else None
     if real is not None and shown(cap, real):
-        out.images["measured"] = view_rgb(real) if cap.space == "raw" else stretched_8bit(real)
+        out.images["measured"] = view_rgb(real, names=cap.band_names) if cap.space == "raw" else stretched_8bit(real)
     mask = capture_mask(store, cap)
     # each region at the capture's exposure (a bracketed region's models scaled back)
     models = dict(adjusted({k: m.model for k, m in fitted.items()}, cap.camera))
@@ -117,7 +117,7 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
     if all(a is not None for a in both) and cap.space == "raw":  # each band over its span in both
         over = np.concatenate(both, axis=0)
         for name, image in zip(("independent", "correlated"), both):
-            out.images[name] = view_rgb(image, over)
+            out.images[name] = view_rgb(image, over, cap.band_names)
     elif all(a is not None for a in both):
         span = (int(min(a.min() for a in both)), int(max(a.max() for a in both)))
         for name, image in zip(("independent", "correlated"), both):

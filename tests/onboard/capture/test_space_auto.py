@@ -51,13 +51,24 @@ def test_a_colour_frame_is_judged_in_rgb_hsv_and_pca_and_a_one_band_or_deep_fram
         assert np.array_equal(features.data, frame) and choice.reason.startswith(space)
 
 
-def test_a_multi_spectral_camera_on_auto_sends_its_own_bands_and_says_why(fake_robot):
-    rt, tr = fake_robot(robot("mixed", AUTO, {"hal": {"pixel_format": "MSP6"}}))
+NAMES = ("blue", "green", "red", "rededge", "nir", "thermal")
+
+
+@pytest.mark.parametrize("names", [(), NAMES])
+def test_a_multi_spectral_camera_on_auto_sends_its_own_bands_and_says_why(fake_robot, tmp_path, names):
+    text = robot("mixed", AUTO, {"hal": {"pixel_format": "MSP6"}, "features": {"band_names": list(names)}})
+    rt, tr = fake_robot(text)
     rt.boot()
     command(rt, tr, 1, pk.CommandName.CAPTURE)
     (models,) = [p for p in decoded(tr) if isinstance(p, pk.ModelsPacket)]
-    assert models.feature_space == "raw" and models.bands == tuple(f"B{k}" for k in range(6))
+    assert models.feature_space == "raw" and models.bands == (names or tuple(f"B{k}" for k in range(6)))
     assert models.levels == 65536 and models.extras[space_choice.EXTRA_KEY].startswith("raw: a frame of 6 16-bit")
+    rt.outbox.close()
+    again, tr2 = fake_robot(text)  # a restart keeps the space chosen, and the names with it
+    again.boot()
+    command(again, tr2, 2, pk.CommandName.CAPTURE)
+    (kept,) = [p for p in decoded(tr2) if isinstance(p, pk.ModelsPacket) and p.seq > models.seq]
+    assert (kept.feature_space, kept.bands) == ("raw", models.bands)
 
 
 def test_the_judged_lattice_is_bounded_at_any_frame_size():

@@ -21,7 +21,11 @@ from PIL import Image
 
 from hal.interfaces import ViewAngles
 from hal.scene import render
-from tools.data.images import ImageError, read_image, write_image, write_mask
+from radio import packets as pk
+from tests.support.robots import IDLE, robot_toml
+from tools.data.images import ImageError, read_image, view_rgb, write_image, write_mask
+from tools.station.receiver import Receiver
+from tools.store.database import Store
 
 
 @pytest.fixture(scope="module")
@@ -199,3 +203,38 @@ def test_a_tiff_whose_header_claims_more_pixels_than_an_image_may_have_is_refuse
         tif.write(shape=(40000, 40000), dtype=np.uint8)
     with pytest.raises(ImageError, match="more than the 1073741824 an image may have"):
         read_image(tmp_path / "huge.tif")
+
+
+NAMES = ("blue", "green", "red", "rededge", "nir", "thermal")  # the scene model's camera, in frame order
+
+
+def test_a_view_draws_the_bands_named_red_green_and_blue_as_colour(spectral):
+    _, image, _ = spectral
+    plain = view_rgb(image)  # the first three bands as R, G, B
+    assert np.array_equal(view_rgb(image, names=NAMES), plain[..., ::-1])  # red, green, blue are bands 2, 1, 0
+    assert np.array_equal(view_rgb(image, names=("R", "G", "B", "x", "y", "z")), plain)
+    assert np.array_equal(view_rgb(image, names=("red", "green", "nir", "w", "x", "y")), plain)  # no blue: false colour
+
+
+def test_the_report_draws_a_named_multi_spectral_capture_in_its_colours(fake_robot, host, tmp_path):
+    text = robot_toml({"hal": {"scene": "mixed", "size": [60, 80], "pixel_format": "MSP6"}, "skip": None,
+                       "features": {"space": "raw", "band_names": list(NAMES)}}, IDLE)
+    rt, tr = fake_robot(text)
+    rt.boot()
+    for cid, name, args in ((1, pk.CommandName.SEND_MASK, {"seq": 1}), (2, pk.CommandName.CAPTURE, {})):
+        tr.receive(pk.encode(pk.CommandPacket(cid, name, args)))
+        rt.step()
+    frame, labels = rt.hal.camera.capture(), rt.hal.camera.last_mask  # the same view again
+    with Store.open(tmp_path / "named.db") as store:
+        rx = Receiver(store)
+        for _, body in tr.sent:
+            rx.handle(body)
+    code, _, err = host("report", "--db", tmp_path / "named.db", "--out", tmp_path / "rep", "--quiet")
+    assert code == 0, err
+    (drawn_path,) = (tmp_path / "rep").glob("*_correlated.png")
+    drawn = read_image(drawn_path)
+    # R, G, B of the picture follow the bands named red, green, blue: the materials' order in each
+    for channel, band in enumerate((2, 1, 0)):
+        means = [float(drawn[..., channel][labels == lab].mean()) for lab in np.unique(labels)]
+        real = [float(frame[..., band][labels == lab].mean()) for lab in np.unique(labels)]
+        assert np.argsort(means).tolist() == np.argsort(real).tolist(), (channel, means, real)
