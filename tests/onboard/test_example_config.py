@@ -1,4 +1,4 @@
-"""examples/robot.toml lists every key of the configuration schema (onboard/config.py) with its
+"""examples/robot.toml lists every key of the configuration schema (onboard/config/) with its
 default and meaning, and starts the robot on the fake and the emulated HAL."""
 import dataclasses
 import re

@@ -16,12 +16,13 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Mapping
 
-from btf.capture_settings import LINEAR_SPACES, MAX_BRACKETS
-from hal.controls import AUTO, FALLBACK_LOCK, hold, parse_controls
+from btf.capture_settings import LINEAR_SPACES
 from hal.bno055 import AxisRemap
+from hal.controls import AUTO, FALLBACK_LOCK, hold, parse_controls
 from hal.interfaces import CameraControls, CameraSettings
+from onboard.config.limits import BOUNDS, CHOICES
 from onboard.sweep.plan import SweepPlan
-from radio.packets.base import INT64, MAX_BANDS, MAX_FRAME_PIXELS, MAX_FRAME_SIDE, MAX_NAME, UINT32
+from radio.packets.base import MAX_BANDS, MAX_NAME
 
 # A camera control: a number, "auto" (the camera's automatic) or "hold" (locked at what the
 # camera stands at when the robot starts). TOML gives it as a number or a string.
@@ -201,30 +202,6 @@ def keys() -> dict[str, Any]:
     return {**_TOP, **{f"{name}.{k}": kind for name, cls in _SECTIONS.items() for k, kind in _TYPES[cls].items()}}
 
 
-CHOICES = {"hal.body": ("", "fake", "emulated", "real"), "hal.scene": ("black", "white", "mixed", "field"),
-           "features.space": ("rgb", "hsv", "gray", "pca", "raw", "auto"), "segment.method": ("isodata", "mask", "scene"),
-           "link.clock": ("rtc", "none")}
-# The numbers a key may hold, both ends included (each item of a list key): what the robot, its
-# packets and its devices can use. A value outside is refused as the file is read.
-DAY = 86400.0
-BOUNDS: dict[str, tuple[float, float]] = {
-    "robot_id": (0, 0xFFFF), "outbox_quota_bytes": (4096, INT64), "disk_min_free_bytes": (0, INT64),
-    "disk_reserve_bytes": (0, INT64),
-    "hal.size": (8, MAX_FRAME_SIDE), "hal.fault_rate": (0.0, 1.0), "hal.fault_seed": (0, UINT32),
-    "hal.seed": (0, UINT32), "hal.servo_baud": (1, UINT32), "hal.tracker_bus": (0, 0xFFFF),
-    "link.baud": (1, UINT32), "link.node_id": (0, 255), "link.peer_id": (0, 255), "link.link_id": (0, 255),
-    "link.mtu": (40, 4096), "link.heartbeat_s": (0.01, DAY), "link.failsafe_s": (0.02, DAY),
-    "link.window": (1, 1024),
-    "sweep.start": (0.0, 90.0), "sweep.stop": (0.0, 90.0), "sweep.step": (0.01, 180.0),
-    "sweep.azimuths": (-3600.0, 3600.0), "sweep.settle_timeout_s": (0.001, DAY), "sweep.retries": (0, 100),
-    "sweep.pose_tolerance_deg": (0.0, 90.0), "sweep.retry_skipped": (0, 10),
-    "features.bins_16bit": (2, 65536),
-    "segment.n_labels": (1, 256), "segment.k": (1, 128), "segment.min_samples": (1, MAX_FRAME_PIXELS),
-    "segment.split_std": (1e-6, 1e9), "segment.merge_distance": (0.0, 1e9), "segment.max_merges": (0, 256),
-    "segment.iterations": (1, 1000), "segment.subsample": (1, MAX_FRAME_PIXELS), "segment.refit_drift": (0.0, 1e9),
-    "skip.min_pixels": (1, MAX_FRAME_PIXELS), "skip.unchanged_tolerance": (0.0, 65535.0),
-    "camera.reference_label": (-1, 255), "camera.bracket_max": (1, MAX_BRACKETS),
-}
 MAX_FILE = 1 << 20  # a robot's config is a few kilobytes; a file past this is not one
 
 
