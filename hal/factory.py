@@ -311,18 +311,22 @@ def _real(options: Mapping[str, Any], cal: ArmCalibration, size: tuple[int, int]
                             latency_ms=float(options.get("servo_latency_ms", 16.0)))
     try:
         tracker = BNO055Tracker.open(int(options.get("tracker_bus", 1)), 0x28, remap=tracker_remap(options))
-        camera = _real_camera(str(options.get("camera", "")))
+        camera = _real_camera(str(options.get("camera", "")), pixel_format(options, Body.REAL, False))
     except BaseException:
         bus.close()
         raise
     return Hal(Body.REAL, bus, Arm(bus, cal), tracker, camera, size)
 
 
-def _real_camera(device: str) -> Camera:
-    """`camera = "picamera2"`, a V4L2 index or path; unset: picamera2 when importable, else device 0."""
-    from hal.camera import OpenCVCamera, PiCamera2Camera  # OpenCV: only for the real body
+def _real_camera(device: str, fmt: str = "BGR3") -> Camera:
+    """`camera = "picamera2"`, a V4L2 index or path; unset: picamera2 when importable, else device 0.
+    A format picamera2 cannot give is refused here: at open it would read as a camera not there yet."""
+    from hal.camera import PICAMERA2_FORMATS, OpenCVCamera, PiCamera2Camera  # OpenCV: only for the real body
 
     if device == "picamera2" or (not device and _picamera2_importable()):
+        if fmt not in PICAMERA2_FORMATS:
+            raise HalConfigError(f"hal.pixel_format {fmt!r}: picamera2 gives {', '.join(PICAMERA2_FORMATS)}; "
+                                 "a V4L2 camera (hal.camera = its device) takes other formats")
         return PiCamera2Camera()
     return OpenCVCamera(int(device) if device.isdigit() else (device or 0))
 

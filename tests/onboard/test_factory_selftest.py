@@ -155,6 +155,9 @@ def test_real_camera_is_picamera2_when_importable_and_opencv_otherwise(monkeypat
     monkeypatch.setitem(sys.modules, "picamera2", StandInPicamera2Module)
     assert isinstance(_real_camera(""), PiCamera2Camera)
     assert isinstance(_real_camera("picamera2"), PiCamera2Camera)
+    with pytest.raises(HalConfigError, match="'Y16 ': picamera2 gives BGR3, RGB3"):
+        _real_camera("", "Y16 ")  # refused at start, not retried as a camera not there yet
+    assert isinstance(_real_camera("/dev/video0", "Y16 "), OpenCVCamera)
     named = _real_camera("/dev/video2")
     assert isinstance(named, OpenCVCamera) and named.device == "/dev/video2"
     monkeypatch.setitem(sys.modules, "picamera2", None)  # not installed: import fails
