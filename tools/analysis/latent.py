@@ -77,28 +77,32 @@ def latent_bands(measured: np.ndarray, maps: list[LevelMap]) -> tuple[np.ndarray
         return np.eye(n), np.eye(n)
     start = _nearest_valid(start)
 
-    slopes = {k: np.gradient(g, GRID) for k, g in curves.items()}
+    slopes = [np.gradient(g, GRID) for g in curves.values()]
     rows, cols = np.tril_indices(n)
     at = np.full((n, n), -1)
     at[rows, cols] = np.arange(len(rows))  # each parameter's place in its row of the factor
+    first, second = (np.array(side) for side in zip(*curves))  # each pair's bands
+    pair = np.arange(len(first))[:, None]
 
     def residual(p: np.ndarray) -> np.ndarray:
         r = _matrix(p, n)
         return np.array([np.interp(r[i, j], GRID, g) - measured[i, j] for (i, j), g in curves.items()])
 
     def jacobian(p: np.ndarray) -> np.ndarray:
-        # r_ij = u_i . u_j with u the factor's rows made unit: d r_ij / d row_i = (u_j - r_ij u_i) / |row_i|;
-        # in closed form, one pass, where differences cost a residual per parameter (6 bands: 21)
+        # r_ij = u_i . u_j with u the factor's rows made unit: d r_ij / d row_i = (u_j - r_ij u_i) / |row_i|,
+        # in closed form where differences cost a residual per parameter (6 bands: 21)
         low = np.zeros((n, n))
         low[rows, cols] = p
         norm = np.linalg.norm(low, axis=1)
         u = low / norm[:, None]
-        jac = np.zeros((len(curves), len(p)))
-        for k, ((i, j), g) in enumerate(curves.items()):
-            r = float(u[i] @ u[j])
-            slope = float(np.interp(r, GRID, slopes[(i, j)]))
-            for a, b in ((i, j), (j, i)):
-                jac[k, at[a, :a + 1]] += slope * (u[b, :a + 1] - r * u[a, :a + 1]) / norm[a]
+        r = np.einsum("kc,kc->k", u[first], u[second])
+        slope = np.array([np.interp(v, GRID, d) for v, d in zip(r, slopes)])
+        jac = np.zeros((len(first), len(p)))
+        for a, b in ((first, second), (second, first)):  # a pair's two rows hold parameters of their own
+            place = at[a]
+            live = place >= 0
+            part = slope[:, None] * (u[b] - r[:, None] * u[a]) / norm[a][:, None]
+            jac[np.broadcast_to(pair, place.shape)[live], place[live]] = part[live]
         return jac
 
     p0 = np.linalg.cholesky(start + 1e-9 * np.eye(n))[np.tril_indices(n)]
