@@ -1,9 +1,9 @@
 """The robot's TOML configuration, read once at start into frozen dataclasses.
 
 Every problem (missing file, bad TOML, unknown key, wrong type, a number outside what the
-robot can use (`BOUNDS`), missing key file) raises `ConfigError` with one line naming the key
-and the file; the runtime stops with exit status 2 before it creates anything. Relative paths
-are resolved against the config file's directory.
+robot can use (`BOUNDS`, in `onboard.config.limits`), missing key file) raises `ConfigError`
+with one line naming the key and the file; the runtime stops with exit status 2 before it
+creates anything. Relative paths are resolved against the config file's directory.
 """
 from __future__ import annotations
 
