@@ -317,8 +317,8 @@ def compute(frame: np.ndarray, spec: FeatureSpec, pca: PcaBasis | None = None) -
         data = pca.apply(src, tuple(names.index(b) for b in want))
         return FeatureFrame(data, tuple(want), 256, space)
     want = spec.bands or BAND_NAMES[space]
-    if space is FeatureSpace.GRAY and isinstance(frame, np.ndarray) and frame.ndim == 3 and frame.shape[2] == 1:
-        return _one_band(frame)
+    if space is FeatureSpace.GRAY and isinstance(frame, np.ndarray) and (frame.ndim == 2 or frame.shape[-1:] == (1,)):
+        return _one_band(frame.reshape(frame.shape[:2] + (1,)))
     x = _rgb_pixels(frame, spec)
     h, w = frame.shape[:2]
     out = np.empty((h * w, len(want)), dtype=np.uint8)
