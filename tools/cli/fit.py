@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 
@@ -9,7 +10,7 @@ import numpy as np
 
 from btf.dependence import window
 from onboard.cli.runner import RetryLater
-from tools.cli.options import FEATURE_SPACES, CliError, elevation, label
+from tools.cli.options import FEATURE_SPACES, CliError, band_names, elevation, label
 from tools.store.database import CorruptDatabase, Store, StoreUnavailable
 
 ROBOT_ID = "host"
@@ -29,6 +30,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scene", type=label, metavar="NAME",
                    help="with --db: the sample or place photographed; photographs of different robots or scenes "
                         "are never interpolated together (synth and report choose one with --robot and --scene)")
+    p.add_argument("--band-names", type=band_names, metavar="NAMES",
+                   help="space raw: the image's bands by name, comma-separated in file order (e.g. "
+                        "blue,green,red,nir); the report draws those named red, green and blue as colour")
     p.add_argument("--json", action="store_true", help="print the models document (MODELS.json)")
     p.add_argument("--independent-only", action="store_true",
                    help="skip measuring grain and band correlation (synthesis then draws independent pixels)")
@@ -71,6 +75,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError("--robot and --scene label what --db stores: give --db DB too")
     if args.angle is not None:
         elevation(args.angle)
+    if args.band_names and args.space not in (None, "raw"):
+        raise CliError(f"--band-names names an image's own bands: use it with --space raw, not {args.space}")
     store = _open(args.db) if args.db else None
     try:
         return _fit(args, store)
@@ -90,6 +96,17 @@ def _auto(args: argparse.Namespace):
     return auto_space(image, labels)
 
 
+def _named(fitted, names: tuple[str, ...]):
+    """The fit with its raw bands under the names given."""
+    feats = fitted.feats
+    if feats.space.value != "raw":
+        raise CliError(f"--band-names names an image's own bands; this fit is in {feats.space.value} "
+                       f"(bands {', '.join(feats.band_names)}): add --space raw")
+    if len(names) != len(feats.band_names):
+        raise CliError(f"--band-names gives {len(names)} names for an image of {len(feats.band_names)} bands")
+    return dataclasses.replace(fitted, feats=dataclasses.replace(feats, band_names=names))
+
+
 def _fit(args: argparse.Namespace, store: Store | None) -> int:
     # heavy (OpenCV, scipy): loaded to run, not for --help
     from tools.analysis.models_doc import models_document
@@ -101,6 +118,8 @@ def _fit(args: argparse.Namespace, store: Store | None) -> int:
         fitted = fit_image(args.image, args.mask, space, dependence=not args.independent_only)
     except ValueError as exc:  # ImageError too
         raise CliError(str(exc)) from None
+    if args.band_names:
+        fitted = _named(fitted, args.band_names)
     feats, pca, results = fitted.feats, fitted.pca, fitted.results
     doc = models_document(feats.space.value, feats.band_names, feats.levels, args.angle, results,
                           pca=None if pca is None else pca.to_record(), image=str(args.image),

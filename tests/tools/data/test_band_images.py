@@ -238,3 +238,26 @@ def test_the_report_draws_a_named_multi_spectral_capture_in_its_colours(fake_rob
         means = [float(drawn[..., channel][labels == lab].mean()) for lab in np.unique(labels)]
         real = [float(frame[..., band][labels == lab].mean()) for lab in np.unique(labels)]
         assert np.argsort(means).tolist() == np.argsort(real).tolist(), (channel, means, real)
+
+
+def test_fit_names_a_tiffs_bands_for_the_models_and_the_reports_colours(host, spectral, tmp_path):
+    d, image, mask = spectral
+    names = ",".join(NAMES)
+    code, out, err = host("fit", d / "view.tif", "--mask", d / "mask.png", "--band-names", names, "--json")
+    assert code == 0, err
+    assert tuple(json.loads(out)["bands"]) == NAMES
+    code, _, err = host("fit", d / "view.tif", "--mask", d / "mask.png", "--band-names", names, "--angle", 60,
+                        "--db", tmp_path / "named.db")
+    assert code == 0, err
+    code, _, err = host("report", "--db", tmp_path / "named.db", "--out", tmp_path / "rep", "--quiet")
+    assert code == 0, err
+    drawn = read_image(tmp_path / "rep" / "robothost_060.0_0_correlated.png")
+    for channel, band in enumerate((2, 1, 0)):  # R, G, B from the bands named red, green, blue
+        means = [float(drawn[..., channel][mask == lab].mean()) for lab in np.unique(mask)]
+        real = [float(image[..., band][mask == lab].mean()) for lab in np.unique(mask)]
+        assert np.argsort(means).tolist() == np.argsort(real).tolist(), (channel, means, real)
+    for args, words in ((("--band-names", "a,b"), "2 names for an image of 6 bands"),
+                        (("--band-names", "a,a,b,c,d,e"), "a name repeats"),
+                        (("--band-names", names, "--space", "rgb"), "use it with --space raw")):
+        code, _, err = host("fit", d / "view.tif", "--mask", d / "mask.png", *args)
+        assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
