@@ -5,7 +5,7 @@ import argparse
 import sys
 
 from onboard.cli.runner import bounded
-from tools.cli.options import CliError, elevation
+from tools.cli.options import CliError, band_names, elevation
 from tools.data.datasets import DatasetError, Layout
 from tools.data.ingest import INGEST_SPACES, NADIR, IngestError, ingest
 from tools.store.database import CorruptDatabase
@@ -23,6 +23,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--space", choices=INGEST_SPACES,
                    help="the bands fitted (default: each image's own: gray for one band, rgb for colour, "
                         "raw for other counts)")
+    p.add_argument("--band-names", type=band_names, metavar="NAMES",
+                   help="raw bands by name, comma-separated in file order (e.g. blue,green,red,nir)")
     p.add_argument("--table", help="angle table (curet: angles.txt, folder: angles.csv in DIR by default)")
     p.add_argument("--angle", type=float, default=NADIR,
                    help="view elevation for a folder without angles (default: 90, straight down)")
@@ -50,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
                         default_elevation=args.angle,
                         on_total=lambda n: bar.append(tqdm(total=n, unit="img", disable=args.quiet)),
                         on_image=lambda _name: bar[0].update(1), keep_going=args.keep_going,
-                        dependence=not args.independent_only)
+                        dependence=not args.independent_only, band_names=args.band_names)
     except (DatasetError, IngestError, CorruptDatabase) as exc:
         raise CliError(str(exc)) from None
     finally:

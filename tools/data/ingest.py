@@ -52,6 +52,7 @@ class Job:
     mask: str | None
     space: str | None  # None: each image's own (gray for one band, rgb for colour, raw for other counts)
     dependence: bool = True  # measure grain and band correlation (btf.fit.dependence)
+    names: tuple[str, ...] | None = None  # raw bands by name (None: B0..Bn-1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -93,7 +94,13 @@ def fit_job(job: Job) -> Fitted:
         fitted = fit_image(job.path, job.mask, job.space, dependence=job.dependence)
     except ValueError as exc:  # ImageError too
         raise IngestError(str(exc)) from None
-    return Fitted(job.name, tuple(fitted.feats.band_names), fitted.results,
+    bands = tuple(fitted.feats.band_names)
+    if job.names is not None:
+        if fitted.feats.space.value != "raw" or len(job.names) != len(bands):
+            raise IngestError(f"{job.path}: {len(job.names)} band names for its {len(bands)} "
+                              f"{fitted.feats.space.value} bands ({', '.join(bands)}); band names are for raw bands")
+        bands = job.names
+    return Fitted(job.name, bands, fitted.results,
                   fitted.labels if job.mask else None, fitted.dependence, fitted.feats.levels,
                   fitted.feats.space.value)
 
@@ -156,7 +163,7 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
            table: str | Path | None = None, default_elevation: float = NADIR,
            on_total: Callable[[int], None] | None = None,
            on_image: Callable[[str], None] | None = None, keep_going: bool = False,
-           dependence: bool = True) -> IngestReport:
+           dependence: bool = True, band_names: tuple[str, ...] | None = None) -> IngestReport:
     """Fit and store every not-yet-stored image of the dataset at `root`.
 
     `workers=0` fits in this process; otherwise a process pool of `workers` (default: the
@@ -164,7 +171,7 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
     cannot be fitted stops the run (IngestError), or with `keep_going` is skipped and
     listed in the report's `damaged`. Each region's grain and band correlation is measured
     and stored with its models unless `dependence` is False. `space` None fits each image in
-    its own bands (gray for one band, rgb for colour).
+    its own bands (gray for one band, rgb for colour); `band_names` names raw bands.
     """
     if space is not None and space not in INGEST_SPACES:
         raise IngestError(f"feature space {space!r}: ingest stores one of {', '.join(INGEST_SPACES)}")
@@ -178,7 +185,7 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
     with Store.open(db) as store:
         done = store.sources(robot)
         todo = [im for im in images if im.name not in done]
-        jobs = [Job(im.name, str(im.path), _mask_for(im, mask_path), space, dependence) for im in todo]
+        jobs = [Job(im.name, str(im.path), _mask_for(im, mask_path), space, dependence, band_names) for im in todo]
         if mask_path is not None and mask_path.is_file() and jobs:
             try:
                 store.add_mask(robot, read_mask(mask_path), robot)

@@ -261,3 +261,19 @@ def test_fit_names_a_tiffs_bands_for_the_models_and_the_reports_colours(host, sp
                         (("--band-names", names, "--space", "rgb"), "use it with --space raw")):
         code, _, err = host("fit", d / "view.tif", "--mask", d / "mask.png", *args)
         assert code == 2 and words in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_ingest_names_a_folders_raw_bands_and_refuses_a_count_that_does_not_fit(host, spectral, tmp_path):
+    d, image, _ = spectral
+    folder = tmp_path / "shots"
+    folder.mkdir()
+    for i in range(2):
+        tifffile.imwrite(folder / f"v{i}.tif", image, photometric="minisblack", planarconfig="contig")
+    code, _, err = host("ingest", folder, "--layout", "folder", "--db", tmp_path / "d.db", "--workers", 0,
+                        "--quiet", "--band-names", ",".join(NAMES))
+    assert code == 0, err
+    with Store.open(tmp_path / "d.db") as store:
+        assert [c.band_names for c in store.captures()] == [NAMES, NAMES]
+    code, _, err = host("ingest", folder, "--layout", "folder", "--db", tmp_path / "e.db", "--workers", 0,
+                        "--quiet", "--band-names", "red,green,blue")
+    assert code == 2 and "3 band names for its 6 raw bands" in err and len(err.strip().splitlines()) == 1, err
