@@ -22,7 +22,7 @@ from hal.controls import AUTO, FALLBACK_LOCK, hold, parse_controls
 from hal.interfaces import CameraControls, CameraSettings
 from onboard.config.limits import BOUNDS, CHOICES
 from onboard.sweep.plan import SweepPlan
-from radio.packets.base import MAX_BANDS, MAX_NAME
+from radio.packets.base import band_names_problem
 
 # A camera control: a number, "auto" (the camera's automatic) or "hold" (locked at what the
 # camera stands at when the robot starts). TOML gives it as a number or a string.
@@ -363,13 +363,9 @@ def check_band_names(cfg: Config) -> None:
     if f.space not in ("raw", "auto"):
         raise ConfigError(f"features.band_names names a raw camera's bands; with features.space = '{f.space}' "
                           "leave it empty (or set space = 'raw')")
-    if len(f.band_names) > MAX_BANDS:
-        raise ConfigError(f"features.band_names: {len(f.band_names)} names, a capture carries at most {MAX_BANDS}")
-    for name in f.band_names:
-        if not 1 <= len(name) <= MAX_NAME or not name.isprintable():
-            raise ConfigError(f"features.band_names: {name!r} must be 1 to {MAX_NAME} printable characters")
-    if len(set(f.band_names)) != len(f.band_names):
-        raise ConfigError(f"features.band_names: a name repeats in {list(f.band_names)}")
+    problem = band_names_problem(f.band_names)
+    if problem:
+        raise ConfigError(f"features.band_names: {problem}")
     unknown = [b for b in f.bands if b not in f.band_names]
     if unknown:
         raise ConfigError(f"features.bands {unknown} not among features.band_names {list(f.band_names)}")

@@ -213,3 +213,15 @@ def angles_from_wire(el: Any, az: Any, name: str) -> tuple[float, float]:
     e = want_int(el, f"{name} elevation", -9000, 9000)
     a = want_int(az, f"{name} azimuth", 0, 35999)
     return (e / 100, a / 100)
+
+
+def band_names_problem(names: tuple[str, ...]) -> str | None:
+    """What keeps these band names out of a MODELS packet (None: nothing)."""
+    bad = [n for n in names if not 1 <= len(n) <= MAX_NAME or not n.isprintable()]
+    if bad:
+        return f"{bad[0]!r}: a band name is 1..{MAX_NAME} printable characters"
+    if len(set(names)) != len(names):
+        return f"a name repeats in {', '.join(names)}"
+    if len(names) > MAX_BANDS:
+        return f"{len(names)} names: a capture holds at most {MAX_BANDS} bands"
+    return None

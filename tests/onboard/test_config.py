@@ -71,7 +71,7 @@ def test_good_file_loads_into_frozen_records_with_paths_relative_to_the_file(tmp
         ("[sweep]\nstop = 0\nstep = 0.02", "exceeds 4096"),
         ("[features]\nband_names = ['nir']", "with features.space = 'rgb' leave it empty"),
         ("[features]\nspace = 'raw'\nband_names = ['nir', 'nir']", "a name repeats"),
-        ("[features]\nspace = 'raw'\nband_names = ['near infrared 842nm']", "1 to 16 printable"),
+        ("[features]\nspace = 'raw'\nband_names = ['near infrared 842nm']", "1..16 printable"),
         ("[features]\nspace = 'raw'\nband_names = ['red', 'nir']\nbands = ['green']",
          "features.bands ['green'] not among features.band_names"),
     ],

@@ -8,7 +8,7 @@ from collections import Counter
 from pathlib import Path
 
 from onboard.cli.runner import CliError, bounded
-from radio.packets.base import MAX_BANDS, MAX_NAME
+from radio.packets.base import band_names_problem
 
 # The feature spaces of tools.data.images.SPACES, named here so that building the parser needs no OpenCV.
 FEATURE_SPACES = ("rgb", "hsv", "gray", "pca", "raw")
@@ -86,13 +86,9 @@ def label(text: str) -> str:
 def band_names(text: str) -> tuple[str, ...]:
     """An argparse type: an image's bands by name, comma-separated, each as a capture carries one."""
     names = tuple(n.strip() for n in text.split(","))
-    bad = [n for n in names if not 1 <= len(n) <= MAX_NAME or not n.isprintable()]
-    if bad:
-        raise argparse.ArgumentTypeError(f"{bad[0]!r}: a band name is 1..{MAX_NAME} printable characters")
-    if len(set(names)) != len(names):
-        raise argparse.ArgumentTypeError(f"{text!r}: a name repeats")
-    if len(names) > MAX_BANDS:
-        raise argparse.ArgumentTypeError(f"{len(names)} names: a capture holds at most {MAX_BANDS} bands")
+    problem = band_names_problem(names)
+    if problem:
+        raise argparse.ArgumentTypeError(problem)
     return names
 
 
