@@ -12,6 +12,7 @@ import logging
 import math
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 TIFF_SUFFIXES = (".tif", ".tiff")
@@ -69,3 +70,16 @@ def gray_with_alpha(path: Path) -> bool:
     with open(path, "rb") as f:
         head = f.read(26)
     return len(head) == 26 and head.startswith(_PNG_SIGNATURE) and head[25] == _PNG_GRAY_ALPHA
+
+
+def opencv_bands(image: np.ndarray, path: Path) -> np.ndarray:
+    """The channels OpenCV decoded from `path` (gray, or B, G, R and maybe alpha) as bands: one
+    band for gray and for gray with alpha (which OpenCV reads as four), colour as R, G, B."""
+    if image.ndim == 2:
+        return image[..., None]
+    n = image.shape[2]
+    if n <= 2 or (n == 4 and gray_with_alpha(path)):
+        return np.ascontiguousarray(image[..., :1])
+    if n == 4:
+        return cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB, dst=image)  # in place: a copy would double a large image's peak

@@ -28,7 +28,7 @@ import cv2
 import numpy as np
 
 from hal.controls import EXACT, with_lock_check
-from hal.image_files import TIFF_SUFFIXES, ImageFileError, gray_with_alpha, tiff_bands
+from hal.image_files import TIFF_SUFFIXES, ImageFileError, opencv_bands, tiff_bands
 from hal.interfaces import CameraControls, CameraSettings, DeviceSpent, HalError
 
 SUFFIXES = (".png", ".jpg", ".jpeg") + TIFF_SUFFIXES
@@ -75,13 +75,7 @@ def read_frame(path: Path) -> np.ndarray:
     image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if image is None or image.size == 0:
         raise HalError(f"replay camera: cannot read {path} as an image")
-    image = _depth_checked(image, path)
-    if image.ndim == 2:
-        return image[..., None]
-    bands = image.shape[2]
-    if bands <= 2 or (bands == 4 and gray_with_alpha(path)):  # gray, or gray and alpha (OpenCV reads four)
-        return np.ascontiguousarray(image[..., :1])
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB if bands == 3 else cv2.COLOR_BGRA2RGB)
+    return opencv_bands(_depth_checked(image, path), path)
 
 
 def _depth_checked(image: np.ndarray, path: Path) -> np.ndarray:

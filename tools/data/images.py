@@ -21,7 +21,7 @@ from btf.dependence import MAX_RADIUS, Dependence
 from btf.fit.dependence import measure, observed
 from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from btf.fit.fitter import FrameFitter
-from hal.image_files import TIFF_SUFFIXES, ImageFileError, gray_with_alpha, tiff_bands
+from hal.image_files import TIFF_SUFFIXES, ImageFileError, opencv_bands, tiff_bands
 from tools.analysis.tiles import row_tiles
 from tools.data.decoders import complaint, damage_said, native_stderr, png_problem
 
@@ -92,16 +92,7 @@ def read_image(path: str | Path) -> np.ndarray:
         if tiff_said and str(exc).endswith("not a readable image file"):  # neither reader: say why tifffile could not
             raise ImageError(f"{exc} ({tiff_said}; copy or export it again)") from None
         raise
-    if raw.ndim == 2:
-        return raw[:, :, None]
-    if raw.shape[2] == 1:
-        return raw
-    if raw.shape[2] == 4:
-        if gray_with_alpha(p):
-            return np.ascontiguousarray(raw[:, :, :1])
-        return cv2.cvtColor(raw, cv2.COLOR_BGRA2RGB)
-    # In place: a copy would double the peak memory of a large image.
-    return cv2.cvtColor(raw, cv2.COLOR_BGR2RGB, dst=raw)
+    return opencv_bands(raw, p)
 
 
 def stretched_8bit(image: np.ndarray, span: tuple[int, int] | None = None) -> np.ndarray:

@@ -1,9 +1,9 @@
 """What a stored capture looks like: its label map, the view synthesized from its models
 (independent pixels, and correlated when it carries dependence; hsv and pca ones turned back
 into RGB, pca through the scene's stored basis, raw bands as false colour of those named red,
-green and blue, else of their first three), the measured frame where the host has it, and the histograms with the Johnson curves.
-The static report and the operator's page both draw captures with these (`tools.report.look`
-lays them out).
+green and blue, else of their first three), the measured frame where the host has it, and the
+histograms with the Johnson curves. The static report and the operator's page both draw
+captures with these (`tools.report.look` lays them out).
 
 Measured frames are not in the database (the robot sends models, not pixels): `Frames` finds
 them where the host can, a fake robot's render (its config names scene, size and seed) or the
