@@ -4,8 +4,8 @@ Every image ships inside a public package (scikit-image's data module, matplotli
 data); none is a render of our scene model. Gray textures are one region (the whole frame),
 scenes get a seeded 3-class k-means mask (benchmarks.photo_cases), and the 16-bit case is
 matplotlib's sample elevation raster (jacksboro_fault_dem.npz), its metres as 16-bit levels.
-The steps of `btf-host fit` (and of the robot, `robot=True`: fewer anchors on a smaller
-window): FrameFitter, the observed levels from its histograms, the dependence pass, and the int8
+The steps of `btf-host fit` (and of the robot, `robot=True`: a lattice of anchors, not every
+pixel pair, on a smaller window): FrameFitter, the observed levels from its histograms, the dependence pass, and the int8
 steps of the radio (radio.packets.dependence.quantized).
 """
 from __future__ import annotations
@@ -20,7 +20,8 @@ from btf.fit.dependence import measure, observed
 from btf.fit.fitter import FrameFitter
 from btf.johnson import Johnson
 from radio.packets.dependence import quantized
-from tools.data.images import HOST_ANCHORS, HOST_CORR_POINTS, HOST_RADIUS
+from tools.analysis.pair_sums import every_pair
+from tools.data.images import HOST_CORR_POINTS, HOST_RADIUS
 
 TEXTURES = ("grass", "gravel", "brick")
 GRAY_SCENES = ("camera", "moon", "coins")
@@ -84,8 +85,7 @@ def load(name: str, side: int | None = None, per_band: bool | None = None, robot
     fits = fitter.fit()
     models = {k: r.model for k, r in fits.items()}
     seen = observed(fitter.counts, fitter.centre0, fitter.bin_width, levels)
-    reach = {} if robot else {"max_anchors": HOST_ANCHORS, "radius": HOST_RADIUS, "corr_points": HOST_CORR_POINTS,
-                              "sparse_budget": HOST_ANCHORS // 2}
+    reach = {} if robot else {"radius": HOST_RADIUS, "corr_points": HOST_CORR_POINTS, "pair_sums": every_pair}
     deps = measure(img, labels, models, levels, per_band=per_band, levels_seen=seen, **reach)
     ids = sorted(deps)
     return Photo(name, img, labels, levels, models, quantized(deps, ids, n_bands, levels))

@@ -35,7 +35,7 @@ viewed.
 from __future__ import annotations
 
 import math
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
@@ -58,6 +58,9 @@ SPARSE_PAIRS = 256
 # robot's pass near its time and takes the moon's 2,400-pixel class from 0.74 to 0.10 against
 # every pixel pair; the host (tools.data.images) gives it half, for 0.03.
 SPARSE_SHARE = 8
+# The host's sums over every pixel pair (tools.analysis.pair_sums): (data, labels, regions,
+# centres, radius) -> (anchor side, partner), laid out as _Sums keeps them
+PairSums = Callable[[np.ndarray, np.ndarray, list, np.ndarray, int], tuple[np.ndarray, np.ndarray]]
 # A band's row further than this (plus its sampling noise) from the bands' average at some lag:
 # every band keeps its row (on photographs the average missed a band's grain by up to 0.29)
 ROW_SPREAD = 0.03
@@ -142,7 +145,7 @@ def measure(
     data: np.ndarray, labels: np.ndarray, models: Mapping[tuple[int, int], Johnson],
     levels: int = 256, max_anchors: int = MAX_ANCHORS, chunk: int = CHUNK, radius: int = RADIUS,
     per_band: bool | None = None, levels_seen: Mapping[int, tuple[tuple[int, ...], tuple[int, ...]]] | None = None,
-    corr_points: int | None = None, sparse_budget: int | None = None,
+    corr_points: int | None = None, sparse_budget: int | None = None, pair_sums: PairSums | None = None,
 ) -> dict[int, Dependence]:
     """Dependence of every label that has a model for each band of `data` (H x W x B pixels);
     `levels_seen` ({label: (lo, hi)}, `observed`) fills in the observed levels; `per_band`
@@ -150,7 +153,8 @@ def measure(
     choice) rows per band when some region's bands differ by more than ROW_SPREAD (one
     packet carries one row count, so the choice is the frame's); `corr_points` bounds the
     band correlations' lattice (default twice the anchors), `sparse_budget` the second pass's
-    anchors (default max_anchors // SPARSE_SHARE)."""
+    anchors (default max_anchors // SPARSE_SHARE); `pair_sums` (the host's) gives the grain's
+    sums over every pixel pair in place of the anchors."""
     if data.ndim == 2:
         data = data[..., None]
     if data.ndim != 3 or labels.shape != data.shape[:2]:
@@ -158,7 +162,7 @@ def measure(
     if max_anchors < 1 or chunk < 1:
         raise ValueError("max_anchors and chunk must be positive")
     check_radius(radius)
-    h, w, n_bands = data.shape
+    n_bands = data.shape[2]
     regions = sorted({lab for lab, _ in models if all((lab, b) in models for b in range(n_bands))})
     if not regions:
         return {}
@@ -169,19 +173,10 @@ def measure(
     sums = _Sums(len(regions), n_bands, (radius + 1) * (2 * radius + 1))
     # anchors per chunk: at most `chunk`, fewer with many regions (see _Sums.pairs)
     chunk = max(1, min(chunk, PRODUCT_LIMIT // (len(regions) * (2 * radius + 1))))
-    grid = lattice(h, w, radius, max_anchors)
-    for rows, col, nx in grid:
-        per = max(1, chunk // nx)
-        for start in range(0, len(rows), per):
-            _chunk(sums, data, labels, rows[start:start + per], col, nx, index, centre, radius)
-    sparse = np.flatnonzero(np.median(_pairs(sums, radius), axis=1) < SPARSE_PAIRS)
-    met = sums.anchor_side[0][:, radius]  # the lattice's anchors per region: lag (0, 0)
-    budget = max_anchors // SPARSE_SHARE if sparse_budget is None else sparse_budget
-    extra = sparse_anchors(labels, index, sparse, met, radius, budget, grid)
-    if extra is not None:  # the sparse regions' own pixels as anchors, added to their sums
-        only, ys, xs = extra
-        for start in range(0, len(ys), chunk):
-            _points(sums, data, labels, ys[start:start + chunk], xs[start:start + chunk], only, centre, radius)
+    if pair_sums is None:
+        _anchored(sums, data, labels, index, centre, radius, max_anchors, chunk, sparse_budget)
+    else:
+        sums.anchor_side[:], sums.partner[:] = pair_sums(data, labels, regions, centre, radius)
     live = np.array([[models[(lab, b)].family is not Family.CONST for b in range(n_bands)] for lab in regions])
     corrs = _band_correlations(data, labels, index, centre,
                                corr_points or CORR_ANCHORS * max_anchors // MAX_ANCHORS, chunk)
@@ -202,6 +197,25 @@ def measure(
                               tuple(tuple(row.tolist()) for row in rows_out), radius, *seen,
                               (gaps,) * len(rows_out) if gaps else ())
     return out
+
+
+def _anchored(sums: _Sums, data: np.ndarray, labels: np.ndarray, index: np.ndarray, centre: np.ndarray,
+              radius: int, max_anchors: int, chunk: int, sparse_budget: int | None) -> None:
+    """The grain's sums from the anchor lattice, and a second pass for the sparse regions."""
+    h, w = labels.shape
+    grid = lattice(h, w, radius, max_anchors)
+    for rows, col, nx in grid:
+        per = max(1, chunk // nx)
+        for start in range(0, len(rows), per):
+            _chunk(sums, data, labels, rows[start:start + per], col, nx, index, centre, radius)
+    sparse = np.flatnonzero(np.median(_pairs(sums, radius), axis=1) < SPARSE_PAIRS)
+    met = sums.anchor_side[0][:, radius]  # the lattice's anchors per region: lag (0, 0)
+    budget = max_anchors // SPARSE_SHARE if sparse_budget is None else sparse_budget
+    extra = sparse_anchors(labels, index, sparse, met, radius, budget, grid)
+    if extra is not None:  # the sparse regions' own pixels as anchors, added to their sums
+        only, ys, xs = extra
+        for start in range(0, len(ys), chunk):
+            _points(sums, data, labels, ys[start:start + chunk], xs[start:start + chunk], only, centre, radius)
 
 
 def _chunk(sums: _Sums, data: np.ndarray, labels: np.ndarray, rows: np.ndarray, col: int, nx: int,

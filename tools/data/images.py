@@ -22,6 +22,7 @@ from btf.fit.dependence import measure, observed
 from btf.fit.features import FeatureFrame, FeatureSpace, FeatureSpec, PcaBasis, compute
 from btf.fit.fitter import FrameFitter
 from hal.image_files import TIFF_SUFFIXES, ImageFileError, opencv_bands, tiff_bands
+from tools.analysis.pair_sums import every_pair
 from tools.analysis.tiles import row_tiles
 from tools.data.decoders import complaint, damage_said, native_stderr, png_problem
 
@@ -275,12 +276,10 @@ def feature_bands(image: np.ndarray, space: str | None = None, pca=None):
     return compute(image, FeatureSpec(FeatureSpace(space)), pca=pca), pca
 
 
-# The host is not held to the robot's time per pose: the robot's pass at more anchors (the
-# window's worst error 0.059 against 0.082 at the robot's 6,144; benchmarks: "dependence") and
-# on the widest window, so the lags out to 8 that a comparison reads are measured, not extended
-# (regions within 0.10 of the photograph's 2-D autocorrelation: 25 of 36 against 17 at the
-# robot's window; benchmarks: "Texture synthesis on photographs").
-HOST_ANCHORS = 16384
+# The host is not held to the robot's time per pose: it reads the grain over every pixel pair
+# (tools.analysis.pair_sums; the robot's anchors missed the photograph's own autocorrelation by
+# up to 0.20) on the widest window, so the lags out to 8 that a comparison reads are measured,
+# not extended (benchmarks: "Texture synthesis on photographs").
 HOST_RADIUS = MAX_RADIUS
 # The band correlations from every pixel up to 16 MP: a lattice's few thousand points of a
 # region with a long grain missed grace_hopper's background by 0.05.
@@ -290,8 +289,8 @@ HOST_CORR_POINTS = 1 << 24
 @dataclass(frozen=True)
 class FittedImage:
     """An image on disk fitted with the robot's own FrameFitter, label by label, band by band,
-    with each region's grain and band dependence measured by the robot's own pass (at
-    HOST_ANCHORS on the window of HOST_RADIUS)."""
+    with each region's grain and band dependence measured by the robot's own pass (over every
+    pixel pair, on the window of HOST_RADIUS)."""
 
     feats: "FeatureFrame"
     pca: "PcaBasis | None"
@@ -323,8 +322,7 @@ def fit_bands(feats: "FeatureFrame", pca: "PcaBasis | None", labels: np.ndarray,
     fitted = {lab for lab, _ in results}
     if dependence and results:
         deps = measure(feats.data, labels, {k: r.model for k, r in results.items()}, feats.levels,
-                       max_anchors=HOST_ANCHORS, radius=HOST_RADIUS, levels_seen=seen,
-                       corr_points=HOST_CORR_POINTS, sparse_budget=HOST_ANCHORS // 2)
+                       radius=HOST_RADIUS, levels_seen=seen, corr_points=HOST_CORR_POINTS, pair_sums=every_pair)
     else:
         deps = {lab: Dependence.observed(*seen[lab]) for lab in fitted if lab in seen}
     return FittedImage(feats, pca, labels, results, deps, fitter.counts)
