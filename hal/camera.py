@@ -13,7 +13,7 @@ import cv2
 import numpy as np
 
 from hal.controls import Tolerance, with_lock_check
-from hal.interfaces import CameraControls, CameraSettings, HalError
+from hal.interfaces import CameraControls, CameraSettings, HalError, NotGranted
 
 SIXTEEN_BIT = frozenset({"Y16 "})
 V4L2_DEFAULT_BUFFERS = 4  # what V4L2 queues when a driver will not say
@@ -89,8 +89,9 @@ class OpenCVCamera:
         got_w, got_h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
         got_fmt = fourcc_text(cap.get(cv2.CAP_PROP_FOURCC))
         if (got_w, got_h) != (width, height) or (fmt in SIXTEEN_BIT and got_fmt != fmt):
-            raise HalError(f"{self._where()}: asked for {width}x{height} {fmt!r}, "
-                           f"driver granted {got_w}x{got_h} {got_fmt!r}")
+            raise NotGranted(f"{self._where()}: asked for {width}x{height} {fmt!r}, driver granted "
+                             f"{got_w}x{got_h} {got_fmt!r}; set hal.size and hal.pixel_format to a mode "
+                             "it offers (v4l2-ctl --list-formats-ext)")
         buffers = int(cap.get(cv2.CAP_PROP_BUFFERSIZE))
         self.stale_buffers = buffers if buffers > 0 else V4L2_DEFAULT_BUFFERS
         self.size, self.pixel_format = (height, width), fmt
@@ -234,7 +235,8 @@ class PiCamera2Camera:
             # picamera2 configures a copy: what the camera granted is in its live configuration.
             granted = tuple(cam.camera_configuration()["main"]["size"])
             if granted != (width, height):
-                raise HalError(f"picamera2: asked for {width}x{height}, granted {granted[0]}x{granted[1]}")
+                raise NotGranted(f"picamera2: asked for {width}x{height}, granted {granted[0]}x{granted[1]}; "
+                                 "set hal.size to a mode the sensor offers")
             cam.start()
         except BaseException:
             cam.close()

@@ -17,6 +17,11 @@ class HalError(RuntimeError):
     """A device failed after its bounded retries; the message names the device and why."""
 
 
+class NotGranted(HalError):
+    """The device is there but will not give what the configuration asks (a frame size or a
+    pixel format its driver does not offer): no restart can mend it, the configuration must change."""
+
+
 class DeviceTimeout(HalError):
     """A device did not answer (or did not settle) within its time limit."""
 

@@ -21,6 +21,7 @@ from hal.arm import save_arm_fit
 from hal.controls import describe
 from hal.factory import HalConfigError, build_hal
 from hal.geometry import GOOD_FIT_DEG, NADIR_TOLERANCE_DEG, SQUARE_TOLERANCE_DEG, calibrate_arm, calibrate_tracker
+from hal.interfaces import NotGranted
 from onboard.capture.camera_lock import CameraLock
 from onboard.capture.exposure import calibrate_exposure, plan_extremes, save_exposure
 from onboard.cli.runner import CliError, HelpFormatter, bounded
@@ -130,6 +131,8 @@ def run(args: argparse.Namespace) -> int:
             result = _exposure(args, hal, state_dir)
         else:
             result = _arm(args, hal, state_dir) if args.what == "arm" else _tracker(args, hal)
+    except NotGranted as exc:  # the configuration asks what the camera never gives: change it, not retry
+        raise CliError(f"calibrate {args.what}: {exc}") from None
     except Exception as exc:  # noqa: BLE001 - a device that fails mid-way is one clear line
         print(f"btf-robot calibrate {args.what}: failed: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1

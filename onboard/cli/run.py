@@ -23,7 +23,7 @@ from pathlib import Path
 from serial import SerialException
 
 from hal.factory import HalConfigError, build_hal, choose_body
-from hal.interfaces import Body, HalError
+from hal.interfaces import Body, HalError, NotGranted
 from onboard import config as config_mod
 from onboard.capture.exposure import EXPOSURE_FILE, load_exposure
 from onboard.capture.segmentation import Segmentation
@@ -221,8 +221,9 @@ def run(args: argparse.Namespace) -> int:
         _check_state_dir(cfg.state_dir)  # the first thing made on disk
     except BaseException as exc:
         hal.close()
-        if isinstance(exc, ConfigError) or (isinstance(exc, HalError) and hal.body is not Body.REAL):
-            raise CliError(f"hal: {exc}" if isinstance(exc, HalError) else str(exc)) from None  # no device to wait for
+        # no device to wait for, or one that will never give what the configuration asks
+        if isinstance(exc, (ConfigError, NotGranted)) or (isinstance(exc, HalError) and hal.body is not Body.REAL):
+            raise CliError(f"hal: {exc}" if isinstance(exc, HalError) else str(exc)) from None
         if isinstance(exc, HalError):
             raise RetryLater(f"hal: camera: {exc}") from None
         raise

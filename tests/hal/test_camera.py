@@ -13,7 +13,7 @@ from hal.emulators.camera import SequenceCamera, write_sequence
 from hal.fakes import Faults
 from hal.fakes.camera import FakeCamera
 from hal.fakes.tracker import FakeTracker
-from hal.interfaces import Camera, HalError, OrientationTracker, ViewAngles, view_from_orientation
+from hal.interfaces import Camera, HalError, NotGranted, OrientationTracker, ViewAngles, view_from_orientation
 
 
 def frames(n: int, h: int = 24, w: int = 32) -> list[np.ndarray]:
@@ -142,7 +142,7 @@ def test_open_sets_fourcc_before_size_and_asks_for_one_buffer():
 def test_open_reports_what_the_driver_granted():
     cap = QueueingCapture(queued=0, granted_buffers=1, grant=(320, 240), fourcc="YUYV")
     cam = camera_on(cap)
-    with pytest.raises(HalError, match=r"asked for 640x480 'MJPG', driver granted 320x240 'YUYV'"):
+    with pytest.raises(NotGranted, match=r"asked for 640x480 'MJPG', driver granted 320x240 'YUYV'; set hal.size"):
         cam.open(640, 480, "MJPG")
     assert cap.released
     with pytest.raises(HalError, match="four-character"):

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from hal.arm import ArmCalibration
+from hal.camera import OpenCVCamera
 from hal.factory import Body, HalConfigError, arm_calibration, build_hal
 from hal.interfaces import ViewAngles, view_from_orientation
 from onboard.cli import main
@@ -206,3 +207,41 @@ def test_emulated_fault_rate_reaches_the_tracker_bus_too():
         assert hal.tracker.retried > 0  # NACKs were injected and absorbed by the driver's retries
     finally:
         hal.close()
+
+
+class _RigWithAThermalCameraThatOffersYUYV:
+    """A real body whose V4L2 driver (at the seam: the capture it hands OpenCV) grants YUYV
+    whatever format is asked."""
+
+    body = Body.REAL
+
+    def __init__(self, *args, **kwargs) -> None:
+        self.closed = False
+
+    def open_camera(self) -> None:
+        from tests.hal.test_camera import QueueingCapture  # the V4L2 driver stand-in those tests define
+
+        OpenCVCamera(0, capture_factory=lambda dev, api: QueueingCapture(0, 1, fourcc="YUYV")).open(160, 120, "Y16 ")
+
+    def close(self) -> None:
+        self.closed = True
+
+
+def test_a_camera_that_cannot_give_the_configured_format_is_a_configuration_error_not_a_retry(
+        tmp_path, capsys, monkeypatch):
+    """Exit 1 would have a supervisor restart the robot for ever on a camera that will never
+    give 'Y16 '; exit 2 and one line saying what to change."""
+    import onboard.cli.run as run_module  # its build_hal is replaced by the rig above
+
+    (tmp_path / "robot.key").write_text("00" * 32)
+    (tmp_path / "robot.key").chmod(0o600)
+    cfg = tmp_path / "robot.toml"
+    cfg.write_text(robot_toml({"hal": {"body": "real", "servo_port": "/dev/ttyUSB0", "size": [120, 160],
+                                       "pixel_format": "Y16 ", "scene": None},
+                               "segment": {"method": "isodata"}, "link": {"key_file": "robot.key"}},
+                              state_dir=str(tmp_path / "state")))
+    monkeypatch.setattr(run_module, "build_hal", _RigWithAThermalCameraThatOffersYUYV)
+    code, _, err = run_cli(["run", "--config", str(cfg)], capsys, monkeypatch)
+    assert code == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "driver granted 160x120 'YUYV'" in err and "hal.pixel_format" in err

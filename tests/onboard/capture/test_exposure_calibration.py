@@ -77,3 +77,27 @@ def test_a_scene_too_bright_for_the_shortest_exposure_is_not_stored():
 def test_bad_usage_is_status_2(tmp_path, capsys):
     assert robot(["calibrate", "exposure", "--hal", "fake", "--start-exposure", "-5"]) == 2
     assert "--start-exposure" in capsys.readouterr().err
+
+
+def test_a_camera_that_cannot_give_the_configured_format_is_exit_2_and_what_to_change(tmp_path, capsys, monkeypatch):
+    """Not 'failed' with exit 1, which reads as a device to wait for."""
+    import onboard.cli.calibrate as calibrate_module  # its build_hal is replaced by a rig that refuses
+    from hal.factory import build_hal
+    from hal.interfaces import NotGranted
+
+    class RefusingCamera:  # the fake body, but its camera's driver grants another format
+        def __init__(self, *args, **kwargs) -> None:
+            self._hal = build_hal(*args, **kwargs)
+
+        def __getattr__(self, name):
+            return getattr(self._hal, name)
+
+        def open_camera(self) -> None:
+            raise NotGranted("camera 0: asked for 160x120 'Y16 ', driver granted 160x120 'YUYV'; "
+                             "set hal.size and hal.pixel_format to a mode it offers")
+    monkeypatch.setattr(calibrate_module, "build_hal", RefusingCamera)
+    (tmp_path / "robot.toml").write_text(robot_toml(*FIELD, state_dir="state"))
+    code = robot(["calibrate", "exposure", "--config", str(tmp_path / "robot.toml")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "hal.pixel_format" in err
+    assert load_exposure(tmp_path / "state") is None
