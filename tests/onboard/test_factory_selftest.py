@@ -14,6 +14,7 @@ from hal.factory import Body, HalConfigError, arm_calibration, build_hal
 from hal.interfaces import ViewAngles, view_from_orientation
 from onboard.cli import main
 from tests.support.robots import robot_toml
+from tests.support.v4l2 import QueueingCapture
 
 
 def run_cli(argv, capsys, monkeypatch, env_body=None):
@@ -219,8 +220,6 @@ class _RigWithAThermalCameraThatOffersYUYV:
         self.closed = False
 
     def open_camera(self) -> None:
-        from tests.hal.test_camera import QueueingCapture  # the V4L2 driver stand-in those tests define
-
         OpenCVCamera(0, capture_factory=lambda dev, api: QueueingCapture(0, 1, fourcc="YUYV")).open(160, 120, "Y16 ")
 
     def close(self) -> None:
