@@ -183,6 +183,12 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
         at = (np.arange(len(live)), chosen)
         z_of, code_of, pct_of = reads.z[at].tolist(), reads.code[at].tolist(), reads.pct[at].tolist()
         exact_of, fallback_of, banded = reads.exact[at].tolist(), reads.fallback[at].tolist(), reads.ok[:, 1].tolist()
+        spikes = counts[live].argmax(axis=1)
+        for j in np.flatnonzero(counts[live, spikes] >= SPIKE_SHARE * np.array([totals[i] for i in live])).tolist():
+            one = _spike_reads(reads, j, int(spikes[j]), lo, bin_width, codec)
+            k = int(_choose(counts[live[j]][None], one, plans, [live[j]], totals, lo, bin_width)[0])
+            z_of[j], code_of[j], pct_of[j] = float(one.z[0, k]), int(one.code[0, k]), one.pct[0, k].tolist()
+            exact_of[j], fallback_of[j] = bool(one.exact[0, k]), bool(one.fallback[0, k])
         for j, i in enumerate(live):
             z, shift, exact, fallback = z_of[j], code_of[j] / SHIFT_SCALE, exact_of[j], fallback_of[j]
             _, low, high = plans[i]
@@ -194,6 +200,16 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
             out[i] = FittedModel(model, totals[i], z, p, b1[i], b2[i], shift, low, high, fallback, exact and banded[j])
     return out  # type: ignore[return-value]
 
+
+# A bin holding at least this share of a region's pixels is a spike (a black border's one level,
+# a dark background's): where inside it the percentiles fall is unknown, and spread evenly over
+# its width (as every read above spreads a level) they leave the curve no tail beyond it. The
+# spike reads place its mass in part of its bin instead, (width, centre) in bins; the L1 ranking
+# keeps one only where its model is nearer the histogram, as it keeps a censored region's
+# placement or fallback (btf.fit.censor), which the spike reads join.
+SPIKE_SHARE = 0.5
+SPIKE_PLACEMENTS: tuple[tuple[float, float], ...] = (
+    (0.1, -0.4), (0.1, -0.15), (0.1, 0.15), (0.1, 0.4), (0.4, -0.25), (0.4, 0.25))
 
 # Another read replaces the plain one only when nearer the histogram by more than this times
 # occupied levels / pixels: on a few hundred pixels the other reads would otherwise chase
@@ -213,6 +229,8 @@ class _Reads:
     fallback: np.ndarray
     ok: np.ndarray
     pct: np.ndarray
+    at: np.ndarray | None  # the bin of each percentile (rows x WIDTH x 4), and its place in it
+    frac: np.ndarray | None
 
 
 def _read_all(counts: np.ndarray, cum: np.ndarray, live: list[int], plans: dict, zs: list[float],
@@ -265,7 +283,27 @@ def _read_all(counts: np.ndarray, cum: np.ndarray, live: list[int], plans: dict,
     pct = codec.snap_array(points)
     # the banded plain read only where the band decides its family (elsewhere it is column 0)
     ok[:, 1] = in_band(pct[:, 0], sl_bands(total.astype(np.float64)))
-    return _Reads(z, code, exact, fallback, ok, pct)
+    return _Reads(z, code, exact, fallback, ok, pct, at.reshape(n, WIDTH, 4), frac.reshape(n, WIDTH, 4))
+
+
+def _spike_reads(reads: _Reads, j: int, spike: int, lo: float, bin_width: float, codec: PercentileCodec) -> _Reads:
+    """Row j's reads and the template's again (the banded copy of the plain read excepted) with
+    its spike's mass in part of its bin (SPIKE_PLACEMENTS), as a batch of one row: the same z
+    and shift, so the same packet fields and the same solve on the host; the family by the SL
+    band. One row at a time: the ranking's memory stays one row's reads by its levels."""
+    source = [k for k in range(TEMPLATE) if k != 1]
+    cols = [(k, width, centre) for width, centre in SPIKE_PLACEMENTS for k in source]
+    ks = np.array([k for k, _, _ in cols])
+    width = np.array([w for _, w, _ in cols])[:, None]
+    centre = np.array([c for _, _, c in cols])[:, None]
+    bins, f = reads.at[j, ks], reads.frac[j, ks]
+    points = np.where(bins == spike, spike + centre - 0.5 * width + width * f, bins - 0.5 + f)
+    pct = codec.snap_array(lo + bin_width * points)
+    ok = reads.ok[j, ks] & ~reads.fallback[j, ks]
+    join = lambda a, b: np.concatenate([a[j], b])[None]  # noqa: E731
+    none = np.zeros(len(ks), dtype=bool)
+    return _Reads(join(reads.z, reads.z[j, ks]), join(reads.code, reads.code[j, ks]), join(reads.exact, none),
+                  join(reads.fallback, none), join(reads.ok, ok), join(reads.pct, pct), None, None)
 
 
 def _bins_below(counts: np.ndarray, cum: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -290,21 +328,21 @@ def _choose(counts: np.ndarray, reads: _Reads, plans: dict, live: list[int], tot
             lo: float, bin_width: float) -> np.ndarray:
     """Per live row, the column of its read whose model is nearest its histogram (L1, the first
     of equals). Fallbacks are solved one by one (rare); the rest in one array pass."""
-    n = len(live)
+    n, width = reads.ok.shape
     flat = np.flatnonzero(reads.ok)
-    row = flat // WIDTH
+    row = flat // width
     total = np.array([totals[i] for i in live], dtype=np.float64)[row]
     band = np.where(reads.exact.ravel()[flat], 0.0, sl_bands(total))
     fam, gamma, delta, xi, lam = solve(reads.pct.reshape(-1, 4)[flat], reads.z.ravel()[flat],
                                        reads.code.ravel()[flat] / SHIFT_SCALE, band)
     for m in np.flatnonzero(reads.fallback.ravel()[flat]).tolist():
-        j, k = divmod(int(flat[m]), WIDTH)
+        j, k = divmod(int(flat[m]), width)
         model = model_from_percentiles(tuple(reads.pct[j, k]), float(reads.z[j, k]), totals[live[j]],
                                        normal_probs=fallback_probs(*plans[live[j]][1:]))
         fam[m], gamma[m], delta[m], xi[m], lam[m] = SN, model.gamma, model.delta, model.xi, model.lam
-    errors = np.full(n * WIDTH, np.inf)
+    errors = np.full(n * width, np.inf)
     errors[flat] = l1(fam, gamma, delta, xi, lam, row, rank_grid(counts, lo, bin_width))
-    errors = errors.reshape(n, WIDTH)
+    errors = errors.reshape(n, width)
     total = np.array([totals[i] for i in live], dtype=np.float64)
     margin = NOISE_MARGIN * np.count_nonzero(counts, axis=1) / total
     better = errors.min(axis=1) < errors[:, 0] - margin
