@@ -67,3 +67,11 @@ def test_histograms_without_a_spike_get_the_same_model_as_before(model, monkeypa
     counts = np.bincount(values, minlength=256)
     assert counts.max() < histogram_fit.SPIKE_SHARE * counts.sum()
     assert fit_values(values) == _without_spike_reads(monkeypatch, values)
+
+
+def test_a_small_spiky_region_keeps_the_usual_reads(border, monkeypatch):
+    """Under SPIKE_PIXELS the spike reads would chase counting noise."""
+    values = border[:5000, 0]
+    assert np.bincount(values).max() >= histogram_fit.SPIKE_SHARE * values.size
+    assert values.size < histogram_fit.SPIKE_PIXELS
+    assert fit_values(values) == _without_spike_reads(monkeypatch, values)
