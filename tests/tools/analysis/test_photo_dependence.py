@@ -95,22 +95,22 @@ def test_independent_only_keeps_the_levels_and_says_no_grain_in_the_document(hos
     assert code == 0 and "grain dy,dx:r 0,1:0." in text and "levels " in text
 
 
-def test_band_correlation_of_every_coffee_region_comes_back_within_0_05(host, tmp_path):
-    import cv2
-
-    img = data.coffee()
-    cv2.setRNGSeed(0)
-    _, lab, centres = cv2.kmeans(img.reshape(-1, 3).astype(np.float32), 3, None,
-                                 (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 0.1), 3, cv2.KMEANS_PP_CENTERS)
-    labels = np.argsort(np.argsort(centres.sum(axis=1)))[lab.ravel()].reshape(img.shape[:2]).astype(np.uint8)
-    image, mask = tmp_path / "coffee.png", tmp_path / "coffee_mask.png"
+def _fitted_with_mask(host, tmp_path, name: str, img: np.ndarray, labels: np.ndarray):
+    """`fit --mask --json` of a photograph and its mask, written as a models document."""
+    image, mask = tmp_path / f"{name}.png", tmp_path / f"{name}_mask.png"
     write_image(image, img)
     write_mask(mask, labels)
     code, out, err = host("fit", image, "--mask", mask, "--json")
     assert code == 0, err
     models = tmp_path / "m.json"
     models.write_text(out)
-    cors = _synth(host, tmp_path, models, mask)
+    return models, mask
+
+
+def test_band_correlation_of_every_coffee_region_comes_back_within_0_05(host, tmp_path):
+    img = data.coffee()
+    labels = kmeans_mask(img).astype(np.uint8)
+    cors = _synth(host, tmp_path, *_fitted_with_mask(host, tmp_path, "coffee", img, labels))
     for k in range(3):  # the dark region's blue tail once capped its G-B correlation at 0.72 (0.90 measured)
         inside = labels == k
         assert max(band_gap(img, c, inside) for c in cors) <= 0.05 and max(outside(img, c, inside) for c in cors) == 0
@@ -122,15 +122,8 @@ def test_a_retina_scans_black_border_comes_back_with_its_band_correlation(host, 
     correlation fell 0.31 short (the rim carries it in all three bands at once)."""
     img = np.ascontiguousarray(data.retina()[::2, ::2])
     labels = kmeans_mask(img).astype(np.uint8)  # 0, the darkest class: the border and the rim's edge
-    image, mask = tmp_path / "retina.png", tmp_path / "retina_mask.png"
-    write_image(image, img)
-    write_mask(mask, labels)
-    code, out, err = host("fit", image, "--mask", mask, "--json")
-    assert code == 0, err
-    models = tmp_path / "m.json"
-    models.write_text(out)
     border = labels == 0
-    for c in _synth(host, tmp_path, models, mask, (0, 1)):
+    for c in _synth(host, tmp_path, *_fitted_with_mask(host, tmp_path, "retina", img, labels), (0, 1)):
         assert band_gap(img, c, border) <= 0.05 and outside(img, c, border) == 0
 
 
