@@ -50,7 +50,7 @@ def _blocks(h: int, w: int, radius: int) -> list[slice]:
     """Anchor rows of a box: all of them, or blocks spread evenly up to BLOCK_PIXELS pixels."""
     if h * w <= BLOCK_PIXELS:
         return [slice(0, h)]
-    rows = max(4 * radius, BLOCK_PIXELS // (4 * w))  # a quarter of the budget a block, taller than the window
+    rows = min(h, max(4 * radius, BLOCK_PIXELS // (4 * w)))  # a quarter of the budget a block, taller than the window
     count = max(1, min(h // rows, BLOCK_PIXELS // (rows * w)))
     starts = np.linspace(0, h - rows, count).astype(int)
     return [slice(int(s), int(s) + rows) for s in np.unique(starts)]

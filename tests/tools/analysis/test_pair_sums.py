@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 
 import numpy as np
-import pytest
 from skimage import data
 
 from btf.dependence import window
@@ -63,6 +62,7 @@ def test_a_large_box_is_read_as_blocks_of_anchor_rows_each_with_all_its_partners
     blocks = pair_sums._blocks(90, 40, 3)
     assert len(blocks) > 1 and sum(b.stop - b.start for b in blocks) * 40 <= 1200
     assert all(b.stop - b.start >= 12 and 0 <= b.start < b.stop <= 90 for b in blocks)
+    assert pair_sums._blocks(10, 400, 3) == [slice(0, 10)]  # a strip lower than a block: one block, all of it
     centre = np.array([[100.0, 120.0]])
     side, partner = pair_sums.every_pair(img, np.zeros((90, 40), np.uint8), [0], centre, 3)
     rows = np.concatenate([np.arange(b.start, b.stop) for b in blocks])
