@@ -183,9 +183,10 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
         at = (np.arange(len(live)), chosen)
         z_of, code_of, pct_of = reads.z[at].tolist(), reads.code[at].tolist(), reads.pct[at].tolist()
         exact_of, fallback_of, banded = reads.exact[at].tolist(), reads.fallback[at].tolist(), reads.ok[:, 1].tolist()
-        spikes = counts[live].argmax(axis=1)
+        # every row's fullest bin (no copy of the live rows' histograms: 16-bit rows are 65,536 bins)
+        spikes, peaks = counts.argmax(axis=1)[live], counts.max(axis=1)[live]
         sizes = np.array([totals[i] for i in live])
-        for j in np.flatnonzero((counts[live, spikes] >= SPIKE_SHARE * sizes) & (sizes >= SPIKE_PIXELS)).tolist():
+        for j in np.flatnonzero((peaks >= SPIKE_SHARE * sizes) & (sizes >= SPIKE_PIXELS)).tolist():
             if plans[live[j]] != (Placement(zs[live[j]]), 0.0, 0.0) and not fallback_of[j]:
                 continue  # a censored or piled region's own placement reads clear of its pile
             one = _spike_reads(reads, j, int(spikes[j]), lo, bin_width, codec)
