@@ -57,15 +57,14 @@ def page_options(args: argparse.Namespace, default: str | None = None):
             raise CliError("--http-public, --http-host and --robot-config are options of the page: "
                            "give --http [ADDR:]PORT")
         return None
-    # heavy (OpenCV, scipy): loaded to serve the page, not for --help or a station without one
+    # heavy (aiohttp): loaded to serve the page, not for --help or a station without one
     from tools.page.guard import host_name
-    from tools.page.server import PageOptions, parse_http
-    from tools.report.capture_views import Frames
+    from tools.page.server import PageOptions, fake_hal, parse_http
 
     try:
         host, port = parse_http(given)
         hosts = tuple(host_name(name) for name in args.http_host)
-        fake = Frames.from_robot_config(args.robot_config).fake
+        fake = fake_hal(args.robot_config)
     except ValueError as exc:  # onboard.config.ConfigError too
         raise CliError(str(exc)) from None
     if args.robot_config and fake is None:

@@ -1,7 +1,7 @@
 """The operator page's view of the database: the latest capture at each pose (read on a thread
 of its own, with its own connection, so the station's loop never waits on a query), and each
-capture's section and images (`tools.report.look`, `tools.report.capture_views`: the report's own), drawn in a
-worker process so that synthesis and plotting never hold the station's interpreter. The worker
+capture's section and images (`tools.page.drawing`: the report's own), drawn in a worker process
+so that synthesis and plotting never hold the station's interpreter, nor load in it. The worker
 draws one thing at a time, what the operator chose (a section, its histograms) before the cards'
 pictures; a capture's first drawing with grain and band correlation costs most (a few tenths of a
 second: the correlations of its normal scores are solved for), later ones reuse that.
@@ -14,24 +14,18 @@ import heapq
 import itertools
 import multiprocessing
 import os
-import warnings
 from collections import OrderedDict
 from concurrent.futures import Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any, Mapping
 
-import numpy as np
-
 from radio.packets.base import iso_time
-from tools.analysis.radiometry import adjusted, describe
-from tools.page.btf_panel import panel
-from tools.report.capture_views import Frames, capture_mask, histogram_png, png, shown, views
-from tools.report.look import azimuth_shown, capture_section
+from tools.analysis.radiometry import describe
+from tools.report.look import azimuth_shown
 from tools.store.database import Store
 
 CACHED = 128  # rendered captures kept (thumbnails and sections)
-SHOWN_FIRST = "correlated", "independent", "measured"  # a card's picture: the likest to the surface
 
 
 def pose_key(c: Any) -> str:
@@ -76,47 +70,24 @@ class CaptureIndex:
 
 
 # -- the worker process ---------------------------------------------------------------------
-_worker_store: dict[str, Any] = {}
+# The drawings are tools.page.drawing's: it loads the synthesis, OpenCV and matplotlib, which
+# the workers need and the station does not (a second and more of every station's start).
+
+
+def _drawing():
+    from tools.page import drawing  # the drawing libraries: loaded in the workers, never the station
+
+    return drawing
 
 
 def render(db: str, capture_id: int, fake: Any, what: str, rev: int) -> dict:
-    """In the worker: `what` "thumb" ({"png"}: the card's picture), "section" ({"html", "images":
-    {name: png}}: its pictures, the histograms' place kept) or "histograms" ({"png"}: the plot, a
-    drawing of its own as it takes longest) of one capture; {"missing": text} when there is nothing."""
-
-    store = _worker_store.get(db)
-    if store is None:
-        store = _worker_store[db] = Store.open(db, create=False)
-    cap = store.capture_by_id(capture_id)
-    if cap is None:
-        return {"missing": f"no capture {capture_id} in the database"}
-    rng = np.random.default_rng(capture_id)  # the same drawing every time
-    if what == "thumb":  # the synthesis, or the measured frame when there is none
-        v = views(store, cap, rng, None, histograms=False)
-        if not v.images:
-            v = views(store, cap, rng, Frames(fake), histograms=False)
-        name = next((k for k in SHOWN_FIRST if k in v.images), None)
-        return {"png": png(v.images[name])} if name else {"missing": v.problem or "nothing to draw"}
-    if what == "histograms":
-        return _histograms(store, cap, fake)
-    v = views(store, cap, rng, Frames(fake), histograms=False)
-    images = {k: png(img) for k, img in v.images.items()}
-    if v.fitted and not (v.no_mask or v.problem):  # what views() draws histograms for
-        v.images["histograms"] = b""  # its place in the section; drawn when the page asks for it
-    html = capture_section(v, lambda k: f"capture/{capture_id}/{k}.png?r={rev}")
-    return {"html": html, "images": images}
+    """In the worker: one capture's drawing (`tools.page.drawing.render`)."""
+    return _drawing().render(db, capture_id, fake, what, rev)
 
 
-def _histograms(store: Store, cap: Any, fake: Any) -> dict:
-    """The histograms with the Johnson curves (as `views` draws them), without synthesizing again."""
-    fitted = store.models(cap.id)
-    models = dict(adjusted({k: m.model for k, m in fitted.items()}, cap.camera))
-    mask = capture_mask(store, cap)
-    if mask is None or not models:
-        return {"missing": f"capture {cap.id} has no histograms"}
-    frame = Frames(fake)(cap)  # measured bars wherever the report draws them (rgb, and gray)
-    real = frame if frame is not None and shown(cap, frame) else None
-    return {"png": histogram_png(real, mask, models, cap.band_names, cap.levels)}
+def _panel(db: str, params: dict) -> dict:
+    """In the worker: the BTF panel (`tools.page.btf_panel.panel`)."""
+    return _drawing().panel(db, params)
 
 
 def end_with_parent(parent: int | None = None) -> None:
@@ -145,15 +116,13 @@ def _worker_start(station: int) -> None:
 
 
 def _loaded() -> None:
-    """Nothing: sent to a new worker so that it loads this module's libraries before the first request."""
+    """Sent to a new worker so that it loads the drawing libraries before the first request."""
+    _drawing()
 
 
 def _warm() -> None:
-    """Load the worker's libraries and draw one plot before the first request needs them (matplotlib's
-    first figure costs a second)."""
-    with warnings.catch_warnings():  # an empty plot's "no artists for the legend"
-        warnings.simplefilter("ignore")
-        histogram_png(None, np.zeros((2, 2), np.uint8), {}, ("Y",))
+    """In a new worker: the drawing libraries loaded and one plot drawn (`tools.page.drawing.warm`)."""
+    _drawing().warm()
 
 
 def btf_query(query: Mapping[str, str]) -> dict:
@@ -284,7 +253,7 @@ class PageData:
         if key not in self._btf:
             self.start_worker()
             try:
-                out = await asyncio.get_running_loop().run_in_executor(self._btf_pool, panel, self.db, params)
+                out = await asyncio.get_running_loop().run_in_executor(self._btf_pool, _panel, self.db, params)
             except BrokenProcessPool:
                 self._btf_pool = None
                 return 503, {"error": "the drawing worker stopped; it restarts with the next request"}
