@@ -46,6 +46,10 @@ def _mean_plaid(img: np.ndarray, cors: list[np.ndarray], inside: np.ndarray) -> 
     return None if values[0] is None else float(np.mean(values))
 
 
+def _or0(v: float | None) -> float:
+    return 0.0 if v is None else v
+
+
 def _judge(photo, cors: list[np.ndarray], ind: np.ndarray, bare: np.ndarray) -> list[dict]:
     rows = []
     for lab in photo.regions:
@@ -55,6 +59,8 @@ def _judge(photo, cors: list[np.ndarray], ind: np.ndarray, bare: np.ndarray) -> 
             "label": lab, "pixels": int(inside.sum()),
             "outside": max(gm.outside(img, c, inside) for c in cors), "outside_ind": gm.outside(img, ind, inside),
             "outside_bare": gm.outside(img, bare, inside),
+            "unseen": max(_or0(gm.unseen(img, c, inside, photo.levels)) for c in cors),
+            "unseen_ind": gm.unseen(img, ind, inside, photo.levels),
             "plaid": _mean_plaid(img, cors, inside),
             "acf": float(np.mean([gm.acf_gap(img, c, inside) for c in cors])),
             # two draws of one record differ this much: the photograph is one draw too
@@ -113,18 +119,34 @@ def _fmt(v: float | None, pattern: str) -> str:
 
 def _table(results) -> list[str]:
     lines = ["| photograph | size | bands | regions | outside, ind / cor (worst region) | outside without levels "
-             "| plaid (worst) | 2-D ACF gap: ind / cor (worst region) | band gap (worst) | W1 to photo: without "
-             "levels / cor (mean) | cor / ind time |", "|---|---|---|---:|---|---|---|---|---|---|---:|"]
+             "| colours never seen, ind / cor (worst region) | plaid (worst) | 2-D ACF gap: ind / cor (worst region) "
+             "| band gap (worst) | W1 to photo: without levels / cor (mean) | cor / ind time |",
+             "|---|---|---|---:|---|---|---|---|---|---|---|---:|"]
     for name, rows, info in results:
         plaids = [r["plaid"] for r in rows if r["plaid"] is not None]
+        colour = [r for r in rows if r["unseen_ind"] is not None]
         lines.append(
             f"| {name} | {info['size']} | {info['bands']} | {len(rows)} | "
             f"{max(r['outside_ind'] for r in rows):.3%} / {max(r['outside'] for r in rows):.3%} | "
-            f"{max(r['outside_bare'] for r in rows):.2%} | {_fmt(max(plaids) if plaids else None, '{:.2f}')} | "
+            f"{max(r['outside_bare'] for r in rows):.2%} | "
+            + (f"{max(r['unseen_ind'] for r in colour):.1%} / {max(r['unseen'] for r in colour):.2%} | " if colour
+               else "- | ")
+            + f"{_fmt(max(plaids) if plaids else None, '{:.2f}')} | "
             f"{max(r['acf_ind'] for r in rows):.2f} / {max(r['acf'] for r in rows):.3f} | "
             f"{max(r['band'] for r in rows):.3f} | {np.mean([r['w1_bare'] for r in rows]):.2f} / "
             f"{np.mean([r['w1'] for r in rows]):.2f} | {info['ratio']:.2f}x |")
     return lines
+
+
+def _unseen_line(rows: list[dict]) -> list[str]:
+    if not rows:
+        return []
+    cor = [r["unseen"] for r in rows]
+    return [f"- colours a region never had (its pixels in bins of 1/32 of the depth, every band at once, with one "
+            f"bin of slack, where none of the photograph's pixels there fall): worst region {max(cor):.2%} "
+            f"correlated (median {np.median(cor):.2%}), {max(r['unseen_ind'] for r in rows):.1%} independent. The "
+            "Gaussian copula keeps each band's levels and the bands' correlation, not the shape of their joint "
+            "spread: a class of several materials draws some of their levels in pairs none of them has"]
 
 
 def _summary(results) -> list[str]:
@@ -132,6 +154,7 @@ def _summary(results) -> list[str]:
     plaids = [r["plaid"] for r in rows if r["plaid"] is not None]
     acf_ok = sum(r["acf"] <= 0.10 for r in rows)
     colour = [r["band"] for name, rs, info in results for r in rs if info["photo"].pixels.shape[2] > 1]
+    colour_rows = [r for r in rows if r["unseen_ind"] is not None]
     worst = lambda key: max(r[key] for r in rows)  # noqa: E731
     setup = [t for _, _, info in results for t in info["setup"]]
     out = [f"{len(results)} photographs, {len(rows)} regions of at least {texture_cases.MIN_REGION} pixels; "
@@ -139,6 +162,7 @@ def _summary(results) -> list[str]:
            f"- **outside the observed levels: worst region {worst('outside'):.3%}** correlated, "
            f"{worst('outside_ind'):.3%} independent (target < 0.2%: {verdict(worst('outside'), 0.002)}); "
            f"without the levels {worst('outside_bare'):.2%}",
+           *_unseen_line(colour_rows),
            f"- **plaid index: worst {max(plaids):.2f}** over {len(plaids)} regions with a square of 32 pixels "
            f"(target <= 1.2: {verdict(max(plaids), 1.2)})",
            f"- **2-D ACF gap: {acf_ok} of {len(rows)} regions within 0.10**, median "

@@ -8,6 +8,9 @@ plaid       the share of a region's spectral power on the kx = 0 and ky = 0 axes
             window, over the largest square inside the region (the mask's own edges would
             otherwise put power on the axes); a separable field piles power there
 outside     the share of synthesized pixels outside the region's observed levels per band
+unseen      the share of synthesized pixels whose colour (every band at once, in bins of 1/32 of
+            the depth, one bin of slack) the region's photograph never shows: marginals within
+            their levels can still pair into a colour the region never had
 band_gap    the worst |corr(synthesis) - corr(photograph)| of the bands' correlation matrix
 """
 from __future__ import annotations
@@ -100,6 +103,28 @@ def outside(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray) -> float:
         bad += int(np.count_nonzero((s < p.min()) | (s > p.max())))
         total += s.size
     return bad / total if total else 0.0
+
+
+COLOUR_BINS = 32  # per band, over the depth
+
+
+def unseen(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray, levels: int = 256) -> float | None:
+    """Share of the region's synthesized pixels in colour bins (with their neighbours) that none of
+    the photograph's pixels there fall in; None for one band, or more than three."""
+    bands = photo.shape[2]
+    if not 2 <= bands <= 3:
+        return None
+    step = max(1, levels // COLOUR_BINS)
+    span = levels // step + 2  # a bin and its neighbours, shifted off zero
+
+    def keys(img: np.ndarray, offset: np.ndarray) -> np.ndarray:
+        bins = img[inside].astype(np.int64) // step + 1 + offset
+        return (bins * span ** np.arange(bands)).sum(axis=1)
+    seen = np.unique(keys(photo, np.zeros(bands, np.int64)))
+    near = np.stack(np.meshgrid(*[(-1, 0, 1)] * bands, indexing="ij"), -1).reshape(-1, bands)
+    grown = np.unique((seen[:, None] + (near * span ** np.arange(bands)).sum(axis=1)[None]).ravel())
+    drawn = keys(synth, np.zeros(bands, np.int64))
+    return float(np.mean(~np.isin(drawn, grown))) if drawn.size else 0.0
 
 
 def band_gap(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray) -> float:
