@@ -170,6 +170,11 @@ class Config:
     camera: CameraConfig = field(default_factory=CameraConfig)
     source: Path | None = None
 
+    @property
+    def fake_hal(self) -> HalConfig | None:
+        """`hal` when the body is the fake one: the host draws such a robot's frames from it."""
+        return self.hal if self.hal.body == "fake" else None
+
 
 _SECTIONS: dict[str, type] = {"hal": HalConfig, "link": LinkConfig, "sweep": SweepConfig, "features": FeatureConfig,
                                "segment": SegmentConfig, "skip": SkipConfig, "camera": CameraConfig}

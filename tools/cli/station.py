@@ -58,13 +58,14 @@ def page_options(args: argparse.Namespace, default: str | None = None):
                            "give --http [ADDR:]PORT")
         return None
     # heavy (aiohttp): loaded to serve the page, not for --help or a station without one
+    from onboard.config import load
     from tools.page.guard import host_name
-    from tools.page.server import PageOptions, fake_hal, parse_http
+    from tools.page.server import PageOptions, parse_http
 
     try:
         host, port = parse_http(given)
         hosts = tuple(host_name(name) for name in args.http_host)
-        fake = fake_hal(args.robot_config)
+        fake = None if args.robot_config is None else load(args.robot_config).fake_hal
     except ValueError as exc:  # onboard.config.ConfigError too
         raise CliError(str(exc)) from None
     if args.robot_config and fake is None:

@@ -14,10 +14,10 @@ import sys
 from pathlib import Path
 
 from onboard.cli.runner import CliError
+from onboard.config import load
 from radio.keys import write_key
 from tools.demo.pty_cable import PtyCable
 from tools.page.data import end_with_parent
-from tools.page.server import fake_hal
 from tools.station.events import StationEvent
 from tools.station.start import open_station, serve_to_exit
 
@@ -113,7 +113,7 @@ def run_demo(where: Path, page, status_every: float) -> int:
     the robot had ended on its own."""
     key, config, db = prepare(where)
     try:
-        page.fake = fake_hal(config)
+        page.fake = load(config).fake_hal
     except ValueError as exc:  # onboard.config.ConfigError: a robot.toml edited in DIR
         raise CliError(f"--demo {where}: {exc}; mend it, or delete it for the demo's own") from None
     cable = PtyCable()

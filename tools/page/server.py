@@ -35,12 +35,10 @@ import time
 from collections import Counter, deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 from aiohttp import web
 
-from onboard.config import load
 from tools.page.data import PageData, static_dir
 from tools.page.forms import forms_html, parse_form
 from tools.page.guard import BODY_TIMEOUT_S, ConnectionGate, HostCheck, QuietLog, Tally, connection_cap
@@ -67,15 +65,6 @@ class PageOptions:
     hosts: tuple[str, ...] = ()  # names the page answers to besides its address (--http-host)
     fake: Any = None  # a fake robot's HalConfig: its renders are the measured frames
     token: str = field(default_factory=lambda: secrets.token_urlsafe(24))
-
-
-def fake_hal(robot_config: str | Path | None) -> Any:
-    """The `[hal]` section of a fake robot's config, whose renders the page shows as the measured
-    frames; None without a config or for another body (ConfigError, one line, for a bad one)."""
-    if robot_config is None:
-        return None
-    hal = load(robot_config).hal
-    return hal if hal.body == "fake" else None
 
 
 def parse_http(text: str) -> tuple[str, int]:

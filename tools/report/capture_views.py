@@ -216,9 +216,7 @@ class Frames:
     def from_robot_config(cls, path: str | Path | None) -> Frames:
         if path is None:
             return cls()
-
-        hal = load(path).hal  # ConfigError (one line) for a config the robot would refuse
-        return cls(hal if hal.body == "fake" else None)
+        return cls(load(path).fake_hal)  # ConfigError (one line) for a config the robot would refuse
 
     def __call__(self, cap: StoredCapture) -> np.ndarray | None:
         if cap.dataset is not None:
