@@ -117,13 +117,13 @@ def unseen(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray, levels: int
     step = max(1, levels // COLOUR_BINS)
     span = levels // step + 2  # a bin and its neighbours, shifted off zero
 
-    def keys(img: np.ndarray, offset: np.ndarray) -> np.ndarray:
-        bins = img[inside].astype(np.int64) // step + 1 + offset
-        return (bins * span ** np.arange(bands)).sum(axis=1)
-    seen = np.unique(keys(photo, np.zeros(bands, np.int64)))
-    near = np.stack(np.meshgrid(*[(-1, 0, 1)] * bands, indexing="ij"), -1).reshape(-1, bands)
-    grown = np.unique((seen[:, None] + (near * span ** np.arange(bands)).sum(axis=1)[None]).ravel())
-    drawn = keys(synth, np.zeros(bands, np.int64))
+    weights = span ** np.arange(bands)  # a bin's key: its index per band in base `span`
+
+    def keys(img: np.ndarray) -> np.ndarray:
+        return (img[inside].astype(np.int64) // step + 1) @ weights
+    near = np.stack(np.meshgrid(*[(-1, 0, 1)] * bands, indexing="ij"), -1).reshape(-1, bands) @ weights
+    grown = np.unique((np.unique(keys(photo))[:, None] + near[None]).ravel())
+    drawn = keys(synth)
     return float(np.mean(~np.isin(drawn, grown))) if drawn.size else 0.0
 
 
