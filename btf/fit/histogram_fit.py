@@ -183,8 +183,9 @@ def fit_rows(counts: np.ndarray, totals: list[int], zs: list[float], lo: float, 
         at = (np.arange(len(live)), chosen)
         z_of, code_of, pct_of = reads.z[at].tolist(), reads.code[at].tolist(), reads.pct[at].tolist()
         exact_of, fallback_of, banded = reads.exact[at].tolist(), reads.fallback[at].tolist(), reads.ok[:, 1].tolist()
-        # every row's fullest bin (no copy of the live rows' histograms: 16-bit rows are 65,536 bins)
-        spikes, peaks = counts.argmax(axis=1)[live], counts.max(axis=1)[live]
+        # each live row's fullest bin, in one pass and no copy of the rows (16-bit rows are 65,536 bins)
+        spikes = counts.argmax(axis=1)[live]
+        peaks = counts[live, spikes]
         sizes = np.array([totals[i] for i in live])
         for j in np.flatnonzero((peaks >= SPIKE_SHARE * sizes) & (sizes >= SPIKE_PIXELS)).tolist():
             if plans[live[j]] != (Placement(zs[live[j]]), 0.0, 0.0) and not fallback_of[j]:
