@@ -129,15 +129,17 @@ class _Sums:
         self._onehot = self._left = self._repeated = self._stack = self._side = self._partner = None
 
     def pearson(self, region: int) -> np.ndarray:
-        """Per band and window position, the Pearson correlation of one region's pairs."""
+        """Per band and window position, the Pearson correlation of one region's pairs, anchors
+        and partners each with their own mean and variance (numpy's corrcoef): pooled into one,
+        a class on a gradient (a sky, a shaded wall) read its grain up to 0.27 low."""
         n = self.anchor_side[0, region]
         sa, saa = self.anchor_side[1:1 + self.b, region], self.anchor_side[1 + self.b:, region]
         sb, sab, sbb = self.partner[:, :, region]
         with np.errstate(all="ignore"):
-            m = (sa + sb) / (2 * n)
-            var = (saa + sbb) / (2 * n) - m * m
-            cov = sab / n - m * m
-            r = np.where((n >= MIN_PAIRS) & (var > 1e-9), cov / var, 0.0)
+            ma, mb = sa / n, sb / n
+            va, vb = saa / n - ma * ma, sbb / n - mb * mb
+            cov = sab / n - ma * mb
+            r = np.where((n >= MIN_PAIRS) & (va > 1e-9) & (vb > 1e-9), cov / np.sqrt(va * vb), 0.0)
         return np.clip(np.nan_to_num(r), -1.0, 1.0)
 
 
