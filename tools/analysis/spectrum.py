@@ -253,7 +253,8 @@ def _axis_weights(n: int, g: int) -> np.ndarray:
 
 def amplitude(small: np.ndarray, ny: int, nx: int) -> np.ndarray:
     """sqrt(S) on the rfft half of the ny x nx grid (nx // 2 + 1 columns), float32, S of mean 1
-    over the whole grid: the ring's spectrum interpolated along each axis."""
+    over the whole grid: the ring's spectrum interpolated along each axis (a ring of no power
+    stands for white noise, as `ring_spectrum` gives for one)."""
     wy, wx = _axis_weights(ny, small.shape[0]), _axis_weights(nx, small.shape[1])[:nx // 2 + 1]
     s = wy @ small.astype(np.float32) @ wx.T
     weights = np.full(s.shape[1], 2.0)  # the other half of the grid mirrors these columns
@@ -261,6 +262,8 @@ def amplitude(small: np.ndarray, ny: int, nx: int) -> np.ndarray:
     if nx % 2 == 0:
         weights[-1] = 1.0
     mean = float(s.sum(axis=0, dtype=np.float64) @ weights) / (ny * nx)
+    if not (math.isfinite(mean) and mean > 0.0):
+        s, mean = np.ones_like(s), 1.0
     _mean_power_to_longest_waves(s)
     return np.sqrt(np.maximum(s / np.float32(mean), 0.0), dtype=np.float32)
 

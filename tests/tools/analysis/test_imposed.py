@@ -5,6 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.fft as sfft
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from btf.dependence import Dependence, window
 from btf.johnson import Johnson
@@ -84,3 +86,38 @@ def test_a_long_grain_on_a_box_the_size_of_the_ring_keeps_its_far_lags():
     gaps = [np.abs(acf2d(draw(grain, (side, side), np.random.default_rng(s))[0], np.ones((side, side), bool), 8)
                    - target).max() for s in range(4)]
     assert np.mean(gaps) < 0.1
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1), st.sampled_from(["random", "mean only", "zero", "spike"]),
+       st.sampled_from([(16, 16), (40, 30), (129, 200)]))
+def test_any_spectrum_keeps_its_power_off_the_zero_frequency_finite_and_nonnegative(seed, kind, grid):
+    rng = np.random.default_rng(seed)
+    ring = {"random": lambda: rng.random((16, 16)) * 10 ** rng.uniform(-3, 3), "zero": lambda: np.zeros((16, 16)),
+            "mean only": lambda: np.pad(np.ones((1, 1)), ((0, 15), (0, 15))),
+            "spike": lambda: np.pad(np.ones((1, 1)), ((0, 15), (0, 15))) + 1e-9}[kind]()
+    ny, nx = grid
+    a = spectrum.amplitude(ring, ny, nx).astype(np.float64)
+    assert a.shape == (ny, nx // 2 + 1) and np.all(np.isfinite(a)) and np.all(a >= 0) and a[0, 0] == 0.0
+    weights = np.full(a.shape[1], 2.0)
+    weights[0] = 1.0
+    if nx % 2 == 0:
+        weights[-1] = 1.0
+    if ring.any():
+        assert float((a * a).sum(axis=0) @ weights) / (ny * nx) == pytest.approx(1.0, rel=1e-4)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1), st.floats(0.05, 0.95), st.integers(1, 8))
+def test_any_region_and_values_read_as_the_judge_reads_them(seed, share, radius):
+    rng = np.random.default_rng(seed)
+    inside = rng.random((37, 53)) < share
+    values = np.cumsum(rng.standard_normal((37, 53)), axis=1) * inside  # a grain along the rows
+    values = np.where(inside, values - values[inside].mean(), 0.0)
+    got = _pearson(values, inside, radius)
+    judge = acf2d(values, inside, radius)
+    lags = np.array(window(radius))
+    pairs = np.array([np.count_nonzero(inside[:37 - dy, max(0, -dx):53 - max(0, dx)]
+                                       & inside[dy:, max(0, dx):53 - max(0, -dx)]) for dy, dx in lags])
+    read = np.isfinite(got) & (pairs >= 32)
+    assert np.abs(got[read] - judge[read]).max(initial=0.0) < 1e-3
