@@ -1,8 +1,9 @@
 """Figures that judge a synthesized texture beside its photograph, region by region.
 
 acf2d       the Pearson autocorrelation of one band at every lag of a half-plane window,
-            over the pairs of pixels both inside the region (pair means and variances), all lags
-            at once from zero-padded FFTs of the masked values
+            over the pairs of pixels both inside the region (each end's own mean and variance),
+            all lags at once from zero-padded FFTs of the masked values (`pair_pearson`, which
+            synthesis reads its own draws with, tools.analysis.imposed)
 acf_gap     the worst |acf(synthesis) - acf(photograph)| over the window's lags and the bands
 plaid       the share of a region's spectral power on the kx = 0 and ky = 0 axes after a Hann
             window, over the largest square inside the region (the mask's own edges would
@@ -24,33 +25,49 @@ from btf.dependence import window
 MIN_PAIRS = 32
 
 
-def _correlate(a: np.ndarray, b: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """sum_p a(p) b(p + h) for every lag h, a circular array of `shape` (zero-padded inputs)."""
-    fa, fb = sfft.rfft2(a, shape), sfft.rfft2(b, shape)
-    return sfft.irfft2(np.conj(fa) * fb, shape)
+def region_pairs(inside: np.ndarray, shape: tuple[int, int], lags: np.ndarray,
+                 dtype: type = np.float32) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(the mask in `dtype`, its rfft2 on `shape`, its pairs at each lag, at least 1): what
+    `pair_pearson` reads a region's values against."""
+    m = inside.astype(dtype)
+    fm = sfft.rfft2(m, shape)
+    n = sfft.irfft2(fm * np.conj(fm), shape)[lags[:, 0] % shape[0], lags[:, 1] % shape[1]]
+    return m, fm, np.maximum(np.rint(n), 1.0)
+
+
+def pair_pearson(v: np.ndarray, fm: np.ndarray, n: np.ndarray, shape: tuple[int, int], lags: np.ndarray) -> np.ndarray:
+    """Each lag's Pearson correlation of v (zero outside the region) over the region's pairs, each
+    end with its own mean and variance, from zero-padded FFT products (NaN where an end does not
+    vary); fm, n: the region's `region_pairs` on `shape`. Sums stay in v's precision."""
+    at, back = (lags[:, 0] % shape[0], lags[:, 1] % shape[1]), (-lags[:, 0] % shape[0], -lags[:, 1] % shape[1])
+
+    def at_lags(spectrum: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # a box of sums at a time
+        sums = sfft.irfft2(spectrum, shape)
+        return sums[at].astype(np.float64), sums[back].astype(np.float64)
+    fv = sfft.rfft2(v, shape)
+    sab, _ = at_lags(fv * np.conj(fv))
+    first = at_lags(np.conj(fv) * fm)  # sums of the pairs' first ends (at h) and second ends (at -h)
+    del fv
+    squares = at_lags(np.conj(sfft.rfft2(v * v, shape)) * fm)
+    ma, mb = first[0] / n, first[1] / n
+    va, vb = squares[0] / n - ma * ma, squares[1] / n - mb * mb
+    # a variance under this share of the mean square is the sums' rounding, not spread
+    rounding = 1e-5 if v.dtype == np.float32 else 1e-12
+    varies = (va > rounding * squares[0] / n) & (vb > rounding * squares[1] / n)
+    with np.errstate(all="ignore"):
+        return np.where(varies, (sab / n - ma * mb) / np.sqrt(np.abs(va * vb)), np.nan)
 
 
 def acf2d(values: np.ndarray, inside: np.ndarray, radius: int = 8) -> np.ndarray:
-    """Pearson autocorrelation of `values` (H x W) at window(radius), pairs inside `inside`."""
-    m = inside.astype(np.float64)
+    """Pearson autocorrelation of `values` (H x W) at window(radius), pairs inside `inside`
+    (0 at a lag of fewer than MIN_PAIRS pairs)."""
+    lags = np.array(window(radius))
+    shape = tuple(sfft.next_fast_len(n + radius + 1) for n in values.shape)
+    m, fm, n = region_pairs(inside, shape, lags, np.float64)
     v = np.where(inside, values.astype(np.float64), 0.0)
     v -= v[inside].mean() if inside.any() else 0.0
-    v *= m
-    shape = tuple(sfft.next_fast_len(n + radius + 1) for n in values.shape)
-    n = _correlate(m, m, shape)
-    sa, sb = _correlate(v, m, shape), _correlate(m, v, shape)
-    saa, sbb = _correlate(v * v, m, shape), _correlate(m, v * v, shape)
-    sab = _correlate(v, v, shape)
-    lags = np.array(window(radius))
-    idx = (lags[:, 0] % shape[0], lags[:, 1] % shape[1])
-    n, sa, sb, saa, sbb, sab = (x[idx] for x in (n, sa, sb, saa, sbb, sab))
-    with np.errstate(all="ignore"):
-        n = np.rint(n)
-        ma, mb = sa / n, sb / n
-        cov = sab / n - ma * mb
-        den = np.sqrt(np.maximum(saa / n - ma * ma, 0) * np.maximum(sbb / n - mb * mb, 0))
-        r = np.where((n >= MIN_PAIRS) & (den > 1e-12), cov / den, 0.0)
-    return np.clip(np.nan_to_num(r), -1.0, 1.0)
+    r = pair_pearson(v * m, fm, n, shape, lags)
+    return np.clip(np.where((n >= MIN_PAIRS) & np.isfinite(r), r, 0.0), -1.0, 1.0)
 
 
 def acf_gap(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray, radius: int = 8) -> float:

@@ -25,6 +25,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from btf.dependence import MAX_RADIUS, window
+from tools.analysis.grain_metrics import pair_pearson, region_pairs
 
 # One round: a second took the moon's speckled classes from 0.10 and 0.15 to 0.086 and 0.135,
 # but a thin class of vessels, whose window no spectrum meets, from 0.43 to 0.53.
@@ -45,35 +46,6 @@ def lag_acf(amp: np.ndarray, nx: int, reach: int) -> np.ndarray:
     return r[np.ix_(d % amp.shape[0], d % nx)].astype(np.float64) / max(float(r[0, 0]), 1e-30)
 
 
-def _pairs(inside: np.ndarray, shape: tuple[int, int], lags: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    m = inside.astype(np.float32)
-    fm = sfft.rfft2(m, shape)
-    n = sfft.irfft2(fm * np.conj(fm), shape)[lags[:, 0] % shape[0], lags[:, 1] % shape[1]]
-    return m, fm, np.maximum(np.rint(n), 1.0)
-
-
-def pair_pearson(v: np.ndarray, fm: np.ndarray, n: np.ndarray, shape: tuple[int, int], lags: np.ndarray) -> np.ndarray:
-    """Each lag's Pearson correlation of v (zero outside the region) over the region's pairs, each
-    end with its own mean and variance, as the record and the judge read it (NaN where an end
-    does not vary); fm: the region mask's rfft2 on `shape`, n: its pairs per lag."""
-    at, back = (lags[:, 0] % shape[0], lags[:, 1] % shape[1]), (-lags[:, 0] % shape[0], -lags[:, 1] % shape[1])
-
-    def at_lags(spectrum: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # a box of sums at a time
-        sums = sfft.irfft2(spectrum, shape)
-        return sums[at].astype(np.float64), sums[back].astype(np.float64)
-    fv = sfft.rfft2(v, shape)
-    sab, _ = at_lags(fv * np.conj(fv))
-    first = at_lags(np.conj(fv) * fm)  # sums of the pairs' first ends (at h) and second ends (at -h)
-    del fv
-    squares = at_lags(np.conj(sfft.rfft2(v * v, shape)) * fm)
-    ma, mb = first[0] / n, first[1] / n
-    va, vb = squares[0] / n - ma * ma, squares[1] / n - mb * mb
-    # float32 sums: a variance under 1e-5 of the mean square is rounding, not spread
-    varies = (va > 1e-5 * squares[0] / n) & (vb > 1e-5 * squares[1] / n)
-    with np.errstate(all="ignore"):
-        return np.where(varies, (sab / n - ma * mb) / np.sqrt(np.abs(va * vb)), np.nan)
-
-
 def impose(spectra: np.ndarray, keep: list[np.ndarray], out: list[np.ndarray], inside: np.ndarray,
            targets: tuple[np.ndarray, ...], nx: int, scale: float, offset: float, redraw: Callable[[], None],
            radius: int = MAX_RADIUS) -> None:
@@ -84,7 +56,7 @@ def impose(spectra: np.ndarray, keep: list[np.ndarray], out: list[np.ndarray], i
     lags = np.array(window(radius))
     h, w = inside.shape
     pad = (sfft.next_fast_len(h + radius, real=True), sfft.next_fast_len(w + radius, real=True))
-    m, fm, n = _pairs(inside, pad, lags)
+    m, fm, n = region_pairs(inside, pad, lags)
     ny = spectra.shape[1]
     c0 = targets[0].shape[0] // 2
     ahead, back = lags[:, None, :] + lags[None, :, :], lags[:, None, :] - lags[None, :, :]

@@ -12,8 +12,7 @@ from btf.dependence import Dependence, window
 from btf.johnson import Johnson
 from tools.analysis import spectrum
 from tools.analysis.fields import _shaping, _targets, draw, grain_of
-from tools.analysis.grain_metrics import acf2d
-from tools.analysis.imposed import _pairs, pair_pearson
+from tools.analysis.grain_metrics import acf2d, pair_pearson, region_pairs
 from tools.analysis.levelmap import level_map
 
 NORMAL = level_map(Johnson.normal(128.0, 20.0), 256)
@@ -26,7 +25,7 @@ def _exponential(decay: float, radius: int) -> tuple[float, ...]:
 def _pearson(values: np.ndarray, inside: np.ndarray, radius: int) -> np.ndarray:
     lags = np.array(window(radius))
     pad = tuple(sfft.next_fast_len(n + radius, real=True) for n in inside.shape)
-    m, fm, n = _pairs(inside, pad, lags)
+    m, fm, n = region_pairs(inside, pad, lags)
     return pair_pearson((values * m).astype(np.float32), fm, n, pad, lags)
 
 
