@@ -1,6 +1,7 @@
 """listen, decode and cmd on the command line: recorded streams, bad input, no answer."""
 import json
 import os
+import time
 import tty
 
 import pytest
@@ -174,6 +175,17 @@ def test_cmd_against_a_running_robot_gets_its_answers(robot_port, capsys):
     assert abs(ans["extras"]["elevation"] - 50.0) < 2.0  # the measured angle, not the commanded one
     code, ans = _cmd(port, key, capsys, "sweep", "--elevations", "60,40")
     assert code == 0 and ans["type"] == "ACK" and ans["extras"]["poses"] == 2
+    _until_idle(port, key, capsys)  # the sweep ends; the module's later commands find the arm free
+
+
+def _until_idle(port, key, capsys, seconds=120.0):
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        code, ans = _cmd(port, key, capsys, "status")
+        if code == 0 and ans["status"]["mode"] == "idle":
+            return
+        time.sleep(0.5)
+    raise AssertionError(f"the robot still sweeping after {seconds:.0f} s")
 
 
 def test_cmd_against_a_running_robot_reports_a_refusal_with_its_reason(robot_port, capsys):
