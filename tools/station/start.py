@@ -153,10 +153,10 @@ async def serve(parts: StationParts, until: Callable[[], bool] | None = None, pa
     companion = None if beside is None else asyncio.ensure_future(beside(station))
     try:
         while until is not None and not pump.done():
+            await asyncio.sleep(0.02)  # first: the station starts its run before `until` is asked
             if until():
                 station.stop()
                 break
-            await asyncio.sleep(0.02)
         await pump
     finally:
         if companion is not None:

@@ -61,15 +61,14 @@ import secrets
 import sqlite3
 import time
 from collections import deque
-from contextlib import contextmanager
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from typing import Any, Callable, Iterator
 
 from radio import packets as pk
-from radio.link import Delivered, LinkDown, LinkUp, PeerStale
+from radio.link import Delivered, LinkDown, LinkUp, PeerStale, QueueFull
 from radio.packets.commands import CommandName, check_args
 from radio.pump import LinkPump
-from radio.link import QueueFull
 from tools.station import events as ev_
 from tools.station.bus import EventBus
 from tools.station.log import StationLog
@@ -164,6 +163,7 @@ class Station:
         is ever acknowledged: a failed store ends the turn before its write)."""
         loop = asyncio.get_running_loop()
         io = ThreadPoolExecutor(1, thread_name_prefix="station-port")
+        self.last_delivery = self.clock()  # idle from here: a slow start is not time without packets
         self.emit(ev_.StationEvent(self.wall(), f"started: port {self.snapshot.port}, database {self.snapshot.db}"))
         out = b""
         try:

@@ -86,10 +86,25 @@ def test_listen_stores_what_arrives_then_exits_when_idle(key, tmp_path, capsys, 
     # loop:// echoes our own frames back: they are rejected as from the wrong sender, nothing stored.
     db = tmp_path / "scene.db"
     assert main(["listen", "--port", "loop://", "--db", str(db), "--key", str(key),
-                 "--until-idle", "0.3", "--json"]) == 0
+                 "--until-idle", "1", "--json"]) == 0
     out = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
     assert out[-1]["kind"] == "summary" and out[-1]["captures"] == 0
     assert out[-1]["rejected"].get("sender", 0) > 0
+
+
+def test_listen_counts_idle_time_from_when_it_listens_not_from_a_slow_start(key, tmp_path, capsys, monkeypatch):
+    import tools.station.start as start
+
+    opened = start.ControlServer.start
+
+    async def slow_start(self):  # a loaded machine: the station is ready well after it was built
+        time.sleep(1.2)
+        await opened(self)
+    monkeypatch.setattr(start.ControlServer, "start", slow_start)
+    assert main(["listen", "--port", "loop://", "--db", str(tmp_path / "scene.db"), "--key", str(key),
+                 "--until-idle", "1", "--json"]) == 0
+    out = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert out[-1]["kind"] == "summary" and out[-1]["rejected"].get("sender", 0) > 0  # it heard its own echo
 
 
 def test_cmd_without_an_answer_times_out_with_one_line(key, tmp_path, capsys):
