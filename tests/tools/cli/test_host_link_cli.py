@@ -16,6 +16,7 @@ from tests.support.packets import models_body
 from tests.support.robots import IDLE, LINKED, robot_toml
 from tools.cli import main
 from tools.demo.pty_cable import PtyCable
+from tools.station import start as station_start
 
 
 @pytest.fixture
@@ -93,14 +94,12 @@ def test_listen_stores_what_arrives_then_exits_when_idle(key, tmp_path, capsys, 
 
 
 def test_listen_counts_idle_time_from_when_it_listens_not_from_a_slow_start(key, tmp_path, capsys, monkeypatch):
-    import tools.station.start as start
-
-    opened = start.ControlServer.start
+    opened = station_start.ControlServer.start
 
     async def slow_start(self):  # a loaded machine: the station is ready well after it was built
         time.sleep(1.2)
         await opened(self)
-    monkeypatch.setattr(start.ControlServer, "start", slow_start)
+    monkeypatch.setattr(station_start.ControlServer, "start", slow_start)
     assert main(["listen", "--port", "loop://", "--db", str(tmp_path / "scene.db"), "--key", str(key),
                  "--until-idle", "1", "--json"]) == 0
     out = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
@@ -190,10 +189,10 @@ def test_cmd_against_a_running_robot_gets_its_answers(robot_port, capsys):
     assert abs(ans["extras"]["elevation"] - 50.0) < 2.0  # the measured angle, not the commanded one
     code, ans = _cmd(port, key, capsys, "sweep", "--elevations", "60,40")
     assert code == 0 and ans["type"] == "ACK" and ans["extras"]["poses"] == 2
-    _until_idle(port, key, capsys)  # the sweep ends; the module's later commands find the arm free
+    _until_robot_idle(port, key, capsys)  # the sweep ends; the module's later commands find the arm free
 
 
-def _until_idle(port, key, capsys, seconds=120.0):
+def _until_robot_idle(port, key, capsys, seconds=120.0):
     deadline = time.monotonic() + seconds
     while time.monotonic() < deadline:
         code, ans = _cmd(port, key, capsys, "status")
