@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
@@ -47,7 +48,12 @@ def run(args: argparse.Namespace) -> int:
         image = segmentation_view(read_image(args.image))
         if image.shape[0] * image.shape[1] < args.k:
             raise CliError(f"image {args.image}: fewer pixels than --k {args.k} classes")
-        write_mask(args.out, segment(image, args.method, args.k, args.seed, args.scale, args.segments))
+        mask = segment(image, args.method, args.k, args.seed, args.scale, args.segments)
+        write_mask(args.out, mask)
     except ImageError as exc:
         raise CliError(str(exc)) from None
+    classes = int(mask.max()) + 1  # classes are 0..n-1
+    if classes < args.k:
+        print(f"btf-host: note: {classes} classes of the {args.k} asked for: the image's colours part into no more",
+              file=sys.stderr)
     return 0

@@ -42,11 +42,18 @@ def _rank(centres: np.ndarray) -> np.ndarray:
     return rank
 
 
+def _distinct_ranks(centres: np.ndarray) -> np.ndarray:
+    """Class of each centre, darkest first, centres of one colour in one class: k-means splits
+    identical pixels between centres when the image has fewer colours than classes."""
+    distinct, inverse = np.unique(centres, axis=0, return_inverse=True)
+    return _rank(distinct)[inverse.reshape(-1)]
+
+
 def _compact_rank(labels: np.ndarray, centres: np.ndarray) -> np.ndarray:
     """Table from raw labels to ordered classes, after dropping labels no pixel uses."""
     used = np.array(list(label_counts(labels)), np.int64)
     table = np.zeros(len(centres), np.int64)
-    table[used] = _rank(centres[used])
+    table[used] = _distinct_ranks(centres[used])
     return table
 
 
@@ -119,9 +126,9 @@ def _merge_segments(image: np.ndarray, segments: np.ndarray, k: int, seed: int) 
             sums[:, c] += np.bincount(seg, px[:, c].astype(np.float64), n)
     means = sums / np.maximum(counts, 1)[:, None]
     present = counts > 0
-    if present.sum() <= k:
+    if len(np.unique(means[present], axis=0)) <= k:  # no more colours than classes: one class each
         table = np.zeros(n, np.int64)
-        table[present] = _rank(means[present])
+        table[present] = _distinct_ranks(means[present])
         return relabel(segments, table)
     centres, cls = kmeans2(means[present], k, minit="++", seed=seed)
     full = np.zeros(n, np.int64)
