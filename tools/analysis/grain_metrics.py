@@ -148,7 +148,8 @@ def band_gap(photo: np.ndarray, synth: np.ndarray, inside: np.ndarray) -> float:
     """Worst gap of the bands' pixel correlation matrix over the region (0 for one band)."""
     if photo.shape[2] < 2:
         return 0.0
-    c = [np.nan_to_num(np.corrcoef(x[inside].T.astype(np.float64))) for x in (photo, synth)]
+    with np.errstate(invalid="ignore", divide="ignore"):  # a flat band correlates with nothing: 0
+        c = [np.nan_to_num(np.corrcoef(x[inside].T.astype(np.float64))) for x in (photo, synth)]
     return float(np.abs(c[0] - c[1]).max())
 
 

@@ -69,6 +69,16 @@ def test_a_one_band_photograph_offers_gray_alone(run, photo):
     assert code == 0 and [r["space"] for r in json.loads(out)["rows"]] == ["gray"]
 
 
+def test_a_photograph_of_flat_colours_is_judged_without_a_warning(run, tmp_path, recwarn):
+    image = np.zeros((48, 48, 3), np.uint8)
+    image[:, 24:] = (200, 100, 50)  # two flat regions: every band constant in each
+    write_image(tmp_path / "flat.png", image)
+    code, out, err = run("spaces", tmp_path / "flat.png", "--masks", "kmeans2", "--spaces", "rgb", "--json")
+    assert code == 0 and err == ""
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]  # numpy's, of a flat band's correlation
+    assert json.loads(out)["rows"][0]["texture"]["band_gap"] == 0.0
+
+
 def test_missing_files_and_an_existing_picture_are_one_line(run, photo):
     assert "no such file" in refused(*run("spaces", photo / "none.png")[::2])
     (photo / "p.png").write_bytes(b"x")
