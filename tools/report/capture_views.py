@@ -13,6 +13,7 @@ are all of region 0 (`ingest` or `fit` without a mask) is drawn as one region ov
 from __future__ import annotations
 
 import io
+import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -150,6 +151,18 @@ def level_span(models: dict, band: int, levels: int) -> tuple[float, float]:
     return max(lo - pad, -0.5), min(hi + pad, levels - 0.5)
 
 
+def measured_per_level(values: np.ndarray, levels: int, span: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    """(share of the pixels per level, bin edges): every level of an 8-bit band; a deeper band in
+    bins of whole levels, about 256 over the panel's `span`, each bin's share spread over its
+    levels as the Johnson curve's is (`model_curve`)."""
+    if levels <= 256:
+        return np.bincount(values, minlength=256) / values.size, np.arange(257) - 0.5
+    lo, hi = math.floor(span[0]), math.ceil(span[1])
+    width = max(1, math.ceil((hi - lo) / 256))
+    edges = np.arange(lo - 0.5, hi + 0.5 + width, width)
+    return np.histogram(values, edges)[0] / (values.size * width), edges
+
+
 def histogram_png(image: np.ndarray | None, mask: np.ndarray, models: dict, bands: tuple[str, ...],
                   levels: int = 256) -> bytes:
     """One panel per band over the levels its models cover: the measured histogram of each label
@@ -166,19 +179,19 @@ def histogram_png(image: np.ndarray | None, mask: np.ndarray, models: dict, band
     # margins in pixels (a layout engine would measure every tick label of every figure)
     axis_w = (width - 72 - 40 * (len(bands) - 1)) / len(bands)
     fig.subplots_adjust(left=64 / width, right=1 - 8 / width, bottom=38 / h, top=1 - 22 / h, wspace=40 / axis_w)
-    edges = np.arange(257) - 0.5
     labels = sorted({lab for lab, _ in models})
     for b, name in enumerate(bands):
         ax = axes[0][b]
+        span = level_span(models, b, levels)
         for k, lab in enumerate(labels):
             colour = f"C{k % 10}"
-            if image is not None and levels <= 256 and image.shape[:2] == mask.shape and (mask == lab).any():
-                hist = np.bincount(image[..., b][mask == lab], minlength=256) / (mask == lab).sum()
+            if image is not None and image.shape[:2] == mask.shape and (mask == lab).any():
                 # one filled step artist: 256 bar patches per label made the report slow
-                ax.stairs(hist, edges, fill=True, alpha=0.35, color=colour, label=f"measured {lab}")
+                ax.stairs(*measured_per_level(image[..., b][mask == lab], levels, span), fill=True, alpha=0.35,
+                          color=colour, label=f"measured {lab}")
             if (lab, b) in models:
                 ax.plot(*model_curve(models[(lab, b)], levels), lw=1.3, color=colour, label=f"Johnson {lab}")
-        ax.set_xlim(*level_span(models, b, levels))
+        ax.set_xlim(*span)
         ax.set_ylim(bottom=0)
         ax.set_title(f"band {name}", fontsize=9)
         ax.set_xlabel("level", fontsize=8)

@@ -12,10 +12,12 @@ import cv2
 import numpy as np
 import pytest
 
+from btf.fit.fitter import FrameFitter
 from hal.interfaces import ViewAngles
 from hal.scene import render
 from tests.support.databases import older_database
 from tools.data.images import read_image, write_image, write_mask
+from tools.report.capture_views import histogram_png, level_span, measured_per_level, model_curve
 from tools.store.database import Store
 
 
@@ -187,3 +189,26 @@ def test_report_shows_16_bit_captures_at_their_depth(host, tmp_path):
         pixels = cv2.imread(str(shown), cv2.IMREAD_UNCHANGED)
         # the hot black sand (left) and the cool white sand (right), stretched for viewing
         assert pixels[:, :40].mean() > pixels[:, 40:].mean() + 60, kind
+
+
+def test_a_deep_bands_measured_histogram_stands_beside_its_johnson_curve():
+    image, mask = thermal_camera("mixed", (120, 160), 2)
+    labels = [int(v) for v in np.unique(mask)]
+    fitter = FrameFitter(max(labels) + 1, 1, bins=65536)
+    fitter.add(image[..., None], mask)
+    models = {k: r.model for k, r in fitter.fit().items()}
+    span = level_span(models, 0, 65536)
+    for lab in labels:
+        values = image[mask == lab]
+        per_level, edges = measured_per_level(values, 65536, span)
+        width = edges[1] - edges[0]
+        assert len(edges) <= 258 and np.all(np.diff(edges) == width)  # about 256 bins of whole levels
+        shown = per_level.sum() * width
+        assert shown == pytest.approx(np.mean((values > edges[0]) & (values < edges[-1])))
+        # on the scale of the curve: probability per level, where the bulk of the region lies
+        x, curve = model_curve(models[(lab, 0)], 65536)
+        centres = (edges[:-1] + edges[1:]) / 2
+        bulk = per_level > 0.25 * per_level.max()
+        assert np.median(per_level[bulk] / np.interp(centres[bulk], x, curve)) == pytest.approx(1.0, abs=0.15)
+    with_image = histogram_png(image[..., None], mask, models, ("Y",), 65536)
+    assert with_image != histogram_png(None, mask, models, ("Y",), 65536)  # the measured bars are drawn
