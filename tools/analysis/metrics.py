@@ -16,7 +16,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy import stats
 
 from tools.analysis.level_bins import Grid
 from tools.analysis.tiles import label_counts, region_histograms, row_tiles
@@ -85,12 +84,13 @@ def ks(h_ref: np.ndarray, h_test: np.ndarray, circular: bool = False) -> float:
 
 
 def w1(h_ref: np.ndarray, h_test: np.ndarray, circular: bool = False) -> float:
+    """Wasserstein-1 in levels: the area between the CDFs (scipy.stats.wasserstein_distance's
+    figure; its import alone took 1.5 s of each `compare`)."""
+    if h_ref.sum() == 0 or h_test.sum() == 0:
+        return 0.0
+    d = np.cumsum(h_ref / h_ref.sum()) - np.cumsum(h_test / h_test.sum())
     if not circular:
-        levels = np.arange(len(h_ref), dtype=np.float64)
-        if h_ref.sum() == 0 or h_test.sum() == 0:
-            return 0.0
-        return float(stats.wasserstein_distance(levels, levels, h_ref, h_test))
-    d = np.cumsum(h_ref) - np.cumsum(h_test)
+        return float(np.abs(d).sum())
     # Circular W1 = min over cuts c of sum |d - c|; any median of d is optimal, and the
     # upper median is one of d's values, i.e. a real cut point.
     c = np.sort(d)[len(d) // 2]
@@ -111,12 +111,19 @@ def correlation(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.clip((x * y).sum() / den, -1.0, 1.0))
 
 
+def circular_mean(theta: np.ndarray) -> float:
+    """The mean direction of angles in radians (scipy.stats.circmean's, up to a turn)."""
+    return float(np.arctan2(np.sin(theta).mean(), np.cos(theta).mean()))
+
+
 def circular_correlation(a: np.ndarray, b: np.ndarray, levels: int) -> float:
     """Jammalamadaka's circular correlation of two angle arrays given in 0..levels-1 units."""
     ta = np.asarray(a, dtype=np.float64).ravel() * (2 * np.pi / levels)
     tb = np.asarray(b, dtype=np.float64).ravel() * (2 * np.pi / levels)
-    sa = np.sin(ta - stats.circmean(ta))
-    sb = np.sin(tb - stats.circmean(tb))
+    if ta.size == 0:
+        return 1.0 if tb.size == 0 else 0.0
+    sa = np.sin(ta - circular_mean(ta))
+    sb = np.sin(tb - circular_mean(tb))
     den = np.sqrt((sa * sa).sum() * (sb * sb).sum())
     if den == 0 or not np.isfinite(den):
         return 1.0 if np.array_equal(ta, tb) else 0.0
