@@ -11,7 +11,7 @@ import numpy as np
 
 from tools.analysis.radiometry import adjusted
 from tools.page.btf_panel import panel
-from tools.report.capture_views import Frames, capture_mask, histogram_png, png, shown, views
+from tools.report.capture_views import Frames, histogram_png, label_map, png, shown, views
 from tools.report.look import capture_section
 from tools.store.database import Store
 
@@ -52,11 +52,11 @@ def _histograms(store: Store, cap: Any, fake: Any) -> dict:
     """The histograms with the Johnson curves (as `views` draws them), without synthesizing again."""
     fitted = store.models(cap.id)
     models = dict(adjusted({k: m.model for k, m in fitted.items()}, cap.camera))
-    mask = capture_mask(store, cap)
-    if mask is None or not models:
-        return {"missing": f"capture {cap.id} has no histograms"}
     frame = Frames(fake)(cap)  # measured bars wherever the report draws them (rgb, and gray)
     real = frame if frame is not None and shown(cap, frame) else None
+    mask, _ = label_map(store, cap, models, frame)
+    if mask is None or not models:
+        return {"missing": f"capture {cap.id} has no histograms"}
     return {"png": histogram_png(real, mask, models, cap.band_names, cap.levels)}
 
 

@@ -64,6 +64,16 @@ def capture_mask(store: Store, cap: StoredCapture) -> np.ndarray | None:
     return None
 
 
+def label_map(store: Store, cap: StoredCapture, models: dict,
+              frame: np.ndarray | None) -> tuple[np.ndarray | None, bool]:
+    """(the capture's label map, whether it is the whole frame): a capture of region 0 alone
+    with none stored (an ingest without --mask) is its whole frame, or WHOLE_SIZE without one."""
+    mask = capture_mask(store, cap)
+    if mask is None and models and {label for label, _ in models} == {0}:
+        return np.zeros(frame.shape[:2] if frame is not None else WHOLE_SIZE, np.uint8), True
+    return mask, False
+
+
 def shown(cap: StoredCapture, image: np.ndarray) -> bool:
     """Whether an image of this capture's bands can be shown as a picture (rgb, gray, and raw
     bands as false colour)."""
@@ -93,12 +103,9 @@ def views(store: Store, cap: StoredCapture, rng: np.random.Generator, measured: 
     real = measured(cap) if measured is not None else None
     if real is not None and shown(cap, real):
         out.images["measured"] = view_rgb(real, names=cap.band_names) if cap.space == "raw" else stretched_8bit(real)
-    mask = capture_mask(store, cap)
     # each region at the capture's exposure (a bracketed region's models scaled back)
     models = dict(adjusted({k: m.model for k, m in fitted.items()}, cap.camera))
-    if mask is None and models and {label for label, _ in models} == {0}:
-        mask = np.zeros(real.shape[:2] if real is not None else WHOLE_SIZE, np.uint8)
-        out.whole = True
+    mask, out.whole = label_map(store, cap, models, real)
     if mask is None or not models:
         out.no_mask = mask is None
         out.problem = "No label mask for this capture: nothing to synthesize." if mask is None else ""

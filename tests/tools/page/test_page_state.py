@@ -243,6 +243,25 @@ def test_a_gray_photographs_histograms_carry_its_measured_levels(host, tmp_path)
     assert drawn != histogram_png(None, mask, models, cap.band_names, cap.levels)
 
 
+def test_an_unmasked_photographs_histograms_are_drawn_over_its_whole_frame(host, tmp_path):
+    """An ingest without --mask is one region, the whole frame: the section keeps the histograms'
+    place, and the page draws them there as the report does (it once answered 404)."""
+    folder = tmp_path / "photos"
+    folder.mkdir()
+    image = skdata.camera()[::4, ::4]
+    write_image(folder / "camera.png", image)
+    db = tmp_path / "u.db"
+    assert host("ingest", folder, "--layout", "folder", "--db", db, "--workers", 0, "--quiet")[0] == 0
+    with Store.open(db) as store:
+        (cap,) = store.captures()
+        models = {k: m.model for k, m in store.models(cap.id).items()}
+    assert "histograms.png" in render(str(db), cap.id, None, "section", 0)["html"]
+    drawn = render(str(db), cap.id, None, "histograms", 0)["png"]
+    whole = np.zeros(image.shape, np.uint8)
+    assert drawn == histogram_png(image[..., None], whole, models, cap.band_names, cap.levels)
+    assert drawn != histogram_png(None, whole, models, cap.band_names, cap.levels)  # its measured bars
+
+
 @pytest.mark.parametrize("space", ["pca", "hsv"])
 def test_hsv_and_pca_captures_have_a_picture_on_their_card_and_in_their_section(host, tmp_path, space):
     """Their syntheses turned back into RGB, in the photograph's colours."""
