@@ -34,7 +34,7 @@ import math
 
 import numpy as np
 import scipy.fft as sfft
-from scipy.linalg import solve
+from scipy.linalg import cho_factor, cho_solve
 from scipy.optimize import least_squares
 
 from btf.dependence import window
@@ -134,6 +134,16 @@ def _projected(radius: int, latent: np.ndarray, ny: int, nx: int, known: np.ndar
     return s / total if total > 0 else np.ones_like(s)
 
 
+def _flat_lags(lags: np.ndarray, ny: int, nx: int) -> tuple[np.ndarray, ...]:
+    """Flat indices on the ny x nx ring of the lags h, of -h, and of every h_i + h_j and h_i - h_j
+    (m x m): gathered by (row, column) pairs, the 2 m^2 sums were most of each refit step."""
+    def flat(dy: np.ndarray, dx: np.ndarray) -> np.ndarray:
+        return (dy % ny) * nx + dx % nx
+    dy, dx = lags[:, 0], lags[:, 1]
+    return (flat(dy, dx), flat(-dy, -dx), flat(dy[:, None] + dy[None, :], dx[:, None] + dx[None, :]),
+            flat(dy[:, None] - dy[None, :], dx[:, None] - dx[None, :]))
+
+
 def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray,
            known: np.ndarray | None = None, reference: np.ndarray | None = None) -> np.ndarray:
     """The spectrum, tilted from `reference` (else `start`), whose pixel autocorrelation over
@@ -156,28 +166,23 @@ def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray
     m = len(lags)
     base = np.maximum(reference if reference is not None else start, 0.0) + 1e-3  # no frequency stuck at 0
     log_half = np.log(base[:, :nx // 2 + 1])
-    at = (lags[:, 0] % ny, lags[:, 1] % nx)
-    mirror = ((-lags[:, 0]) % ny, (-lags[:, 1]) % nx)
-    plus = ((lags[:, None, 0] + lags[None, :, 0]) % ny, (lags[:, None, 1] + lags[None, :, 1]) % nx)
-    minus = ((lags[:, None, 0] - lags[None, :, 0]) % ny, (lags[:, None, 1] - lags[None, :, 1]) % nx)
+    at, mirror, plus, minus = _flat_lags(lags, ny, nx)
     slope = np.gradient(curve, GRID)
     weight = np.full(m, math.sqrt(2.0))  # each lag of the half stands for h and -h
     weight[0] = 10.0  # unit variance
-    tilt = np.zeros((ny, nx))
+    cells = np.concatenate((at, mirror))  # h and -h (lag 0 twice)
 
     def half_spectrum(c: np.ndarray) -> np.ndarray:
-        tilt[at] = tilt[mirror] = 0.0
-        np.add.at(tilt, at, 0.5 * c)
-        np.add.at(tilt, mirror, 0.5 * c)
+        tilt = np.bincount(cells, np.concatenate((0.5 * c, 0.5 * c)), ny * nx).reshape(ny, nx)
         return np.exp(np.minimum(log_half + sfft.rfft2(tilt).real, MAX_LOG))
 
     def evaluate(c: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-        r = sfft.irfft2(half_spectrum(c), s=(ny, nx))
+        r = sfft.irfft2(half_spectrum(c), s=(ny, nx)).ravel()
         at_lags = r[at]
         p, dp = np.interp(at_lags, GRID, curve), np.interp(at_lags, GRID, slope)
         p[0], dp[0] = at_lags[0], 1.0  # lag 0 stays latent
         res = weight * (p - goal)
-        jac = (weight * dp)[:, None] * (0.5 * (r[plus] + r[minus]))
+        jac = (weight * dp)[:, None] * (0.5 * (r.take(plus) + r.take(minus)))
         return res, jac, float(res @ res + RIDGE * (c @ c))
 
     c = np.zeros(m)
@@ -191,7 +196,8 @@ def _refit(radius: int, target: np.ndarray, start: np.ndarray, curve: np.ndarray
         normal[np.diag_indices(m)] += RIDGE
         gradient = jac.T @ res + RIDGE * c
         try:
-            step = -solve(normal + damping * np.diag(np.diag(normal)), gradient, assume_a="pos")
+            # Cholesky, as solve(assume_a="pos") does, without its per-call overhead (a third of the refit)
+            step = -cho_solve(cho_factor(normal + damping * np.diag(np.diag(normal))), gradient)
         except (np.linalg.LinAlgError, ValueError):
             damping, grow = damping * grow, grow * 2.0
             continue
