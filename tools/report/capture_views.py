@@ -193,9 +193,11 @@ def histogram_png(image: np.ndarray | None, mask: np.ndarray, models: dict, band
         for k, lab in enumerate(labels):
             colour = f"C{k % 10}"
             if image is not None and image.shape[:2] == mask.shape and (mask == lab).any():
-                # one filled step artist: 256 bar patches per label made the report slow
-                ax.stairs(*measured_per_level(image[..., b][mask == lab], levels, span), fill=True, alpha=0.35,
-                          color=colour, label=f"measured {lab}")
+                # one filled polygon of steps: 256 bar patches per label made the report slow, and a
+                # filled `stairs` patch took 25 ms to find its own limits, point by point
+                per_level, edges = measured_per_level(image[..., b][mask == lab], levels, span)
+                ax.fill_between(edges, np.append(per_level, per_level[-1]), step="post", alpha=0.35, color=colour,
+                                linewidth=0, label=f"measured {lab}")
             if (lab, b) in models:
                 ax.plot(*model_curve(models[(lab, b)], levels), lw=1.3, color=colour, label=f"Johnson {lab}")
         ax.set_xlim(*span)
