@@ -159,15 +159,14 @@ def level_span(models: dict, band: int, levels: int) -> tuple[float, float]:
 
 
 def measured_per_level(values: np.ndarray, levels: int, span: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
-    """(share of the pixels per level, bin edges): every level of an 8-bit band; a deeper band in
-    bins of whole levels, about 256 over the panel's `span`, each bin's share spread over its
-    levels as the Johnson curve's is (`model_curve`)."""
-    if levels <= 256:
-        return np.bincount(values, minlength=256) / values.size, np.arange(257) - 0.5
-    lo, hi = math.floor(span[0]), math.ceil(span[1])
-    width = max(1, math.ceil((hi - lo) / 256))
-    edges = np.arange(lo - 0.5, hi + 0.5 + width, width)
-    return np.histogram(values, edges)[0] / (values.size * width), edges
+    """(share of the pixels per level, bin borders) over the panel's `span`, in the bins a deep
+    band's histograms are compared in (`Grid`: every level of an 8-bit band, at most 256 bins of
+    whole levels of a deeper one), each bin's share spread over its levels as `model_curve` does."""
+    grid = Grid.over(max(0, math.floor(span[0])), min(levels - 1, math.ceil(span[1])), levels)
+    top = grid.lo + math.ceil(grid.bins * grid.width)  # one past the last level binned
+    bounds = np.concatenate(([grid.lo - 0.5], grid.edges(), [top - 0.5]))
+    counts = grid.rebin(np.bincount(values.ravel(), minlength=top))
+    return counts / (values.size * np.diff(bounds)), bounds
 
 
 def histogram_png(image: np.ndarray | None, mask: np.ndarray, models: dict, bands: tuple[str, ...],
