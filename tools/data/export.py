@@ -189,6 +189,12 @@ def _same_export(out: Path, identity: dict) -> bool:
         return False
 
 
+def _not_export(out: Path) -> list[str]:
+    """The names in `out` that no export writes (its manifest, its robot=... partitions)."""
+    return sorted(p.name for p in out.iterdir()
+                  if not (p.name == MANIFEST or (p.name.startswith("robot=") and p.is_dir())))
+
+
 def _fill(store: Any, root: Path, fmt: str) -> tuple[int, int, int]:
     """Adds what `root` lacks, partition by partition: (rows, files, partitions)."""
     rows = files = 0
@@ -211,12 +217,17 @@ def export(store: Any, out: str | Path, fmt: str = "parquet", replace: bool = Fa
     identity = _identity(store, fmt)
     if out.exists() and not out.is_dir():
         raise ExportError(f"--out {out} is a file; give a directory")
-    if out.is_dir() and not replace:
-        if not _same_export(out, identity):
-            raise ExportError(f"--out {out} exists and is not a {fmt} export of this database; "
-                              "pass --force to replace it")
-        rows, files, parts = _fill(store, out, fmt)
-        return ExportReport(out, rows, files, parts, False)
+    if out.is_dir():
+        foreign = _not_export(out)
+        if foreign:  # --force replaces the whole directory: only ever an export's own files
+            shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+            raise ExportError(f"--out {out} holds {shown}, not an export; give a new or empty directory "
+                              "(--force replaces only an earlier export)")
+        if not replace and (out / MANIFEST).exists():
+            if not _same_export(out, identity):
+                raise ExportError(f"--out {out} is not a {fmt} export of this database; pass --force to replace it")
+            rows, files, parts = _fill(store, out, fmt)
+            return ExportReport(out, rows, files, parts, False)
     if not out.parent.is_dir():
         raise ExportError(f"--out {out}: directory {out.parent} does not exist")
     temp = out.parent / f".{out.name}.tmp-{os.getpid()}"

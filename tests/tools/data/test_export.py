@@ -2,6 +2,7 @@
 back by pyarrow, DuckDB, pandas and Dask; grown databases add only new files; a failure mid-export
 leaves no partial file."""
 import json
+import shutil
 import sqlite3
 
 import pytest
@@ -138,20 +139,28 @@ def test_a_failure_while_adding_leaves_whole_files_only(db, tmp_path, monkeypatc
     assert report.rows == 3 * 6 and as_rows(pa_ds.dataset(out, partitioning="hive").to_table().to_pylist()) == stored(db)
 
 
-def test_out_is_replaced_only_with_force_and_errors_are_one_line(host, db, tmp_path):
-    other = tmp_path / "other"
-    other.mkdir()
-    (other / "notes.txt").write_text("mine")
-
+def test_force_replaces_only_an_earlier_export_and_errors_are_one_line(host, db, tmp_path):
     def error(*argv):
         code, out, err = host(*argv)
         assert code == 2 and out == "" and len(err.strip().splitlines()) == 1, (code, out, err)
         return err
 
-    assert "pass --force" in error("export", "--db", db, "--out", other)
-    assert host("export", "--db", db, "--out", other, "--force")[0] == 0
-    assert not (other / "notes.txt").exists() and len(list(other.rglob("*.parquet"))) == 2
-    assert "not a csv export" in error("export", "--db", db, "--out", other, "--format", "csv")
+    # a directory of anything else is never replaced: not the user's notes, not the database itself
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    shutil.copy(db, other / "scene.db")
+    for force in ((), ("--force",)):
+        said = error("export", "--db", other / "scene.db", "--out", other, *force)
+        assert "holds notes.txt, scene.db" in said and "not an export" in said
+    assert (other / "notes.txt").read_text() == "mine" and stored(other / "scene.db") == stored(db)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert host("export", "--db", db, "--out", empty)[0] == 0 and len(list(empty.rglob("*.parquet"))) == 2
+    assert "not a csv export" in error("export", "--db", db, "--out", empty, "--format", "csv")
+    assert "pass --force" in error("export", "--db", db, "--out", empty, "--format", "csv")
+    assert host("export", "--db", db, "--out", empty, "--format", "csv", "--force")[0] == 0
+    assert not list(empty.rglob("*.parquet")) and len(list(empty.rglob("*.csv"))) == 2
     assert "choose from 'parquet', 'csv'" in error("export", "--db", db, "--out", tmp_path / "y", "--format", "xlsx")
     assert "no such database" in error("export", "--db", tmp_path / "none.db", "--out", tmp_path / "y")
     with Store.open(tmp_path / "empty.db"):
