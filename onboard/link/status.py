@@ -61,16 +61,17 @@ class Status:
         return pk.RobotState.SWEEPING if self.state.mode is Mode.SWEEPING else pk.RobotState.IDLE
 
     def packet(self, text: str, report: pk.StatusReport | None = None,
-               state: pk.RobotState | None = None) -> tuple[int, bytes]:
+               state: pk.RobotState | None = None, last_seq: int | None = None) -> tuple[int, bytes]:
         """A STATUS packet (outbox kind, body), for the caller to queue or commit: `report`'s
-        fields, with the mode and the disk."""
+        fields, with the mode and the disk; `state` and `last_seq` where the caller knows them
+        ahead of the robot (a packet committed with the capture it follows)."""
         said = self.said()
         if report is not None:
             said = dataclasses.replace(report, mode=report.mode or said.mode, disk=report.disk or said.disk,
                                        pose_ms=said.pose_ms if report.pose_ms is None else report.pose_ms)
-        return wire.status_body(self.state.cfg.robot_id, self.wall(), state or self.robot_state(),
+        return wire.status_body(self.state.cfg.robot_id, self.wall(), self.robot_state() if state is None else state,
                                 self.state.pose, len(self.outbox), self.outbox.bytes_used,
-                                self.captures.last_seq, text, fit(said))
+                                self.captures.last_seq if last_seq is None else last_seq, text, fit(said))
 
     def send(self, text: str, report: pk.StatusReport | None = None) -> None:
         """Queue a STATUS now (straight on the link if the outbox cannot take it), and show its

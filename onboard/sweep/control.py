@@ -165,7 +165,7 @@ class SweepControl:
             result = "measured"
         if nxt.done:
             nxt.active = False
-            packets.append(self._done_packet(p, nxt))
+            packets.append(self._done_packet(p, nxt, seq if cap is not None else None))
         try:
             self.outbox.commit(packets, {**state, **self.sweeps.entry(nxt)}, reserve=self.reserve)
         except OutboxFull as exc:
@@ -181,14 +181,16 @@ class SweepControl:
         self._said(p, nxt, index, again, cap, seq if cap is not None else None, reason, result)
         return result
 
-    def _done_packet(self, p: SweepProgress, nxt: SweepProgress) -> tuple[int, bytes]:
-        """The STATUS that ends a sweep: how many poses were measured, and the ones missing with why."""
+    def _done_packet(self, p: SweepProgress, nxt: SweepProgress, seq: int | None) -> tuple[int, bytes]:
+        """The STATUS that ends a sweep: how many poses were measured, and the ones missing with
+        why; committed with the last pose's capture (`seq`), so it says the robot as it is after."""
         missing = tuple(skipped_pose(k) for k in nxt.skipped)
         return self.status.packet(
             "sweep done",
-            pk.StatusReport(sweep=sweep_report(p, active=False, measured=len(nxt.measured),
+            pk.StatusReport(mode=Mode.IDLE.value,
+                            sweep=sweep_report(p, active=False, measured=len(nxt.measured),
                                                skipped=pk.Kept((), len(nxt.skipped)), missing=pk.Kept(missing))),
-            pk.RobotState.IDLE)
+            pk.RobotState.IDLE, seq)
 
     def _said(self, p: SweepProgress, nxt: SweepProgress, index: int | None, again: bool, cap: FittedView | None,
               seq: int | None, reason: str, result: str) -> None:

@@ -69,6 +69,9 @@ def test_a_pose_the_tracker_failed_is_measured_once_the_plan_is_through(fake_rob
     (done,) = [p for p in packets if isinstance(p, pk.StatusPacket) and p.text == "sweep done"]
     assert done.report.sweep.measured == 3 and done.report.sweep.missing == pk.Kept(())
     assert rt.progress.done and not rt.progress.skipped
+    # it says the robot as it is once the sweep is over: idle, its last capture the sweep's last
+    last = [p.seq for p in packets if isinstance(p, pk.ModelsPacket)][-1]
+    assert (done.state, done.report.mode, done.last_seq) == (pk.RobotState.IDLE, "idle", last)
 
 
 def test_with_retry_skipped_zero_the_pose_stays_missing_with_its_reason(fake_robot):
