@@ -11,6 +11,7 @@ beside the synthetic ones.
 from __future__ import annotations
 
 import html
+import re
 from collections import Counter
 from pathlib import Path
 from typing import Any
@@ -71,12 +72,13 @@ def _images_html(store: Store, out: Path, groups: dict, measured: Measured | Non
     """Every capture's synthetic beside measured images and histograms, a section per robot and
     scene (anchors images-k); writes their PNGs into `out`."""
     parts, unmasked, shown = ["<section id=images><h2>Synthetic beside measured</h2>"], 0, 0
+    used: set[str] = set()
     for k, ((robot, scene, space), caps) in enumerate(groups.items()):
         parts.append(f"<section id=images-{k}><h3 class=group>{html.escape(source_name(robot, scene, space))}: "
                      f"{len(caps)} capture(s)</h3>")
         for c in caps:
             v = views(store, c, rng, measured)
-            name = f"{c.scene or 'robot' + c.robot}_{c.elevation:05.1f}_{c.sequence}"
+            name = _file_stem(c, used)
             bar.update()
             unmasked += v.no_mask
             if v.no_mask or not v.fitted:
@@ -98,6 +100,18 @@ def _images_html(store: Store, out: Path, groups: dict, measured: Measured | Non
     elif unmasked:
         parts.append(note(f"{unmasked} capture(s) without a label mask are not shown."))
     return "".join(parts) + "</section>"
+
+
+def _file_stem(c: Any, used: set[str]) -> str:
+    """A capture's image files' stem, scene_elevation_sequence: only letters, digits, '.', '_'
+    and '-', so a scene or robot name never leads outside the report's folder, and the capture's
+    id added where another capture took the stem (two datasets' folders of one name)."""
+    source = re.sub(r"[^A-Za-z0-9._-]+", "-", c.scene or "robot" + c.robot).lstrip(".") or "capture"
+    stem = f"{source[:60]}_{c.elevation:05.1f}_{c.sequence}"
+    if stem in used:
+        stem = f"{stem}_id{c.id}"
+    used.add(stem)
+    return stem
 
 
 def _toc(btfs: list, groups: dict, demo: Any) -> str:

@@ -92,6 +92,32 @@ def test_a_dataset_capture_is_shown_beside_the_image_it_was_fitted_from(tmp_path
     assert Frames()(cap) is None
 
 
+def test_image_files_stay_in_the_report_folder_and_two_captures_never_share_one(tmp_path):
+    """Scene and robot names become file names: a path in them stays inside the folder, and two
+    datasets whose folders share a name (the same scene, angle and number) keep their own images."""
+    from btf.fit.fitter import FrameFitter
+    from hal.interfaces import ViewAngles
+    from hal.scene import render
+    from tools.data.images import read_image
+
+    views = [render(scene, ViewAngles(50.0, 0.0), (40, 48), seed=0) for scene in ("mixed", "white", "black", "mixed")]
+    out = tmp_path / "deep" / "rep"
+    out.parent.mkdir()
+    with Store.open(tmp_path / "scene.db") as s:
+        for k, (robot, scene) in enumerate([("dataset:/a/photos", "photos"), ("dataset:/b/photos", "photos"),
+                                            ("7", "../escaped"), ("cam/1", "")]):
+            fitter = FrameFitter(4, 3)
+            fitter.add(views[k].image, views[k].mask)
+            s.add_capture(robot, 1, 0.0, None, (50.0, 0.0), "rgb", ("R", "G", "B"), fitter.fit(), scene=scene)
+            s.add_mask(f"{robot}/1", views[k].mask, robot)
+        write_report(s, out)
+    assert not list(tmp_path.glob("*.png")) and not list((tmp_path / "deep").glob("*.png"))
+    pngs = sorted(p.name for p in out.glob("*_synthetic.png"))
+    assert len(pngs) == 4 and all("/" not in p and not p.startswith(".") for p in pngs), pngs
+    first, second = (read_image(out / p) for p in pngs if p.startswith("photos_"))
+    assert not np.array_equal(first, second)  # the white plate's and the mixed one's, each its own
+
+
 @pytest.mark.parametrize("space", ["pca", "hsv"])
 def test_hsv_and_pca_captures_are_drawn_as_pictures_in_the_scenes_colours(host, tmp_path, space):
     """Their syntheses turned back into RGB (pca through the stored basis) look like the photograph."""
