@@ -93,9 +93,14 @@ def stored_photo(db: str, capture: str, robot_config: str | None) -> tuple[np.nd
     except (StoreUnavailable, CorruptDatabase) as exc:
         raise CliError(str(exc)) from None
     try:
-        cap = store.capture_by_seq(robot, int(seq))
-        if cap is None:
+        # a robot numbers its captures afresh in each state it keeps (its incarnation): the newest such capture
+        same = sorted((c for c in store.captures(robot=robot) if c.sequence == int(seq)), key=lambda c: c.id)
+        if not same:
             raise CliError(f"database {db}: no capture {capture}")
+        cap = same[-1]
+        if len(same) > 1:
+            print(f"btf-host: note: robot {robot} numbered {len(same)} captures {seq} (one per robot state); "
+                  f"judging the newest, stored as capture id {cap.id}", file=sys.stderr)
         try:
             frames = Frames.from_robot_config(robot_config)
         except ValueError as exc:

@@ -103,6 +103,19 @@ def test_a_stored_capture_is_judged_by_its_image_or_said_to_have_none(run, photo
     assert "--db needs --capture" in refused(*run("spaces", "--db", photo / "f.db")[::2])
 
 
+def test_a_robots_capture_is_found_in_whichever_state_numbered_it(run, photo):
+    """Robot captures carry the id of the robot state that numbered them: ROBOT/SEQ finds the
+    newest, and says so where two states numbered the same."""
+    fitter = FrameFitter(1, 3)
+    fitter.add(read_image(photo / "a.png"), np.zeros(read_image(photo / "a.png").shape[:2], np.uint8))
+    with Store.open(photo / "r.db") as s:
+        for incarnation in ("a1b2", "c3d4"):
+            s.add_capture("1", 3, 0.0, None, (40.0, 0.0), "rgb", ("R", "G", "B"), fitter.fit(), incarnation=incarnation)
+    code, _, err = run("spaces", "--db", photo / "r.db", "--capture", "1/3")
+    assert code == 2 and "capture 1/3 has no image to judge by" in err
+    assert "numbered 2 captures 3 (one per robot state); judging the newest, stored as capture id 2" in err
+
+
 def test_fit_space_auto_is_recorded_with_the_capture(run, photo):
     code, out, _ = run("fit", photo / "a.png", "--mask", photo / "m.png", "--space", "auto", "--json")
     doc = json.loads(out)
