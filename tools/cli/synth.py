@@ -269,7 +269,13 @@ def run(args: argparse.Namespace) -> int:
     else:
         _radiometry(args, "rgb")  # refuses --exposure and --normalise-reference without --db
         by_angle, dependence, space, levels, pca_rec = _from_json(args.model)
-        pca = PcaBasis.from_record(pca_rec) if pca_rec else None
+        try:
+            pca = PcaBasis.from_record(pca_rec) if pca_rec else None
+        except ValueError as exc:
+            raise CliError(f"models {args.model}: {exc}") from None
+        bands = 1 + max((b for models in by_angle.values() for _, b in models), default=-1)
+        if pca is not None and pca.n != bands:
+            raise CliError(f"models {args.model}: its pca basis has {pca.n} channel(s) for {bands} band(s) of models")
     _check_depth(args.out, levels)
     _check_bands(args.out, space, by_angle)
     mask = _read_mask(args.mask)

@@ -145,6 +145,27 @@ def test_a_pca_fit_is_stored_with_its_basis_and_synthesized_back_into_the_photog
         assert np.abs(drawn[mask == label].mean(0) - image[mask == label].mean(0)).max() < 10
 
 
+@pytest.mark.parametrize("damage", ["no mean", "nan", "sizes", "a list", "two channels"])
+def test_a_models_document_with_a_damaged_pca_basis_is_refused_in_one_line(run, photo, damage):
+    code, out, _ = run("fit", photo / "a.png", "--mask", photo / "m.png", "--space", "pca", "--json")
+    doc = json.loads(out)
+    basis = doc["pca"]
+    if damage == "no mean":
+        del basis["mean"]
+    elif damage == "nan":
+        basis["mean"][0] = float("nan")
+    elif damage == "sizes":
+        basis["rotation"] = basis["rotation"][:2]
+    elif damage == "a list":
+        doc["pca"] = [1, 2]
+    else:
+        doc["pca"] = {"mean": [0, 0], "rotation": [[1, 0], [0, 1]], "scale": [1, 1], "offset": [0, 0]}
+    (photo / "bad.json").write_text(json.dumps(doc))
+    said = run("synth", "--model", photo / "bad.json", "--mask", photo / "m.png", "--out", photo / "s.png")
+    line = refused(said[0], said[2])
+    assert "pca" in line and "bad.json" in line and not (photo / "s.png").exists()
+
+
 @pytest.mark.parametrize("name", COLOUR)
 @pytest.mark.parametrize("masked", [False, True])
 def test_auto_never_chooses_a_space_worse_than_rgb_beyond_the_noise_between_two_seeds(run, tmp_path, name, masked):
