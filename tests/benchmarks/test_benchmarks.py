@@ -109,6 +109,27 @@ def test_runner_writes_results_headed_by_the_machine(tmp_path, capsys):
     assert "- CPU:" in text and "- cores:" in text and "## Wire" in text
 
 
+def test_a_benchmark_run_alone_replaces_only_its_own_sections(tmp_path, monkeypatch, capsys):
+    import benchmarks.__main__ as runner
+
+    old = ["# Benchmark results", "", "- CPU: then", "", "## Core: fit", "", "old core", "",
+           "## Wire: bytes", "", "old wire", "", "## Zeta", "", "old zeta", "", "_Whole run: 900 s._", ""]
+    (tmp_path / "RESULTS.md").write_text("\n".join(old))
+    monkeypatch.setattr(runner, "run_one", lambda name, ctx: [Section("Wire: bytes", ["new wire"]),
+                                                              Section("Wire: more", ["added"])])
+    assert main(["wire", "--out", str(tmp_path)]) == 0
+    text = (tmp_path / "RESULTS.md").read_text()
+    assert "old wire" not in text and text.count("## ") == 4
+    assert text.index("- CPU: then") < text.index("old core") < text.index("new wire") < text.index("old zeta")
+    assert text.index("old zeta") < text.index("## Wire: more") < text.index("_Whole run: 900 s._")
+    assert text.count("re-run alone") == 2 and "`python -m benchmarks wire`" in text
+    # a smoke test without --out goes to a temporary directory, never over the measured figures
+    monkeypatch.setattr(runner.tempfile, "gettempdir", lambda: str(tmp_path / "tmp"))
+    assert main(["wire", "--quick"]) == 0
+    assert (tmp_path / "tmp" / "btfscout-bench-quick" / "RESULTS.md").is_file()
+    assert (tmp_path / "RESULTS.md").read_text() == text
+
+
 def test_runner_refuses_an_unknown_benchmark(tmp_path, capsys):
     assert main(["nosuch", "--out", str(tmp_path)]) == 2
     assert "no benchmarks/bench_nosuch.py" in capsys.readouterr().err
