@@ -104,12 +104,18 @@ def models_from_document(doc: object) -> tuple[float | None, dict[tuple[int, int
     out: dict[tuple[int, int], Johnson] = {}
     for k, row in enumerate(doc["models"]):
         try:
-            out[(int(row["label"]), int(row["band"]))] = Johnson(
-                Family(row["family"]), float(row["gamma"]), float(row["delta"]),
-                float(row["xi"]), float(row["lam"]))
+            label, band = row["label"], row["band"]
+            if type(label) is not int or type(band) is not int or label < 0 or band < 0:
+                raise ValueError(f"label {label!r} and band {band!r} must be whole numbers from 0")
+            if (label, band) in out:  # a second one would silently take the first's place
+                raise ValueError(f"a second model of label {label} band {band}; keep one")
+            out[(label, band)] = Johnson(Family(row["family"]), float(row["gamma"]), float(row["delta"]),
+                                         float(row["xi"]), float(row["lam"]))
         except (KeyError, TypeError, ValueError) as exc:
             raise ValueError(f"model {k}: {exc}") from None
     angle = doc.get("angle")
     if angle is not None and (type(angle) not in (int, float) or not np.isfinite(angle)):
         raise ValueError(f"angle {angle!r} is not a finite number of degrees")
+    if angle is not None and not 0.0 <= angle <= 90.0:
+        raise ValueError(f"angle {angle:g}: an elevation lies in 0..90 degrees")
     return (None if angle is None else float(angle)), out, doc

@@ -74,6 +74,11 @@ def _check(mask: np.ndarray, models: Models, n_bands: int, where: str = "",
     missing = sorted({lab for lab in labels for b in range(n_bands) if (lab, b) not in models})
     if missing:
         have = sorted({lab for lab, _ in models})
+        partial = [lab for lab in missing if lab in have]
+        if partial:  # a label with models of some bands only
+            lack = [b for b in range(n_bands) if (partial[0], b) not in models]
+            raise MissingModels(f"label {partial[0]} has no model of band(s) {lack}{where} "
+                                f"(each label needs all {n_bands} bands' models)")
         raise MissingModels(
             f"mask label(s) {missing} have no models{where} (models exist for labels {have})"
         )

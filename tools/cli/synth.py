@@ -268,6 +268,10 @@ def run(args: argparse.Namespace) -> int:
                 pca = _stored_basis(store.pca_by_angle(**source), args.db)
     else:
         _radiometry(args, "rgb")  # refuses --exposure and --normalise-reference without --db
+        given = [o for o, v in (("--space", args.space), ("--robot", args.robot), ("--scene", args.scene)) if v]
+        if given:  # they choose among a database's captures: a models document has its own
+            raise CliError(f"{', '.join(given)}: chooses among a database's captures (--db); a models document "
+                           "holds one space, robot and scene")
         by_angle, dependence, space, levels, pca_rec = _from_json(args.model)
         try:
             pca = PcaBasis.from_record(pca_rec) if pca_rec else None

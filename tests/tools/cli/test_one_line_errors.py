@@ -115,3 +115,34 @@ def test_photographs_stored_under_their_own_scene_are_chosen_never_mixed(run, fi
                                                                               ("host", "sand", 256)]
     line = refused(*run("fit", files / "a.png", "--scene", "sand")[::2])
     assert "--db" in line
+
+
+@pytest.mark.parametrize(("edit", "said"), [
+    ("second model", "a second model of label 0 band 0; keep one"),
+    ("half a label", "label 0.5 and band 0 must be whole numbers from 0"),
+    ("band missing", "label 0 has no model of band(s) [1]"),
+    ("angle 95", "angle 95: an elevation lies in 0..90 degrees"),
+    ("--space", "--space: chooses among a database's captures (--db)"),
+])
+def test_a_hand_edited_models_document_is_refused_where_it_would_mislead(run, files, edit, said):
+    """A model of one band given twice took the first's place silently, and the region's band
+    came out one level; database-only options were ignored."""
+    code, out, _ = run("fit", files / "a.png", "--mask", files / "m.png", "--json")
+    doc = json.loads(out)
+    first = doc["models"][0]
+    assert (first["label"], first["band"]) == (0, 0)
+    extra: tuple = ()
+    if edit == "second model":
+        doc["models"].append({**first, "xi": 200.0})
+    elif edit == "half a label":
+        first["label"] = 0.5
+    elif edit == "band missing":
+        doc["models"] = [m for m in doc["models"] if (m["label"], m["band"]) != (0, 1)]
+    elif edit == "angle 95":
+        doc["angle"] = 95
+    else:
+        extra = ("--space", "hsv")
+    (files / "edited.json").write_text(json.dumps(doc))
+    code, _, err = run("synth", "--model", files / "edited.json", "--mask", files / "m.png", "--out",
+                       files / "s.png", *extra)
+    assert said in refused(code, err) and not (files / "s.png").exists()
