@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         METRICS,
         compare_bands,
     )
-    from tools.data.images import ImageError, default_space, feature_bands, read_image, read_mask, three_bands
+    from tools.data.images import ImageError, default_space, feature_bands, read_image, read_mask
 
     try:
         ref = read_image(args.ref)
@@ -70,9 +70,10 @@ def run(args: argparse.Namespace) -> int:
         if ref.shape[2] != test.shape[2] and 1 < min(ref.shape[2], test.shape[2]):
             raise ImageError(f"image {args.test}: {test.shape[2]} bands, {args.ref} has {ref.shape[2]}; "
                              "compare images of the same bands")
-        space = args.space or (default_space(ref) if ref.shape[2] == test.shape[2] else "rgb")
+        space = args.space or default_space(ref)
         if ref.shape[2] != test.shape[2] and space != "gray":  # a one-band image against a colour one
-            ref, test = three_bands(ref), three_bands(test)
+            raise ImageError(f"image {args.test}: {test.shape[2]} band(s), {args.ref} has {ref.shape[2]}; "
+                             "compare a one-band image with a colour one in gray (--space gray)")
         factors = None if args.reference_label is None else _normalise(ref, test, mask, args.reference_label, args.test)
         a, _ = feature_bands(ref, space)
         del ref  # each image gives way to its bands: peak memory stays near the images themselves

@@ -251,13 +251,16 @@ def feature_bands(image: np.ndarray, space: str | None = None, pca=None):
     """The robot's own feature bands of an image (btf.fit.features); `space` None follows the
     image (`default_space`); pca fits a basis if none is given. A one-band image in gray is its
     own band at its own depth; a 16-bit image keeps its depth: rgb and raw as they are, gray by
-    OpenCV's weights. Colour spaces of a one-band image see it repeated to RGB; raw is any image's
-    own bands."""
+    OpenCV's weights. A one-band image has no colour space (its R, G and B would be one band three
+    times, its hue and saturation 0); raw is any image's own bands."""
     space = default_space(image) if space is None else space
     if space not in SPACES:
         raise ImageError(f"feature space {space!r}: expected one of {', '.join(SPACES)}")
     if space == "raw":  # the bands as they are, at their depth
         return compute(image, FeatureSpec(FeatureSpace.RAW)), None
+    if band_count(image) == 1 and space != "gray":
+        raise ImageError(f"feature space {space}: the image is one band, which has no colours; "
+                         "use gray (its own band, the default)")
     if band_count(image) not in (1, 3):
         raise ImageError(f"feature space {space}: the image has {band_count(image)} bands, and {space} is "
                          "made from one or three; fit its own bands with the raw space")

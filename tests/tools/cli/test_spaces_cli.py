@@ -67,6 +67,15 @@ def test_a_one_band_photograph_offers_gray_alone(run, photo):
     assert "offers only gray; drop rgb" in line
     code, out, _ = run("spaces", photo / "g.png", "--masks", "kmeans2", "--json")
     assert code == 0 and [r["space"] for r in json.loads(out)["rows"]] == ["gray"]
+    # fit, pdfs and compare say the same: a one-band image has no colours to fit or compare
+    for argv in (("fit", photo / "g.png", "--space", "hsv"),
+                 ("pdfs", photo / "g.png", "--mask", photo / "m.png", "--space", "rgb"),
+                 ("compare", photo / "g.png", photo / "g.png", "--space", "hsv")):
+        assert "the image is one band, which has no colours; use gray" in refused(*run(*argv)[::2])
+    line = refused(*run("compare", photo / "a.png", photo / "g.png")[::2])
+    assert "1 band(s)" in line and "in gray (--space gray)" in line
+    code, out, _ = run("compare", photo / "a.png", photo / "g.png", "--space", "gray")
+    assert code == 0 and "Y" in out
 
 
 def test_a_photograph_of_flat_colours_is_judged_without_a_warning(run, tmp_path, recwarn):

@@ -149,10 +149,13 @@ def test_unusable_pixel_types_are_one_line_and_exit_2(host, tmp_path, pixels, me
 
 def test_depth_mistakes_are_one_line_and_exit_2(host, thermal, tmp_path):
     write_image(tmp_path / "eight.png", np.zeros((480, 640, 3), np.uint8))
+    write_image(tmp_path / "deep.png", np.full((48, 64, 3), 999, np.uint16))
     cases = [
         (["compare", thermal / "thermal.png", tmp_path / "eight.png"], "compare images of one depth"),
-        (["fit", thermal / "thermal.png", "--space", "hsv"], "16-bit images are fitted in rgb or gray"),
-        (["pdfs", thermal / "thermal.png", "--mask", thermal / "mask.png", "--space", "pca"], "rgb or gray"),
+        # a thermal frame is one band: no colour space of it, at any depth
+        (["fit", thermal / "thermal.png", "--space", "hsv"], "the image is one band"),
+        (["pdfs", thermal / "thermal.png", "--mask", thermal / "mask.png", "--space", "pca"], "use gray"),
+        (["fit", tmp_path / "deep.png", "--space", "hsv"], "16-bit images are fitted in rgb or gray"),
     ]
     code, out, _ = host("fit", thermal / "thermal.png", "--mask", thermal / "mask.png", "--space", "gray", "--json")
     (tmp_path / "m.json").write_text(out)
