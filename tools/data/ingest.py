@@ -185,13 +185,20 @@ def ingest(root: str | Path, layout: str | Layout, db: str | Path, *, mask: str 
     with Store.open(db) as store:
         done = store.sources(robot)
         todo = [im for im in images if im.name not in done]
-        jobs = [Job(im.name, str(im.path), _mask_for(im, mask_path), space, dependence, band_names) for im in todo]
+        jobs, unmasked = [], []
+        for im in todo:
+            try:
+                jobs.append(Job(im.name, str(im.path), _mask_for(im, mask_path), space, dependence, band_names))
+            except IngestError as exc:  # no mask of its own in the masks folder
+                if not keep_going:
+                    raise
+                unmasked.append(Damaged(im.name, str(exc)))
         if mask_path is not None and mask_path.is_file() and jobs:
             try:
                 store.add_mask(robot, read_mask(mask_path), robot)
             except ImageError as exc:
                 raise IngestError(str(exc)) from None
-        stored, damaged = 0, []
+        stored, damaged = 0, list(unmasked)
         if jobs:
             by_name = {im.name: im for im in todo}
             # connects before any work is shown

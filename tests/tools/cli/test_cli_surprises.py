@@ -182,6 +182,24 @@ def test_ingest_keep_going_skips_damaged_images_and_names_them_at_the_end(run, t
         assert sorted(c.source for c in s.captures()) == sorted(p.name for i, p in enumerate(pngs) if i not in (1, 3))
 
 
+def test_ingest_keep_going_skips_an_image_the_masks_folder_has_no_mask_for(run, tmp_path):
+    from tools.data.datasets import Angles, write_rendered
+
+    write_rendered(tmp_path / "d", "utia", [Angles(el, 0.0, 50.0, 0.0) for el in (30.0, 60.0, 90.0)], size=(24, 24))
+    pngs = sorted((tmp_path / "d").glob("*.png"))
+    (tmp_path / "masks").mkdir()
+    for p in pngs[:2]:  # the last image has none
+        write_mask(tmp_path / "masks" / p.name, np.zeros((24, 24), np.uint8))
+    argv = ("ingest", tmp_path / "d", "--layout", "utia", "--mask", tmp_path / "masks", "--db", tmp_path / "x.db",
+            "--workers", 0, "--quiet")
+    code, _, err = run(*argv)
+    assert code == 2 and "masks folder has none for " + pngs[2].name in one_line(err)
+    code, out, err = run(*argv, "--keep-going")
+    assert code == 1 and "2 image(s) stored" in out and err.strip().splitlines()[-1].startswith("btf-host: 1 damaged")
+    with Store.open(tmp_path / "x.db", create=False) as s:
+        assert sorted(c.source for c in s.captures()) == [p.name for p in pngs[:2]]
+
+
 # --- --robot / --scene -------------------------------------------------------------------------
 def _two_scene_db(path: Path) -> Path:
     """Robot 1 measured a dark plate, robot 2 a bright one, both at 30 and 60 degrees."""
