@@ -132,27 +132,37 @@ def read_sidecar(path: Path) -> dict[str, Angles]:
     """File name -> Angles from a folder's CSV sidecar (degrees, elevation above the horizon)."""
     if not path.is_file():
         raise DatasetError(f"angle table {path}: no such file")
-    with open(path, newline="", errors="replace") as fh:
-        rows = list(csv.DictReader(fh))
-        fields = set(rows[0]) if rows else set()
+    # utf-8-sig: spreadsheets write a byte-order mark before the header; spaces after commas are read past
+    with open(path, newline="", encoding="utf-8-sig", errors="replace") as fh:
+        reader = csv.DictReader(fh, skipinitialspace=True)
+        rows = list(reader)
+        fields = {(name or "").strip() for name in reader.fieldnames or ()}
     need = {"file", "elevation", "azimuth"}
     if not need <= fields:
-        raise DatasetError(f"angle table {path}: needs columns {', '.join(sorted(need))}")
+        found = ", ".join(sorted(f for f in fields if f)) or "none"
+        raise DatasetError(f"angle table {path}: needs columns {', '.join(sorted(need))} (found: {found})")
+    if not rows:
+        raise DatasetError(f"angle table {path}: no rows below its header")
     light = {"light_elevation", "light_azimuth"} <= fields
     out: dict[str, Angles] = {}
-    for lineno, row in enumerate(rows, 2):
+    for lineno, raw in enumerate(rows, 2):
+        row = {(k or "").strip(): v.strip() if isinstance(v, str) else ("" if v is None else v) for k, v in raw.items()}
         where = f"angle table {path}, line {lineno}"
+        if row["file"] in out:
+            raise DatasetError(f"{where}: {row['file']} listed twice")
         try:
             el, az = _direction(float(row["elevation"]), float(row["azimuth"]), where)
             lel = laz = None
-            if light and (row["light_elevation"] or "").strip():
+            if light and (row["light_elevation"] or row["light_azimuth"]):
+                if not (row["light_elevation"] and row["light_azimuth"]):
+                    raise DatasetError(f"{where}: a light direction needs both light_elevation and light_azimuth")
                 lel, laz = _direction(float(row["light_elevation"]), float(row["light_azimuth"]),
                                       where + " (illumination)")
         except (TypeError, ValueError) as exc:
             if isinstance(exc, DatasetError):
                 raise
             raise DatasetError(f"{where}: angles are not numbers") from None
-        out[row["file"].strip()] = Angles(el, az, lel, laz)
+        out[row["file"]] = Angles(el, az, lel, laz)
     return out
 
 

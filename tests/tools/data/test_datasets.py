@@ -88,12 +88,24 @@ def test_folder_sidecar_without_light_columns_and_missing_rows(tmp_path):
 @pytest.mark.parametrize("text, problem", [
     ("name,el\nview_000.png,3\n", "needs columns"), ("file,elevation,azimuth\nview_000.png,x,0\n", "not numbers"),
     ("file,elevation,azimuth\nview_000.png,120,0\n", "elevation 120"),
+    ("file,elevation,azimuth\n", "no rows below its header"),
+    ("file,elevation,azimuth\nview_000.png,30,0\nview_000.png,40,0\n", "line 3: view_000.png listed twice"),
+    ("file,elevation,azimuth,light_elevation,light_azimuth\nview_000.png,30,0,45,\n",
+     "needs both light_elevation and light_azimuth"),
+    ("name,el\nview_000.png,3\n", r"\(found: el, name\)"),
 ])
 def test_bad_sidecars_name_the_problem(tmp_path, text, problem):
     write_rendered(tmp_path, "folder", VIEWS[:1], size=(16, 16), masks=False)
     (tmp_path / "angles.csv").write_text(text)
     with pytest.raises(DatasetError, match=problem):
         scan(tmp_path, "folder")
+
+
+def test_a_sidecar_as_spreadsheets_write_it_is_read(tmp_path):
+    """A byte-order mark before the header (Excel's CSV UTF-8) and spaces after the commas."""
+    write_rendered(tmp_path, "folder", VIEWS[:1], size=(16, 16), masks=False)
+    (tmp_path / "angles.csv").write_bytes(b"\xef\xbb\xbffile, elevation, azimuth\r\nview_000.png, 30, 10\r\n")
+    assert scan(tmp_path, "folder")[0].angles == Angles(30.0, 10.0)
 
 
 def test_missing_directory_empty_directory_and_unknown_layout(tmp_path):
