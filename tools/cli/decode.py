@@ -4,7 +4,9 @@ from __future__ import annotations
 import argparse
 import binascii
 import json
+import sys
 from pathlib import Path
+from typing import Iterable, Iterator
 
 from cobs import cobs
 
@@ -25,46 +27,57 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     a.add_argument("--no-auth", action="store_true", help="unauthenticated: frame headers only")
 
 
-def headers(bodies: list[bytes]) -> list[dict]:
-    """Frame headers without the key: CRC checked, the tag not (marked so)."""
+READ_BYTES = 1 << 16  # the recording is read, framed and printed this much at a time
 
-    out = []
+
+def frames_of(path: Path) -> Iterator[bytes]:
+    """The frame bodies of a recording, read a block at a time: the first lines print at once,
+    and memory stays flat however long the recording."""
+    deframer = Deframer(max_body=8192)
+    try:
+        with open(path, "rb") as fh:
+            while block := fh.read(READ_BYTES):
+                yield from deframer.feed(block)
+    except OSError as exc:
+        raise CliError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    yield from deframer.feed(b"\x00")
+
+
+def headers(bodies: Iterable[bytes]) -> Iterator[dict]:
+    """Frame headers without the key: CRC checked, the tag not (marked so)."""
     for i, raw in enumerate(bodies):
         row: dict = {"frame": i, "authenticated": False}
         try:
             body = cobs.decode(raw)
         except cobs.DecodeError as exc:
-            out.append({**row, "error": f"cobs: {exc}"})
+            yield {**row, "error": f"cobs: {exc}"}
             continue
         if len(body) < OVERHEAD:
-            out.append({**row, "error": f"length: {len(body)} bytes"})
+            yield {**row, "error": f"length: {len(body)} bytes"}
             continue
         if binascii.crc_hqx(body[:-CRC_LEN], 0xFFFF) != int.from_bytes(body[-CRC_LEN:], "big"):
-            out.append({**row, "error": "crc: CRC mismatch"})
+            yield {**row, "error": "crc: CRC mismatch"}
             continue
         first, sender, link, seq, counter = HEADER.unpack_from(body)
         try:
             kind = FrameKind(first & 0x0F).name
         except ValueError:
             kind = first & 0x0F
-        out.append({**row, "version": first >> 4, "kind": kind, "sender": sender, "link": link,
-                    "seq": seq, "counter": int.from_bytes(counter, "big"),
-                    "payload_bytes": len(body) - OVERHEAD})
-    return out
+        yield {**row, "version": first >> 4, "kind": kind, "sender": sender, "link": link,
+               "seq": seq, "counter": int.from_bytes(counter, "big"), "payload_bytes": len(body) - OVERHEAD}
 
 
-def authenticated(bodies: list[bytes], key: bytes) -> list[dict]:
+def authenticated(bodies: Iterable[bytes], key: bytes) -> Iterator[dict]:
     """Each frame checked with the key; reliable messages reassembled and decoded as packets."""
     links: dict[tuple[int, int], Link] = {}
-    out: list[dict] = []
     for i, raw in enumerate(bodies):
         try:
             f = decode(raw, key)
         except FrameError as exc:
-            out.append({"frame": i, "error": str(exc)})
+            yield {"frame": i, "error": str(exc)}
             continue
-        out.append({"frame": i, "authenticated": True, "kind": f.kind.name, "sender": f.sender,
-                    "link": f.link, "seq": f.seq, "counter": f.counter, "payload_bytes": len(f.payload)})
+        yield {"frame": i, "authenticated": True, "kind": f.kind.name, "sender": f.sender,
+               "link": f.link, "seq": f.seq, "counter": f.counter, "payload_bytes": len(f.payload)}
         k = (f.sender, f.link)
         if k not in links:  # a receiver per sender, as the peer would run
             links[k] = Link((f.sender + 1) % 256, f.sender, f.link, key, MemoryCounterStore())
@@ -72,28 +85,38 @@ def authenticated(bodies: list[bytes], key: bytes) -> list[dict]:
         for ev in links[k].pop_events():
             if isinstance(ev, Delivered):
                 try:
-                    out.append({"message": ev.msg_id, "sender": ev.sender, **packet_json(pk.decode(ev.payload))})
+                    yield {"message": ev.msg_id, "sender": ev.sender, **packet_json(pk.decode(ev.payload))}
                 except FrameError as exc:
-                    out.append({"message": ev.msg_id, "sender": ev.sender, "error": str(exc)})
-    return out
+                    yield {"message": ev.msg_id, "sender": ev.sender, "error": str(exc)}
 
 
 def run(args: argparse.Namespace) -> int:
     path = Path(args.file)
-    try:
-        data = path.read_bytes()
-    except FileNotFoundError:
-        raise CliError(f"{path}: no such file") from None
-    except OSError as exc:
-        raise CliError(f"{path}: cannot read ({exc.strerror})") from None
+    if not path.exists():
+        raise CliError(f"{path}: no such file")
+    if path.is_dir():
+        raise CliError(f"{path}: cannot read (Is a directory)")
     key = None
     if args.key:
         try:
             key = load_key(args.key)
         except KeyFileError as exc:
             raise CliError(str(exc)) from None
-    bodies = Deframer(max_body=8192).feed(data + b"\x00")
-    rows = headers(bodies) if key is None else authenticated(bodies, key)
-    for row in rows:
+    frames = passed = data = messages = 0
+    for row in headers(frames_of(path)) if key is None else authenticated(frames_of(path), key):
         print(json.dumps(row))
+        if "frame" in row:
+            frames += 1
+            passed += bool(row.get("authenticated"))
+            data += row.get("kind") == "DATA"
+        else:
+            messages += 1
+    if key is not None and frames and not passed:
+        raise CliError(f"no frame of {path} authenticates with {args.key}: wrong key? Give the link's key file, "
+                       "or --no-auth for the frame headers alone")
+    if key is not None and data and not messages:
+        print(f"btf-host: note: {data} DATA frame(s) authenticated but no message put together: the recording "
+              "starts after its link came up (no SYN before them)", file=sys.stderr)
+    if not frames:
+        print(f"btf-host: note: {path}: no frames", file=sys.stderr)
     return 0

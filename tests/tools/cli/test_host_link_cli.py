@@ -56,9 +56,38 @@ def test_decode_without_the_key_shows_headers_and_a_wrong_key_rejects_every_fram
     kinds = {r.get("kind") for r in rows}
     assert {"SYN", "DATA"} <= kinds and all(r["authenticated"] is False for r in rows)
     other = write_key(tmp_path / "other.key")
-    assert main(["decode", str(path), "--key", str(other)]) == 0
-    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert main(["decode", str(path), "--key", str(other)]) == 2
+    said = capsys.readouterr()
+    rows = [json.loads(line) for line in said.out.splitlines()]
     assert rows and all("error" in r for r in rows)
+    (line,) = said.err.strip().splitlines()
+    assert "authenticates with" in line and "wrong key?" in line
+
+
+def test_decode_of_a_recording_begun_after_the_link_came_up_says_why_no_message_is_shown(key, tmp_path, capsys):
+    whole = recording(key, tmp_path).read_bytes()
+    frames = whole.split(b"\x00")
+    syn = [i for i, f in enumerate(frames) if f and main_kind(f, key) == "SYN"]
+    late = tmp_path / "late.bin"
+    late.write_bytes(b"\x00".join(frames[syn[-1] + 1:]))
+    assert main(["decode", str(late), "--key", str(key)]) == 0
+    said = capsys.readouterr()
+    assert not [r for r in map(json.loads, said.out.splitlines()) if "message" in r]
+    assert "no message put together: the recording starts after its link came up" in said.err
+    empty = tmp_path / "empty.bin"
+    empty.write_bytes(b"")
+    assert main(["decode", str(empty), "--no-auth"]) == 0 and "no frames" in capsys.readouterr().err
+
+
+def main_kind(raw: bytes, key: bytes) -> str | None:
+    from radio import FrameError
+    from radio.frame import decode
+    from radio.keys import load_key
+
+    try:
+        return decode(raw, load_key(key)).kind.name
+    except FrameError:
+        return None
 
 
 @pytest.mark.parametrize("argv, needle", [
