@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from btf.fit import space_choice
+from btf.fit import dependence, space_choice
 from radio import packets
 from tools.analysis import grain_metrics
 from tools.analysis.metrics import compare_bands
@@ -126,13 +126,19 @@ def texture(photo: np.ndarray, synth: np.ndarray, labels: np.ndarray) -> dict[st
 
 
 def wire_bytes(fitted, levels: int) -> int | None:
-    """The MODELS body's length as the robot would send it (None when it exceeds a link message)."""
+    """The MODELS body's length as the robot would send it (None when it exceeds a link message):
+    with the robot's own dependence record (its window and row rule), not the host's larger one."""
     extras = fitted.pca.to_extras() if fitted.pca is not None else None
+    robots = None
+    if fitted.results:
+        seen = {lab: (dep.lo, dep.hi) for lab, dep in fitted.dependence.items() if dep.lo}
+        robots = dependence.measure(fitted.feats.data, fitted.labels, {k: r.model for k, r in fitted.results.items()},
+                                    fitted.feats.levels, levels_seen=seen)
     try:
         return len(packets.encode_models(fitted.results, robot_id=0, seq=0, time=0.0, commanded=(0.0, 0.0),
                                          measured=(0.0, 0.0), feature_space=fitted.feats.space.value,
                                          bands=fitted.feats.band_names, levels=levels, extras=extras,
-                                         dependence=fitted.dependence))
+                                         dependence=robots))
     except ValueError:
         return None
 

@@ -9,6 +9,7 @@ import json
 import numpy as np
 import pytest
 
+from btf.fit import dependence as robot_dependence
 from btf.fit.fitter import FrameFitter
 from radio import packets
 from tests.support.images import public_photos
@@ -80,10 +81,14 @@ def test_the_table_agrees_with_a_direct_computation(judged, name):
             if band != "H":
                 want = np.corrcoef(syn[..., b].ravel().astype(float), data[..., b].ravel().astype(float))[0, 1]
                 assert row["table1"]["independent"][band] == pytest.approx(want, abs=1e-9)
+        # the bytes the robot would send: its own dependence record, as its pipeline measures it
+        robots = robot_dependence.measure(feats.data, labels, models, levels,
+                                          levels_seen={k: (d.lo, d.hi) for k, d in fitted.dependence.items()})
+        assert sum(len(d.acf[0]) for d in robots.values() if d.measured) < sum(
+            len(d.acf[0]) for d in fitted.dependence.values() if d.measured)  # a smaller window than the host's
         body = packets.encode_models(fitted.results, robot_id=0, seq=0, time=0.0, commanded=(0.0, 0.0),
                                      measured=(0.0, 0.0), feature_space=row["space"], bands=row["bands"],
-                                     levels=levels, extras=pca.to_extras() if pca else None,
-                                     dependence=fitted.dependence)
+                                     levels=levels, extras=pca.to_extras() if pca else None, dependence=robots)
         assert row["wire_bytes"] == len(body)
         assert len(packets.decode(body).fits) == row["regions"] * len(row["bands"])
         assert row["fit_ms"] > 0 and all(v is None or np.isfinite(v) for v in row["texture"].values())
