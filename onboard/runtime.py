@@ -94,6 +94,7 @@ class Runtime:
         if cfg.features.space == "auto":
             self.pipeline.keep_space(read_space(self.outbox.state(SPACE_KEY)))
         self.link = LinkService(transport, self.outbox, self.state, on_ack=self._room_freed)
+        self._sessions_heard = 0  # sessions the base opened that this robot has told its state
         self.captures = Captures(self.state, self.outbox, wall)
         self.failsafe = Failsafe(self.state, hal.arm, wall, lambda text, report: self.status.send(text, report))
         self.status = Status(self.state, self.outbox, self.captures, self.pipeline, self.failsafe, self.link,
@@ -163,6 +164,12 @@ class Runtime:
                 self.dispatch.on_body(event.payload)
             elif isinstance(event, PeerStale):
                 self.note(f"link: {event.text}")
+        stats = self.link.stats()
+        if stats is not None and stats.sessions_opened > self._sessions_heard:
+            # a station (re)started opens a session while the link stays up: the whole report tells it
+            # the robot, its pose and the sweep at once, where an idle robot would otherwise say nothing
+            self._sessions_heard = stats.sessions_opened
+            self.status.send("the base opened a session", self.status.report())
         self.link.write(now)
         self.notifier.kick()
 

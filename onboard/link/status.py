@@ -93,7 +93,8 @@ def sweep_report(p: SweepProgress, whole: bool = False, **said) -> pk.SweepRepor
         p.sweep_id, next=p.next_index, poses=plan.count, active=p.active,
         plan=pk.Plan(plan.start, plan.stop, plan.step, plan.azimuths, plan.elevations) if fits else None,
         plan_left_out=not fits, skipped=pk.Kept(tuple(skipped_pose(k) for k in p.skipped)),
-        **({"missing": pk.Kept(tuple(skipped_pose(k) for k in p.skipped))} if p.done else {}), **said)
+        **({"missing": pk.Kept(tuple(skipped_pose(k) for k in p.skipped)), "measured": len(p.measured)}
+           if p.done else {}), **said)
 
 
 def skipped_pose(k) -> pk.SkippedPose:

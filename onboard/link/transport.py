@@ -34,6 +34,7 @@ class MemoryTransport:
         self._events: deque[Event] = deque()
         self._received = 0
         self.rejected: dict[str, int] = {}  # what the link would have counted, for STATUS tests
+        self.sessions = 0  # sessions the base opened (a station started), as the link counts them
 
     def send(self, payload: bytes, reliable: bool = True, msg_id: int | None = None,
              now: float | None = None) -> int:
@@ -60,4 +61,4 @@ class MemoryTransport:
         pass  # `sent` already holds what the robot sent
 
     def stats(self) -> LinkStats:
-        return LinkStats(0, 0, 0, 0, 0, 0, 0, 0, dict(self.rejected))
+        return LinkStats(0, 0, 0, 0, 0, 0, 0, self.sessions, dict(self.rejected))

@@ -127,3 +127,21 @@ def test_82_poses_at_a_twenty_percent_fault_rate_end_measured_or_missing_and_the
     first = {x.report.sweep.skipped.items[0].index for x in decoded(tr)
              if isinstance(x, pk.StatusPacket) and x.text.startswith("skipped pose: ")}
     assert len(missing) * 3 < len(first)  # most poses skipped once were measured on a later try
+
+
+def test_a_station_started_after_the_sweep_hears_the_robot_its_pose_and_the_sweep_at_once(fake_robot):
+    """An idle robot says nothing of itself: when a base opens a session (a station restarted
+    while the link stayed up) it sends its whole report, so the new station knows it at once."""
+    rt, tr = make(fake_robot, extra=(SMALL, {"sweep": {"start": 90, "stop": 70, "step": 10}}))
+    sweep(rt)
+    before = len(tr.sent)
+    rt.service()
+    assert len(tr.sent) == before  # no session opened: nothing more
+    tr.sessions += 1
+    rt.service()
+    (told,) = [p for p in decoded(tr)[before:] if isinstance(p, pk.StatusPacket)]
+    assert told.text == "the base opened a session" and told.state is pk.RobotState.IDLE
+    assert told.pose is not None and abs(told.pose[0] - 70.0) < 2.0
+    assert (told.report.sweep.measured, told.report.sweep.active, told.report.mode) == (3, False, "idle")
+    rt.service()
+    assert len(tr.sent) == before + 1  # once a session
