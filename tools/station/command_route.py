@@ -15,7 +15,7 @@ from pathlib import Path
 from radio.packets.commands import CommandName
 from tools.cli.options import CliError
 from tools.station.control import StationClient, StationGone, socket_path
-from tools.station.start import StationBusy, open_station, serve
+from tools.station.start import StationBusy, open_station, serve, station_runs
 
 
 def ask(args: argparse.Namespace, name: CommandName, cargs: dict, command_id: int) -> dict:
@@ -24,6 +24,10 @@ def ask(args: argparse.Namespace, name: CommandName, cargs: dict, command_id: in
     deadline = time.monotonic() + args.timeout
     while True:
         left = deadline - time.monotonic()
+        if left <= 0 and path.exists() and args.db is not None and not station_runs(args.db):
+            raise CliError(f"no station serves {args.db}: the last one ended without tidying up and none started "
+                           f"within {args.timeout:g} s; start 'btf-host station --port URL --db DB --key KEY', or "
+                           "give cmd --port and --key to open the port itself")
         if left <= 0:
             raise CliError(f"no answer from the robot within {args.timeout:g} s; a station keeps the command "
                            "until the robot hears it, and its log shows the answer")
@@ -49,7 +53,7 @@ def ask(args: argparse.Namespace, name: CommandName, cargs: dict, command_id: in
         if not path.exists():
             raise CliError(f"no station serves {args.db or path}: start 'btf-host station --port URL --db DB "
                            "--key KEY', or give cmd --port and --key to open the port itself")
-        time.sleep(0.1)  # its socket is there: a station that is (re)starting
+        time.sleep(0.1)  # its socket is there: a station that is (re)starting, or one killed (said at the end)
 
 
 def _through(client: StationClient, name: CommandName, cargs: dict, cid: int, deadline: float,

@@ -76,6 +76,21 @@ def take_lock(db: str | os.PathLike) -> int:
     return fd
 
 
+def station_runs(db: str | os.PathLike) -> bool:
+    """Whether a station holds the database's lock now (a killed one holds none: the kernel let go)."""
+    try:
+        fd = os.open(lock_path(db), os.O_RDONLY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+    except BlockingIOError:
+        return True
+    finally:
+        os.close(fd)  # a lock taken here goes with it
+    return False
+
+
 def open_station(port_url: str, key_file: str, db: str, *, baud: int = 115200, scene: str = "",
                  sock: str | None = None, log: str | None = None, echo: TextIO | None = sys.stderr,
                  status_every: float = 10.0, on_item=None) -> StationParts:

@@ -133,6 +133,20 @@ def test_the_control_socket_is_private_and_one_station_holds_a_database_and_a_po
     assert code == 2 and "no station serves" in err and len(err.splitlines()) == 1
 
 
+def test_cmd_after_a_station_was_killed_says_none_serves_not_that_the_robot_is_silent(rig, tmp_path):
+    """A station killed with -9 leaves its socket behind. cmd waits for the next one (a service
+    manager restarts it), and when none came it blamed the robot; the lock the kernel let go of
+    tells it no station ran."""
+    station = rig.station()
+    rig.wait_up(station)
+    station.kill()
+    station.wait(timeout=30)
+    assert (tmp_path / "host.db.sock").exists()
+    code, _, err = rig.cmd("status", timeout=2)
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert "no station serves" in err and "ended without tidying up" in err and "robot" not in err
+
+
 def test_a_wrong_key_is_said_in_one_line_and_the_station_goes_on_listening(rig, tmp_path):
     """Listening with the wrong key once exited 0 printing `rejected {'tag': 20}`. The
     person is told in one line, on stderr, in the log, in `watch` and on the page; frames anyone
