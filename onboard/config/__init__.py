@@ -439,6 +439,9 @@ def load(path: str | Path) -> Config:
         raise ConfigError(f"{p}: bad TOML: {' '.join(str(exc).split())}") from None
     except RecursionError:  # tomllib parses nested arrays and tables by recursion
         raise ConfigError(f"{p}: bad TOML: arrays or tables nested too deeply") from None
+    if not data:  # a truncated file would run a robot on every default, its link looped to itself
+        raise ConfigError(f"{p}: the file sets nothing (empty, or comments only); copy examples/robot.toml "
+                          "and edit it")
     try:
         return replace(from_mapping(data, p.resolve().parent), source=p)
     except ConfigError as exc:

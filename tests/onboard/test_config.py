@@ -74,6 +74,8 @@ def test_good_file_loads_into_frozen_records_with_paths_relative_to_the_file(tmp
         ("[features]\nspace = 'raw'\nband_names = ['near infrared 842nm']", "1..16 printable"),
         ("[features]\nspace = 'raw'\nband_names = ['red', 'nir']\nbands = ['green']",
          "features.bands ['green'] not among features.band_names"),
+        ("", "the file sets nothing (empty, or comments only); copy examples/robot.toml"),
+        ("# robot 3, the north rig\n\n", "the file sets nothing"),
     ],
 )
 def test_each_bad_config_raises_one_line_naming_the_problem(tmp_path, text, words):
