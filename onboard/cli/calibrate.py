@@ -165,8 +165,8 @@ def _arm(args: argparse.Namespace, hal: Hal, state_dir: Path) -> int:
         print(f"NOT stored: a residual above {GOOD_FIT_DEG:g} deg is no rigid offset. On real hardware: tighten the "
               "servo horns and the tracker's mount, check 'btf-robot calibrate tracker', then run this again.")
         return 1
-    print(f"stored in {stored}; 'btf-robot run' applies it at start (remove the file to go back to the config's "
-          "[hal] arm calibration)")
+    print(f"stored in {stored}; 'btf-robot run' applies it at start (remove the file to go back to the arm "
+          "uncalibrated)")
     for name in ("yaw", "tilt"):
         if getattr(report.fit, name).sign < 0:
             print(f"  note: the {name} servo turns against its joint; the calibration handles it, "
