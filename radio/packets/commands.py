@@ -119,7 +119,7 @@ COMMANDS: dict[CommandName, Command] = {c.name: c for c in (
         _angle("stop", "sweep stop", -90.0, 90.0, "last elevation, e.g. 30"),
         _angle("step", "sweep step", 0.1, 180.0, "elevation step, e.g. 10"),
         _angles("elevations", -90.0, 90.0, "explicit elevations, e.g. 90,80,70"),
-        _angles("azimuths", -360.0, 360.0, "e.g. 0,90", default=[0.0]),
+        _angles("azimuths", -360.0, 360.0, "e.g. 0,90; left out, the robot's sweep.azimuths"),
     ), forms=(frozenset({"start", "stop", "step"}), frozenset({"elevations"})),
         optional=frozenset({"azimuths"}), interrupts=True, example="--start 90 --stop 30 --step 10 --azimuths 0,90",
         answer=(Field("sweep", Int(0, UINT32), "the new sweep's number"), Field("poses", Int(1, 4096), "its poses"))),

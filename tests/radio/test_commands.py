@@ -20,7 +20,7 @@ TYPED = {
     C.STATUS: (["status"], {}),
     C.GOTO: (["goto", "--elevation", "45"], {"elevation": 45.0, "azimuth": 0.0}),
     C.CAPTURE: (["capture"], {}),
-    C.SWEEP: (["sweep", "--elevations", "90,60"], {"elevations": [90.0, 60.0], "azimuths": [0.0]}),
+    C.SWEEP: (["sweep", "--elevations", "90,60"], {"elevations": [90.0, 60.0]}),
     C.ABORT: (["abort"], {}),
     C.SET: (["set", "skip.min_pixels", "32"], {"key": "skip.min_pixels", "value": 32}),
     C.TORQUE_OFF: (["torque-off"], {}),

@@ -17,6 +17,8 @@ from radio.packets.base import iso_time
 from radio.pump import LinkPump
 from tests.support import ROOT
 from tests.support.robots import IDLE, SMALL, robot_toml
+from tools.cli import build_parser
+from tools.cli.cmd import command_of
 from tools.station.snapshot import StationSnapshot
 
 C = pk.CommandName
@@ -124,6 +126,11 @@ def test_set_takes_a_list_as_the_packet_carries_it(fake_robot):
     ack = command(rt, tr, 1, C.SET, key="sweep.azimuths", value=[0, 45])
     assert isinstance(ack, pk.AckPacket), ack
     assert rt.cfg.sweep.azimuths == (0.0, 45.0)
+    # and `cmd sweep` without --azimuths sweeps them: the command leaves them to the robot
+    name, args = command_of(build_parser().parse_args(["cmd", "--port", "x", "--key", "k", "sweep", "--start", "80",
+                                                       "--stop", "70", "--step", "10"]))
+    ack = command(rt, tr, 2, name, **args)
+    assert isinstance(ack, pk.AckPacket) and ack.extras["poses"] == 4, ack
 
 
 def test_send_mask_sends_the_map_of_the_capture_named_or_refuses(fake_robot):

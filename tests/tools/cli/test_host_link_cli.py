@@ -154,13 +154,13 @@ def test_cmd_arguments_become_the_commands_the_robot_checks():
     p = build_parser()
     name, args = command_of(p.parse_args(["cmd", "--port", "x", "--key", "k", "sweep",
                                           "--elevations", "90,60,30"]))
-    assert name is pk.CommandName.SWEEP and args == {"elevations": [90.0, 60.0, 30.0], "azimuths": [0.0]}
+    assert name is pk.CommandName.SWEEP and args == {"elevations": [90.0, 60.0, 30.0]}  # azimuths: the robot's own
     name, args = command_of(p.parse_args(["cmd", "--port", "x", "--key", "k", "set", "skip.min_pixels", "32"]))
     assert (name, args) == (pk.CommandName.SET, {"key": "skip.min_pixels", "value": 32})
     assert pk.decode(pk.encode(pk.CommandPacket(1, name, args))).args == args
     name, args = command_of(p.parse_args(["cmd", "--port", "x", "--key", "k", "sweep",
                                           "--start", "90", "--stop", "30", "--step", "10"]))
-    assert args == {"start": 90.0, "stop": 30.0, "step": 10.0, "azimuths": [0.0]}
+    assert args == {"start": 90.0, "stop": 30.0, "step": 10.0}
     decoded = pk.decode(pk.encode(pk.CommandPacket(2, name, args))).args
     assert {k: list(v) if isinstance(v, tuple) else v for k, v in decoded.items()} == args
 
