@@ -229,6 +229,10 @@ def run(args: argparse.Namespace) -> int:
         raise
     try:
         port = _open_port(cfg.link.url, cfg.link.baud)
+    except ValueError as exc:  # a URL no handler reads: the config's mistake, which no restart mends
+        hal.close()
+        raise CliError(f"link.url {cfg.link.url}: {exc}; give a device such as /dev/ttyUSB0, or loop://, "
+                       "socket://HOST:PORT or btfsim://") from None
     except Exception as exc:
         hal.close()
         raise RetryLater(f"link.url {cfg.link.url}: cannot open: {exc}") from None

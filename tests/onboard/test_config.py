@@ -123,6 +123,20 @@ def test_btf_robot_run_stops_at_start_with_one_line_and_exit_2(tmp_path, text, w
     assert len(lines) == 1 and words in lines[0] and "Traceback" not in out.stderr
 
 
+def test_a_link_url_no_handler_reads_is_a_configuration_error_not_restarted(tmp_path):
+    """Exit 1 means "retry later" to the systemd unit: a URL of an unknown scheme was retried forever."""
+    (tmp_path / "robot.key").write_text("00" * 32)
+    (tmp_path / "robot.key").chmod(0o600)
+    (tmp_path / "robot.toml").write_text("[link]\nurl = 'bogus://x'\n")
+    out = subprocess.run(
+        [sys.executable, "-c", "import sys; from onboard.cli import main; sys.exit(main())",
+         "run", "--config", str(tmp_path / "robot.toml"), "--hal", "fake"],
+        capture_output=True, text=True, timeout=60, cwd=ROOT,
+    )
+    (line,) = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and "link.url bogus://x" in line and "give a device such as /dev/ttyUSB0" in line
+
+
 def test_btf_robot_run_without_a_hal_body_is_a_configuration_error_not_restarted(tmp_path, monkeypatch, capsys):
     """No hal.body and no BTF_HAL: exit 2, which the shipped systemd unit does not restart."""
     from onboard.cli import main
