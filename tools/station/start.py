@@ -57,6 +57,10 @@ def lock_path(db: str | os.PathLike) -> Path:
 def take_lock(db: str | os.PathLike) -> int:
     """An exclusive lock on the database's station (released when the process ends, however)."""
     path = lock_path(db)
+    folder = path.parent if str(path.parent) else Path(".")
+    if not folder.is_dir():  # a mistyped path: no wait mends it
+        raise CliError(f"database {db}: folder {folder} does not exist; create it, or give --db a path "
+                       "in one that does")
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o600)
     except OSError as exc:  # a full disk or a read-only one: the environment (exit 1)

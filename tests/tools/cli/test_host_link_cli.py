@@ -103,6 +103,14 @@ def test_bad_input_is_one_line_and_status_2(argv, needle, tmp_path, monkeypatch,
     assert needle in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.parametrize("command", ["station", "listen"])
+def test_a_database_in_a_folder_that_does_not_exist_is_a_mistake_not_a_wait(command, key, tmp_path, capsys):
+    """Exit 1 (try again later) for a mistyped --db: a service manager restarted it forever."""
+    assert main([command, "--port", "loop://", "--db", str(tmp_path / "nodir" / "x.db"), "--key", str(key)]) == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert f"folder {tmp_path / 'nodir'} does not exist; create it" in line
+
+
 def test_listen_refuses_a_corrupt_database_and_leaves_it_untouched(key, tmp_path, capsys):
     db = tmp_path / "scene.db"
     db.write_bytes(b"not a database at all" * 10)
