@@ -62,7 +62,7 @@ def test_good_file_loads_into_frozen_records_with_paths_relative_to_the_file(tmp
         ("robot_id = 1.5", "robot_id must be an integer"),
         ("[sweep]\nautostart = 1", "sweep.autostart must be true or false"),
         ("[hal]\nsize = [10]", "hal.size must have 2 items"),
-        ("[hal]\nbody = 'magic'", "hal.body must be one of"),
+        ("[hal]\nbody = 'magic'", "hal.body must be one of \"\" (unset), 'fake', 'emulated', 'real', got 'magic'"),
         ("[sweep]\nstep = -5", "sweep.step must lie in 0.01..180, got -5"),
         ("[sweep]\nstart = 120", "sweep.start must lie in 0..90, got 120"),
         ("[sweep]\nstart = nan", "must be finite"),
