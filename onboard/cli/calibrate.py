@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -104,6 +105,8 @@ def _options(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
             offsets[joint.strip()] = float(deg)
         except ValueError:
             raise CliError(f"--fake-joint-offset wants JOINT=DEG such as tilt=3, got {item!r}") from None
+        if not -180.0 <= offsets[joint.strip()] <= 180.0:  # nan too
+            raise CliError(f"--fake-joint-offset {item}: DEG must be a number of degrees in -180..180")
     given = vars(args)  # the faults and the remap are options of arm and tracker only
     faults = {"fake_joint_offsets": offsets or None, "fake_joint_reversed": given.get("fake_joint_reversed") or None,
               "fake_tracker_mount": given.get("fake_tracker_mount"),
@@ -116,6 +119,8 @@ def _options(args: argparse.Namespace) -> tuple[dict[str, Any], Path]:
 
 def run(args: argparse.Namespace) -> int:
     options, state_dir = _options(args)
+    if args.what in ("arm", "exposure"):  # they store what they find: the folder is checked before the arm moves
+        _writable(state_dir)
     try:
         hal = build_hal(options, state_dir=state_dir)
     except HalConfigError as exc:
@@ -139,6 +144,16 @@ def run(args: argparse.Namespace) -> int:
     finally:
         hal.close()
     return result
+
+
+def _writable(state_dir: Path) -> None:
+    try:
+        state_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CliError(f"state dir {state_dir}: cannot create it ({exc.strerror or exc}); give --state-dir a "
+                       "folder this user can write") from None
+    if not os.access(state_dir, os.W_OK | os.X_OK):
+        raise CliError(f"state dir {state_dir}: cannot write in it; give --state-dir a folder this user can write")
 
 
 def _say(args: argparse.Namespace, text: str) -> None:

@@ -214,6 +214,9 @@ def test_cli_tracker_remap_from_the_config(tmp_path, capsys, monkeypatch):
     (["calibrate", "arm", "--hal", "real", "--fake-tracker-mount", "upside_down"], "only fake and emulated"),
     (["calibrate", "tracker", "--hal", "fake", "--tracker-remap", "P9"], "tracker_remap"),
     (["calibrate", "tracker", "--hal", "fake", "--fake-tracker-mount", "sideways"], "unknown fake_tracker_mount"),
+    (["calibrate", "arm", "--hal", "fake", "--fake-joint-offset", "tilt=nan"], "in -180..180"),
+    # checked before the arm moves: it stores what it finds there
+    (["calibrate", "arm", "--hal", "fake", "--state-dir", "/proc/no/such"], "state dir /proc/no/such: cannot create"),
 ])
 def test_cli_bad_usage_is_one_line_and_exit_2(argv, message, tmp_path, capsys, monkeypatch):
     code, out, err = run(argv, capsys, monkeypatch, tmp_path)
