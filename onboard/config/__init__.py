@@ -20,7 +20,7 @@ from btf.capture_settings import LINEAR_SPACES
 from hal.bno055 import AxisRemap
 from hal.controls import AUTO, FALLBACK_LOCK, hold, parse_controls
 from hal.interfaces import CameraControls, CameraSettings
-from onboard.config.limits import BOUNDS, CHOICES
+from onboard.config.limits import BOUNDS, CHOICES, choices_said
 from onboard.sweep.plan import SweepPlan
 from radio.packets.base import band_names_problem
 
@@ -274,7 +274,7 @@ def _section(cls: type, table: Any, prefix: str, base: Path) -> Any:
             raise ConfigError(f"unknown key {_shown(name, True)} (known: {', '.join(types)})")
         value = _convert(name, raw, types[key], base)
         if name in CHOICES and value not in CHOICES[name]:
-            raise ConfigError(f"{name} must be one of {_choices(name)}, got {value!r}")
+            raise ConfigError(f"{name} must be one of {choices_said(name)}, got {value!r}")
         values[key] = value
     obj = cls(**values)
     # Paths left at their defaults are relative to the config file as well.
@@ -408,7 +408,7 @@ def with_value(cfg: Config, dotted: str, value: Any) -> Config:
         raise ConfigError(f"unknown key {_shown(dotted, True)}")
     new = _convert(dotted, value, _TYPES[cls][key], cfg.state_dir)
     if dotted in CHOICES and new not in CHOICES[dotted]:
-        raise ConfigError(f"{dotted} must be one of {_choices(dotted)}, got {new!r}")
+        raise ConfigError(f"{dotted} must be one of {choices_said(dotted)}, got {new!r}")
     part = getattr(cfg, section)
     return replace(cfg, **{section: replace(part, **{key: new})})
 
@@ -418,11 +418,6 @@ def check_key_file(cfg: Config) -> None:
     path = cfg.link.key_file
     if not path.is_file():
         raise ConfigError(f"link.key_file: no such file {path} (create one with btf-host keygen)")
-
-
-def _choices(dotted: str) -> str:
-    """A key's choices as a person reads them: the empty one (unset) said in words."""
-    return ", ".join(repr(c) if c else '"" (unset)' for c in CHOICES[dotted])
 
 
 def load(path: str | Path) -> Config:

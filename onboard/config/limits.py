@@ -28,3 +28,8 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "skip.min_pixels": (1, MAX_FRAME_PIXELS), "skip.unchanged_tolerance": (0.0, 65535.0),
     "camera.reference_label": (-1, 255), "camera.bracket_max": (1, MAX_BRACKETS),
 }
+
+
+def choices_said(dotted: str) -> str:
+    """A key's choices as a person reads them: the empty one (unset) said in words."""
+    return ", ".join(repr(c) if c else '"" (unset)' for c in CHOICES[dotted])
