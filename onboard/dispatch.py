@@ -85,8 +85,8 @@ def refusal(exc: Exception) -> Refusal:
         return Refusal(pk.Reason.BUSY, f"interrupted by {exc}")
     elif isinstance(exc, OutboxFull):
         reason, text = pk.Reason.OUTBOX_FULL, str(exc)
-    elif isinstance(exc, (ConfigError, KeyError, ValueError)):
-        return Refusal(pk.Reason.BAD_ARGUMENT, f"{type(exc).__name__}: {exc}")
+    elif isinstance(exc, (ConfigError, KeyError, ValueError)):  # their messages are written for a person
+        return Refusal(pk.Reason.BAD_ARGUMENT, str(exc.args[0]) if isinstance(exc, KeyError) and exc.args else str(exc))
     else:
         reason, text = pk.Reason.INTERNAL, f"{type(exc).__name__}: {exc}"
     return Refusal(reason, f"{text} ({RECOVERY[reason]})")

@@ -66,7 +66,8 @@ def test_refusals_are_values_with_their_reason():
     assert refusal(Interrupted("ABORT")) == Refusal(pk.Reason.BUSY, "interrupted by ABORT")
     full = refusal(OutboxFull("full"))
     assert full.reason is pk.Reason.OUTBOX_FULL and "station" in full.text
-    assert refusal(ConfigError("x")) == Refusal(pk.Reason.BAD_ARGUMENT, "ConfigError: x")
+    assert refusal(ConfigError("x")) == Refusal(pk.Reason.BAD_ARGUMENT, "x")  # no class name for a person
+    assert refusal(KeyError("no key y")) == Refusal(pk.Reason.BAD_ARGUMENT, "no key y")
     internal = refusal(RuntimeError("y"))
     assert internal.reason is pk.Reason.INTERNAL and internal.text.startswith("RuntimeError: y (see the robot's log")
 
