@@ -67,6 +67,7 @@ from typing import Any, Callable, Iterator
 
 from radio import packets as pk
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale, QueueFull
+from radio.packets.base import MAX_TIME, iso_time
 from radio.packets.commands import CommandName, check_args
 from radio.pump import LinkPump
 from tools.station import events as ev_
@@ -327,7 +328,8 @@ class Station:
                 self._poll = None
             self.emit(ev_.StatusEvent(wall, "the robot's report", packet=answer, poll=True), logged=False)
             return
-        said = " ".join(f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items()
+        said = " ".join(f"{k}={iso_time(v)}" if k == "time" and type(v) in (int, float) and 0 <= v <= MAX_TIME else
+                        f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items()
                         if not empty(v))  # "paused=" says nothing: a field left empty is left out
         said = said if len(said) <= 160 else said[:157] + "..."
         verdict = f"ACK {said}".strip() if ok else f"NACK {p.reason.name}: {p.text}"

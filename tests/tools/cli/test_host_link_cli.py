@@ -273,3 +273,10 @@ def test_cmd_prints_an_answer_without_the_fields_left_empty(monkeypatch, capsys,
     answer.update(text="SET", status=None, extras={"set": "skip.min_pixels", "camera": ""})
     assert main(["cmd", "--db", str(tmp_path / "s.db"), "set", "skip.min_pixels", "50"]) == 0
     assert capsys.readouterr().out == "ACK: SET (set=skip.min_pixels)\n"
+
+
+def test_an_answers_angles_read_to_a_tenth_of_a_degree_and_its_clock_as_a_time():
+    from tools.cli.cmd import _shown
+
+    assert (_shown("elevation", 70.4848), _shown("azimuth", 0.102775)) == ("70.5", "0.1")
+    assert _shown("time", 1795890000.25).startswith("2026-") and _shown("poses", 6) == 6
