@@ -182,13 +182,14 @@ def judge_one(image: np.ndarray, mask: str, labels: np.ndarray, space: str, seed
 
 def choose_mask(rows: list[SpaceRow], space: str) -> tuple[str, str]:
     """(mask, reason): the highest Table-1 correlation of the correlated synthesis in `space`;
-    a mask within MASK_MARGIN of it that costs fewer bytes on the wire is preferred."""
+    a mask within MASK_MARGIN of it that costs fewer bytes on the wire is preferred (no reason
+    where only one was judged)."""
     own = [r for r in rows if r.space == space]
     best = max(r.mean_correlation() for r in own)
     near = [r for r in own if r.mean_correlation() >= best - MASK_MARGIN]
     pick = min(near, key=lambda r: (r.wire_bytes if r.wire_bytes is not None else 1 << 30, -r.mean_correlation()))
     if len(own) == 1:
-        return pick.mask, f"{pick.mask}: the only mask"
+        return pick.mask, ""
     others = ", ".join(f"{r.mask} {r.mean_correlation():.3f}" for r in own if r is not pick)
     return pick.mask, (f"{pick.mask}: its {space} synthesis correlates {pick.mean_correlation():.3f} with the "
                        f"photograph (Table 1, band mean; {others}) at {pick.wire_bytes} bytes")
@@ -206,7 +207,8 @@ def judge(image: np.ndarray, masks: dict[str, np.ndarray], spaces: tuple[str, ..
     own = default_space(image) if default_space(image) in spaces else spaces[0]
     mask, mask_reason = choose_mask(rows, own)
     choice = space_choice.choose([r.figures for r in rows if r.mask == mask])
-    return Judgement(rows, mask, choice.space, f"{choice.reason}; mask {mask_reason}")
+    said = f"mask {mask_reason}" if mask_reason else "one mask judged"
+    return Judgement(rows, mask, choice.space, f"{choice.reason}; {said}")
 
 
 def auto_space(image: np.ndarray, labels: np.ndarray, seed: int = 0) -> space_choice.Choice:

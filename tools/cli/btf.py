@@ -16,7 +16,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--space", choices=FEATURE_SPACES, help="only captures in this feature space")
     p.add_argument("--json", action="store_true", help="one JSON document instead of the table")
     p.add_argument("--plot", metavar="FILE.png", help="draw the BTF of the one robot and scene into this PNG")
-    add_force(p)
+    add_force(p, "--plot")
 
 
 def _num(v, width: int = 8, digits: int = 3) -> str:

@@ -15,8 +15,8 @@ FEATURE_SPACES = ("rgb", "hsv", "gray", "pca", "raw")
 BAUD = bounded(int, 50, 4_000_000, "bits/s")  # a serial port's speed
 
 
-def add_force(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--force", action="store_true", help="replace an existing --out")
+def add_force(parser: argparse.ArgumentParser, option: str = "--out") -> None:
+    parser.add_argument("--force", action="store_true", help=f"replace an existing {option}")
 
 
 # The image files OpenCV writes (the host's images are written with it).

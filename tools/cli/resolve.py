@@ -42,6 +42,11 @@ SYMBOLS = {"grain_mm": ("D", " mm"), "wavelength_nm": ("lambda", " nm"), "pixel_
            "facet_per_wavelength2": ("Kfl", ""), "rays_per_facet": ("Kr", "")}
 
 
+def _fixed(v: float) -> str:
+    """A length in a 10-wide column: fixed point where that reads, else in powers of ten."""
+    return f"{v:10.2f}" if 1e-2 <= abs(v) < 1e9 else f"{v:10.3g}"
+
+
 def _number(v: float, unit: str, grain: bool = False) -> str:
     if unit == "nm" and (grain or v >= 1e5):  # grains: nm as the paper writes them, and mm
         return f"{v:.3f} nm = {v / 1e6:.3f} mm"
@@ -70,10 +75,10 @@ def paper_lines(p: PaperView) -> list[str]:
 
 def physical_lines(b: Bounds) -> list[str]:
     lines = ["physical view: diffraction and smoothness",
-             f"  diffraction limit  lambda/(2 NA)           {b.diffraction_limit_nm:10.2f} nm",
-             f"  Rayleigh smooth    lambda/(8 cos theta)    {b.rayleigh_height_nm:10.2f} nm",
-             f"  Fraunhofer smooth  lambda/(32 cos theta)   {b.fraunhofer_height_nm:10.2f} nm",
-             f"  widest flat facet  2 sqrt(D h - h^2)       {b.max_flat_facet_nm:10.2f} nm "
+             f"  diffraction limit  lambda/(2 NA)           {_fixed(b.diffraction_limit_nm)} nm",
+             f"  Rayleigh smooth    lambda/(8 cos theta)    {_fixed(b.rayleigh_height_nm)} nm",
+             f"  Fraunhofer smooth  lambda/(32 cos theta)   {_fixed(b.fraunhofer_height_nm)} nm",
+             f"  widest flat facet  2 sqrt(D h - h^2)       {_fixed(b.max_flat_facet_nm)} nm "
              f"({b.facets_across_grain:.1f} across a grain)",
              f"  facet pixels       P <= D/2                {b.nyquist_pixel_mm:10.4f} mm",
              f"  statistical pixels P >= D sqrt({MIN_GRAINS_PER_PIXEL})          {b.statistical_pixel_mm:10.4f} mm"]
