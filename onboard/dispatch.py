@@ -27,7 +27,7 @@ from onboard.failsafe import Failsafe
 from onboard.link import bodies as wire
 from onboard.link.outbox import Outbox, OutboxFull, Reply
 from onboard.link.service import LinkService
-from onboard.link.status import Status
+from onboard.link.status import Status, sweep_report
 from onboard.state import Interrupted, RuntimeState
 from onboard.sweep.control import SweepControl
 from onboard.sweep.plan import SweepPlan
@@ -247,9 +247,16 @@ class Dispatcher:
         return {"set": args["key"]}
 
     def torque_off(self, args: dict, effect: Effect) -> Result:
+        p = self.state.progress
+        running = p is not None and p.active and not p.done
         self.sweep_control.stop()
         self.state.torque = False  # even if the bus fails below: the servos may be limp
         self.arm.torque_off()
+        if running:  # said, or an operator reads a sweep that ended for no reason
+            text = (f"torque-off ended sweep {p.sweep_id} at pose {p.next_index + 1} of {p.plan.count}; "
+                    "after torque-on, sweep starts a new one")
+            log.info("%s", text)
+            self.status_report.send(text, pk.StatusReport(sweep=sweep_report(p, active=False)))
         return {"torque": False}
 
     def torque_on(self, args: dict, effect: Effect) -> Result:

@@ -59,6 +59,20 @@ def test_torque_off_then_goto_and_sweep_are_refused_with_how_to_recover(fake_rob
     assert rt.progress is None  # the refused sweep was never started, so no pose is skipped
 
 
+def test_torque_off_says_it_ended_the_running_sweep_and_where(fake_robot):
+    rt, tr = fake_robot(ROBOT)
+    rt.boot()
+    assert isinstance(command(rt, tr, 1, C.SWEEP, elevations=[80.0, 60.0, 40.0]), pk.AckPacket)
+    rt.step()  # the first pose
+    before = len(tr.sent)
+    assert isinstance(command(rt, tr, 2, C.TORQUE_OFF), pk.AckPacket)
+    (said,) = [p for p in map(pk.decode, (b for _, b in tr.sent[before:]))
+               if isinstance(p, pk.StatusPacket) and p.text.startswith("torque-off ended sweep")]
+    p = rt.progress
+    assert 0 < p.next_index < 3 and not p.active  # stopped part-way
+    assert f"sweep {p.sweep_id} at pose {p.next_index + 1} of 3" in said.text and said.report.sweep.active is False
+
+
 def test_torque_off_torque_on_sweep_measures_every_pose(fake_robot):
     rt, tr = fake_robot(ROBOT)
     rt.boot()
