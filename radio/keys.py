@@ -17,6 +17,9 @@ def load_key(path: str | os.PathLike[str]) -> bytes:
     """The 32-byte key in `path`; KeyFileError if missing, malformed or readable by others."""
     p = Path(path)
     hint = f"make one with 'btf-host keygen --out {p}'"
+    # a damaged key: the other end's copy is the one the link speaks with
+    damaged = (f"copy the key from the other end of the link again, or make both ends a new one "
+               f"('btf-host keygen --out {p} --force')")
     try:
         st = p.stat()
     except FileNotFoundError:
@@ -31,13 +34,13 @@ def load_key(path: str | os.PathLike[str]) -> bytes:
     try:
         text = p.read_text(encoding="ascii").strip()
     except (OSError, UnicodeDecodeError):
-        raise KeyFileError(f"key file {p} is not readable hex text") from None
+        raise KeyFileError(f"key file {p} is not readable hex text; {damaged}") from None
     try:
         key = bytes.fromhex(text)
     except ValueError:
-        raise KeyFileError(f"key file {p} does not hold hex digits") from None
+        raise KeyFileError(f"key file {p} does not hold hex digits; {damaged}") from None
     if len(key) != KEY_LEN:
-        raise KeyFileError(f"key file {p} holds {len(key)} bytes, expected {KEY_LEN}")
+        raise KeyFileError(f"key file {p} holds {len(key)} bytes, expected {KEY_LEN}; {damaged}")
     return key
 
 
