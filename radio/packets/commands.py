@@ -70,8 +70,11 @@ class Command:
 
 def floats(text: str) -> list[float]:
     """`90,80,70` on the command line."""
+    parts = text.split(",")
+    if any(not v.strip() for v in parts[:-1]):  # `80,,60`: a value lost in typing, not skipped
+        raise ValueError("an empty value between commas; expected comma-separated numbers")
     try:
-        return [float(v) for v in text.split(",") if v.strip()]
+        return [float(v) for v in parts if v.strip()]
     except ValueError:
         raise ValueError("expected comma-separated numbers") from None
 

@@ -100,6 +100,11 @@ def command_of(args: argparse.Namespace) -> tuple[CommandName, dict]:
         forms = " or ".join("/".join(cmd.arg(k).cli for k in sorted(form, key=_order(cmd)))
                             for form in cmd.key_sets())
         named = ", ".join(cmd.arg(k).cli for k in sorted(set(given) - cmd.optional, key=_order(cmd)))
+        # one form short of an option or two: name what is missing, not the whole grammar
+        short = [form - set(given) for form in cmd.key_sets() if set(given) - cmd.optional < form]
+        if len(short) == 1:
+            missing = " and ".join(cmd.arg(k).cli for k in sorted(short[0], key=_order(cmd)))
+            raise CliError(f"{cmd.cli} {named}: {missing} missing ({cmd.cli} takes {forms})")
         raise CliError(f"{cmd.cli} takes {forms}, not {named or 'none of them'}")
     for key, value in given.items():
         if isinstance(value, list) and not value:

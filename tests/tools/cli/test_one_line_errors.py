@@ -30,6 +30,14 @@ def test_a_goto_the_robot_would_refuse_is_refused_at_parse_time_with_its_range(r
     assert "--elevations 90,nan: must lie in -90..90 degrees" in refused(code, err)
 
 
+def test_a_sweep_short_of_an_option_or_with_a_value_lost_between_commas_says_which(run, tmp_path):
+    db = tmp_path / "none.db"
+    assert "sweep --start, --stop: --step missing" in refused(*run("cmd", "--db", db, "sweep", "--start", 90,
+                                                                  "--stop", 30)[::2])
+    line = refused(*run("cmd", "--db", db, "sweep", "--elevations", "80,,60")[::2])
+    assert "--elevations 80,,60: an empty value between commas" in line
+
+
 @pytest.mark.parametrize(("argv", "option"), [
     (("synth", "--model", "m.json", "--mask", "m.png", "--angle", 30, "--out", "s.png", "--seed", -1), "--seed -1"),
     (("mask", "a.png", "--method", "kmeans", "--k", 300, "--out", "o.png"), "--k 300"),
