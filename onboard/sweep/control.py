@@ -18,7 +18,7 @@ import time
 from typing import Callable
 
 from onboard.capture.filing import Captures
-from hal.interfaces import DeviceGone
+from hal.interfaces import DeviceGone, ViewAngles
 from onboard.capture.pipeline import FittedView, Pipeline, PoseSkipped
 from onboard.link.outbox import DiskFull, Outbox, OutboxFull
 from onboard.link.status import Status, skipped_pose, sweep_report
@@ -28,6 +28,21 @@ from onboard.watchdog import Notifier
 from radio import packets as pk
 
 log = logging.getLogger("btf.robot")
+
+
+def same_direction(a: ViewAngles, b: ViewAngles, tol: float) -> bool:
+    """Two commanded poses that look the same way: at the zenith the azimuth does not matter."""
+    if abs(a.elevation - b.elevation) > tol:
+        return False
+    return a.elevation >= 90.0 - tol or abs((a.azimuth - b.azimuth + 180.0) % 360.0 - 180.0) <= tol
+
+
+class AlreadyMeasured(PoseSkipped):
+    """The plan asks again for a direction measured earlier in this sweep (at `view`): nothing to send."""
+
+    def __init__(self, view: ViewAngles, reason: str) -> None:
+        super().__init__(reason)
+        self.view = view
 PROBE_S = 1.0  # while a device is gone, how often its pose is tried again
 
 
@@ -100,7 +115,7 @@ class SweepControl:
             return "paused"
         if self.state.device_gone and self.clock() < self._probe_at:
             return "paused"
-        nxt, cap, reason, fault = copy.deepcopy(p), None, "", False
+        nxt, cap, reason, fault, covered = copy.deepcopy(p), None, "", False, None
         try:
             with self.state.arm_work():
                 cap = self._measure(p)
@@ -108,6 +123,8 @@ class SweepControl:
             return "interrupted"
         except DeviceGone as exc:
             return self._gone(str(exc))
+        except AlreadyMeasured as exc:
+            reason, covered = exc.reason, exc.view
         except PoseSkipped as exc:
             reason, fault = exc.reason, exc.fault
         except Exception as exc:
@@ -115,7 +132,7 @@ class SweepControl:
             # instead of failing the same pose forever.
             reason = f"internal: {type(exc).__name__}: {exc}"
         self._back()
-        return self._file(p, nxt, cap, reason, fault)
+        return self._file(p, nxt, cap, reason, fault, covered)
 
     def _gone(self, why: str) -> str:
         """A device is not there: nothing measured, nothing skipped; the pose is tried again in
@@ -139,19 +156,30 @@ class SweepControl:
 
     def _measure(self, p: SweepProgress) -> FittedView:
         commanded = p.current()
+        cfg = self.state.cfg
+        tol = cfg.sweep.pose_tolerance_deg
+        # a plan's pose in a direction it already measured (the zenith at each azimuth): not moved to again
+        same = next((v for i, v in p.measured if same_direction(p.plan.pose(i), commanded, tol)), None)
+        if cfg.skip.skip_measured_pose and same is not None:
+            raise AlreadyMeasured(same, f"the direction of a pose measured in this sweep (at {same.elevation:.1f}°, "
+                                  f"{same.azimuth:.1f}°)")
         self.pipeline.move(commanded)
         measured = self.pipeline.measure_view()
-        cfg = self.state.cfg
-        if cfg.skip.skip_measured_pose and p.already_measured(measured, cfg.sweep.pose_tolerance_deg):
+        if cfg.skip.skip_measured_pose and p.already_measured(measured, tol):
             raise PoseSkipped(f"already measured in this sweep (measured {measured.elevation:.1f}°, "
                               f"{measured.azimuth:.1f}°)")
         return self.pipeline.shoot(commanded, measured)
 
     def _file(self, p: SweepProgress, nxt: SweepProgress, cap: FittedView | None, reason: str,
-              fault: bool = False) -> str:
-        """Commit the pose's packets (or its skip) with the progress past it."""
+              fault: bool = False, covered: ViewAngles | None = None) -> str:
+        """Commit the pose's packets (or its skip) with the progress past it; a pose `covered`
+        (the direction of one measured in this sweep, as the zenith is at every azimuth) counts as
+        measured, by that capture."""
         index, again = p.current_index(), p.retrying
-        if cap is None:
+        if cap is None and covered is not None:
+            nxt.record_measured(covered)
+            packets, state, result = [], {}, "measured"
+        elif cap is None:
             skipped = nxt.record_skipped(reason, fault)
             said = f"skipped pose again (try {skipped.tries} of {p.retry_skipped + 1})" if again else "skipped pose"
             packets = [self.status.packet(f"{said}: {skipped.reason}", pk.StatusReport(
@@ -202,7 +230,7 @@ class SweepControl:
         pose = (f"sweep {p.sweep_id} pose {(index or 0) + 1}/{n}{' again' if again else ''} at "
                 f"{where.elevation:.1f}°/{where.azimuth:.1f}°")
         if cap is None:
-            log.info("%s: skipped: %s", pose, reason)
+            log.info("%s: %s%s", pose, "" if result == "measured" else "skipped: ", reason)
         else:
             log.info("%s: seq %d, measured %.1f°/%.1f°, %d models%s", pose, seq, cap.measured.elevation,
                      cap.measured.azimuth, len(cap.results), " (unchanged)" if cap.unchanged else "")
