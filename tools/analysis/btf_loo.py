@@ -169,6 +169,7 @@ def table_json(btf: Btf) -> dict:
                          "nearest_angle": None if r is None else angle_text(btf, r.nearest_point)})
     return {"robot": btf.robot, "scene": btf.scene, "space": btf.space, "levels": btf.levels,
             "bands": list(btf.band_names), "varied": list(btf.varied), "directions": len(btf.directions),
+            "captures": btf.stored,
             "rows": rows, "leave_one_out": {"summary": summary(loo).as_dict(), "rows": loo_json(btf, loo)}}
 
 

@@ -149,6 +149,7 @@ class Btf:
     counts: list[dict[tuple[int, int], int]]
     varied: tuple[str, ...]  # the axes the sweep varied (commanded ones where the robot says)
     poses: list[dict[str, float | None]]  # per point, its nominal angle on each axis
+    stored: int = 0  # captures of the robot, scene and space: more than the points where a direction was taken again
     _interpolators: dict = field(default_factory=dict, repr=False)
     _probs: dict = field(default_factory=dict, repr=False)
 
@@ -300,4 +301,5 @@ def load(store: Any, robot: str, scene: str, space: str) -> Btf:
     names = max((c.band_names for c in chosen), key=len)
     return Btf(robot, scene, space, names, max(c.levels for c in chosen), [capture_direction(c) for c in chosen],
                chosen, [models[k] for k in order],
-               [{key: r.count for key, r in store.models(c.id).items()} for c in chosen], varied, poses_of(chosen)[1])
+               [{key: r.count for key, r in store.models(c.id).items()} for c in chosen], varied, poses_of(chosen)[1],
+               len(caps))

@@ -26,7 +26,9 @@ def _num(v, width: int = 8, digits: int = 3) -> str:
 def table(doc: dict) -> list[str]:
     """A `table_json` document as lines of text: a heading, the rows, the leave-one-out summary."""
     lines = [f"BTF of {doc['scene'] or 'no scene'} (robot {doc['robot']}, {doc['space']}, {doc['levels']} levels): "
-             f"{doc['directions']} direction(s), varied: {', '.join(doc['varied']) or 'nothing'}",
+             f"{doc['directions']} direction(s)" + (f" (the latest capture at each, of {doc['captures']} stored)"
+                                                    if doc.get("captures", 0) > doc["directions"] else "")
+             + f", varied: {', '.join(doc['varied']) or 'nothing'}",
              f"{'label':>5} {'band':>4} {'angle':>16} {'family':>6} {'gamma':>8} {'delta':>8} {'xi':>8} {'lambda':>8} "
              f"{'pixels':>7} {'mean':>8} {'sd':>8} {'skew':>8} {'kurt':>8} {'interpL1':>8} {'nearL1':>8}  nearest"]
     for r in doc["rows"]:

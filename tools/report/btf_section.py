@@ -49,7 +49,8 @@ def section(btf: Any, out: Path, stem: str, anchor: str) -> BtfPart:
     who = source_name(btf.robot, btf.scene, btf.space)
     parts = [f"<section class=btf id={anchor}><h3>BTF of {html.escape(who)}</h3>"]
     axes = ", ".join(btf_view.AXIS_TITLES[a] for a in btf.varied) or "nothing"
-    parts.append(f"<p class=note>{len(btf.directions)} measured direction(s); the sweep varied {axes}.</p>")
+    again = (f" (the latest capture at each, of {btf.stored} stored)" if btf.stored > len(btf.directions) else "")
+    parts.append(f"<p class=note>{len(btf.directions)} measured direction(s){again}; the sweep varied {axes}.</p>")
     if not btf.varied:
         parts.append(note("One measured direction: no BTF to draw yet."))
         return BtfPart(anchor, who, btf.robot, btf.scene, btf.space, "".join(parts) + "</section>", None)

@@ -101,3 +101,17 @@ def test_a_sweep_over_two_azimuths_is_interpolated_over_directions(tmp_path):
     assert len(rows) == 10, [btf_loo.angle_text(btf, r.point) for r in rows]
     assert btf_loo.summary(rows).better >= 8
     assert all(btf_loo.why_not(btf, r) for r in rows if not r.better)
+
+
+def test_a_direction_measured_again_is_said_to_use_its_latest_capture(tmp_path, capsys):
+    """The BTF keeps the latest capture at each direction: the table and the report say so where
+    more were stored (three photographs at one angle read as one direction, unexplained)."""
+    from tools.cli import main
+
+    write_sweep(tmp_path / "s.db", linear_normal, ELEVATIONS)
+    write_sweep(tmp_path / "s.db", linear_normal, ELEVATIONS[:2], first_sequence=100)  # two directions again
+    btf = _load(tmp_path / "s.db")
+    assert (len(btf.directions), btf.stored) == (len(ELEVATIONS), len(ELEVATIONS) + 2)
+    assert main(["btf", "--db", str(tmp_path / "s.db")]) == 0
+    assert f"{len(ELEVATIONS)} direction(s) (the latest capture at each, of {len(ELEVATIONS) + 2} stored)" in \
+        capsys.readouterr().out.splitlines()[0]
