@@ -77,7 +77,7 @@ def summary(s: dict) -> str:
         lines.append(f"sweep {sw['id']}: {sw['next']} of {sw['poses']} poses done, {len(sw['skipped'])} skipped"
                      + ("" if sw["active"] else " (not running)"))
     c = s["captures"]
-    lines.append(f"captures stored {c['stored']}, duplicates {c['duplicates']}, masks {c['masks']}"
+    lines.append(f"captures stored since then {c['stored']}, duplicates {c['duplicates']}, masks {c['masks']}"
                  + (f", refused {c['bad']}" if c.get("bad") else ""))
     return "\n".join(lines)
 
