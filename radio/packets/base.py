@@ -44,6 +44,12 @@ def iso_time(t: float | None) -> str | None:
     page): ISO 8601 in UTC, to the second; None stays None. Every time a packet decodes to has one."""
     return None if t is None else datetime.fromtimestamp(t, timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
+
+def clock_time(v: object) -> str | None:
+    """`iso_time` of a value a packet's clock can hold, None for any other (an answer's extra a
+    hostile peer filled is shown as the number it is, never raised on)."""
+    return iso_time(float(v)) if type(v) in (int, float) and 0 <= v <= MAX_TIME else None
+
 # -- sizes a real sensor cannot exceed ------------------------------------------------------
 # Every size a decoded field gives (a frame, a label map, a pixel count, label and band
 # counts) is checked against these before anything is allocated from it, so an authentic but

@@ -11,7 +11,7 @@ import secrets
 from onboard.cli.runner import HelpFormatter, bounded, number_text
 from radio import FrameError
 from radio import packets as pk
-from radio.packets.base import MAX_TIME, iso_time
+from radio.packets.base import clock_time
 from radio.packets.commands import COMMANDS, Arg, Command, CommandName
 from tools.cli.options import BAUD, CliError
 from tools.station.command_route import ask
@@ -146,8 +146,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _shown(key: str, value):
     """An answer's value for a person: short floats, angles to a tenth of a degree, clock times in ISO 8601."""
-    if key in ("time", "since", "until") and type(value) in (int, float) and 0 <= value <= MAX_TIME:
-        return iso_time(value)
+    if key in ("time", "since", "until") and clock_time(value) is not None:
+        return clock_time(value)
     if key in ("elevation", "azimuth") and isinstance(value, float):
         return f"{value:.1f}"  # a tenth of a degree: what the tracker resolves
     return f"{value:.6g}" if isinstance(value, float) else value

@@ -67,7 +67,7 @@ from typing import Any, Callable, Iterator
 
 from radio import packets as pk
 from radio.link import Delivered, LinkDown, LinkUp, PeerStale, QueueFull
-from radio.packets.base import MAX_TIME, iso_time
+from radio.packets.base import clock_time
 from radio.packets.commands import CommandName, check_args
 from radio.pump import LinkPump
 from tools.station import events as ev_
@@ -328,8 +328,7 @@ class Station:
                 self._poll = None
             self.emit(ev_.StatusEvent(wall, "the robot's report", packet=answer, poll=True), logged=False)
             return
-        said = " ".join(f"{k}={iso_time(v)}" if k == "time" and type(v) in (int, float) and 0 <= v <= MAX_TIME else
-                        f"{k}={v:.6g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.extras.items()
+        said = " ".join(f"{k}={_value(k, v)}" for k, v in p.extras.items()
                         if not empty(v))  # "paused=" says nothing: a field left empty is left out
         said = said if len(said) <= 160 else said[:157] + "..."
         verdict = f"ACK {said}".strip() if ok else f"NACK {p.reason.name}: {p.text}"
@@ -382,3 +381,9 @@ class Station:
 def packet_json_args(args: dict) -> dict:
     """Command arguments as JSON (tuples as lists)."""
     return {k: list(v) if isinstance(v, tuple) else v for k, v in args.items()}
+
+
+def _value(key: str, v: object) -> object:
+    """An answer's value in the log: the robot's clock as a time, other floats short."""
+    said = clock_time(v) if key == "time" else None
+    return said if said is not None else f"{v:.6g}" if isinstance(v, float) else v
